@@ -1,0 +1,45 @@
+"""The Typer application: one sub-command per stage module."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from tollcli import __version__
+from tollcli.cli.epochs import epochs
+
+EPILOG = (
+    "Exit codes: 0 ok; 1 data error (input unusable, or a bad line under --strict); "
+    "2 usage error (bad option, missing file, directory); 3 partial (reserved: more skipped than --max-bad)."
+)
+
+app = typer.Typer(
+    name="tollcli",
+    help="GNSS road-user charging log processor: receiver logs → trusted epochs → geo-objects → invoices.",
+    epilog=EPILOG,
+    no_args_is_help=True,
+    add_completion=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"tollcli {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def root(
+    version: Annotated[
+        bool,
+        typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit."),
+    ] = False,
+) -> None:
+    """GNSS road-user charging log processor."""
+
+
+app.command(epilog=EPILOG)(epochs)

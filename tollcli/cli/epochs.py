@@ -1,0 +1,83 @@
+"""``tollcli epochs``: a receiver log → the epoch table (and the satellite table)."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated, Optional
+
+import typer
+
+from tollcli.cli import options as opt
+from tollcli.cli.console import progress, warn
+from tollcli.errors import DataError, UsageError
+from tollcli.io.writers import TableWriter, format_for
+from tollcli.nmea import ReadStats, iter_nmea_tables
+
+
+def epochs(
+    log: opt.LogArg,
+    output: opt.Output = "-",
+    satellites: Annotated[
+        Optional[str],
+        typer.Option("--satellites", help="Also write the satellite table (one row per satellite and epoch) here."),
+    ] = None,
+    strict: opt.Strict = False,
+    date: opt.DateOpt = None,
+    quiet: opt.Quiet = False,
+    as_json: opt.JsonSummary = False,
+) -> None:
+    """Decode an NMEA 0183 log into one row per epoch.
+
+    Columns carry their units (lat_deg, alt_m, speed_mps, ...). Lines that
+    cannot be used are skipped and counted on stderr; --strict makes the first
+    one an error.
+    """
+    if as_json and output == "-":
+        raise UsageError("--json prints the summary on stdout: give the table a file with -o")
+    if satellites == "-" and output == "-":
+        raise UsageError("only one table can go to stdout: give --satellites or -o a file")
+    stats = ReadStats()
+    epoch_writer = TableWriter(output, format_for(output))
+    sat_writer = TableWriter(satellites, format_for(satellites)) if satellites else None
+    with epoch_writer, (sat_writer or _Null()):
+        with progress(f"reading {log}", quiet) as advance:
+            for chunk in iter_nmea_tables(log, strict=strict, date=date.date() if date else None, stats=stats):
+                epoch_writer.write(chunk.epochs)
+                if sat_writer is not None:
+                    sat_writer.write(chunk.satellites)
+                advance(len(chunk.epochs))
+        check_usable(stats)
+        if stats.epochs == 0:
+            from tollcli.nmea.tables import epoch_frame, satellite_frame
+
+            epoch_writer.write(epoch_frame(None))
+            if sat_writer is not None:
+                sat_writer.write(satellite_frame(None, None))
+        epoch_writer.commit()
+        if sat_writer is not None:
+            sat_writer.commit()
+    if as_json:
+        typer.echo(json.dumps(stats.as_dict(), sort_keys=True))
+    else:
+        warn(stats.summary(), quiet)
+
+
+def check_usable(stats: ReadStats) -> None:
+    """Raise DataError when a log gave nothing a toll processor can use."""
+    if stats.lines == 0:
+        raise DataError(f"{stats.source}: empty file")
+    if stats.sentences == 0:
+        hint = f"; first problem at {stats.first_problem}" if stats.first_problem else ""
+        raise DataError(f"{stats.source}: no NMEA sentences in {stats.lines} lines (not an NMEA log?){hint}")
+    if stats.epochs == 0:
+        raise DataError(
+            f"{stats.source}: {stats.sentences} NMEA sentences but no epoch: no GGA/RMC/GLL/GNS/ZDA gave a time of day"
+        )
+
+
+class _Null:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return None

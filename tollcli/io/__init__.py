@@ -1,0 +1,1 @@
+"""Input and output plumbing: sources (paths, .gz, stdin) and atomic table writers."""

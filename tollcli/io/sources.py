@@ -1,0 +1,76 @@
+"""Open a log given as a path, a ``.gz`` path or ``-`` (stdin), and read it in blocks."""
+
+from __future__ import annotations
+
+import gzip
+import io
+import os
+import sys
+import zlib
+from collections.abc import Iterator
+from typing import BinaryIO
+
+from tollcli.errors import DataError, UsageError
+
+BLOCK_BYTES = 1 << 20
+GZIP_MAGIC = b"\x1f\x8b"
+
+
+def source_name(source: str | os.PathLike | BinaryIO) -> str:
+    """A printable name for messages (``-`` for stdin)."""
+    if isinstance(source, (str, os.PathLike)):
+        return os.fspath(source)
+    return getattr(source, "name", "<stream>")
+
+
+def open_binary(source: str | os.PathLike | BinaryIO) -> BinaryIO:
+    """A binary stream for ``source``, transparently gunzipped.
+
+    Raises :class:`UsageError` for a missing path or a directory.
+    """
+    if isinstance(source, (str, os.PathLike)):
+        path = os.fspath(source)
+        if path == "-":
+            raw: BinaryIO = sys.stdin.buffer
+        else:
+            if not os.path.exists(path):
+                raise UsageError(f"{path}: no such file")
+            if os.path.isdir(path):
+                raise UsageError(f"{path}: is a directory, expected a log file")
+            try:
+                raw = open(path, "rb")  # noqa: SIM115 - closed by the caller
+            except OSError as exc:
+                raise UsageError(f"{path}: cannot open ({exc.strerror})") from None
+    else:
+        raw = source
+    buffered = raw if hasattr(raw, "peek") else io.BufferedReader(raw)  # type: ignore[arg-type]
+    if buffered.peek(2)[:2] == GZIP_MAGIC:
+        return gzip.GzipFile(fileobj=buffered, mode="rb")  # type: ignore[return-value]
+    return buffered  # type: ignore[return-value]
+
+
+def iter_text_blocks(stream: BinaryIO, name: str, block_bytes: int = BLOCK_BYTES) -> Iterator[list[str]]:
+    """Yield lists of complete lines (latin-1 decoded, ``\\r\\n`` stripped).
+
+    Memory is bounded by ``block_bytes`` plus the longest line.
+    """
+    rest = b""
+    while True:
+        try:
+            block = stream.read(block_bytes)
+        except (OSError, EOFError, zlib.error) as exc:
+            raise DataError(f"{name}: cannot read compressed data ({exc})") from None
+        if not block:
+            break
+        data = rest + block
+        cut = data.rfind(b"\n")
+        if cut < 0:
+            if len(data) > 4 * block_bytes:  # no line end in sight: binary junk
+                yield [data.decode("latin-1")]
+                data = b""
+            rest = data
+            continue
+        rest = data[cut + 1 :]
+        yield data[:cut].decode("latin-1").replace("\r", "").split("\n")
+    if rest:
+        yield rest.decode("latin-1").replace("\r", "").split("\n")

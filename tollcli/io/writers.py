@@ -1,0 +1,220 @@
+"""Write tables chunk by chunk to CSV, Parquet, GeoJSON or JSON — atomically.
+
+A file is written under a temporary name in the same folder and renamed over
+the target only when the whole table is written (:meth:`TableWriter.commit`); an
+error or Ctrl-C leaves the old file, never half of a new one. ``-`` writes to
+stdout (CSV unless a format is given), so commands compose in pipes.
+
+Formats, by the output's extension:
+
+* ``.csv``: header + rows; times as ISO 8601 UTC (``2024-05-01T12:00:00.000Z``),
+  missing values empty;
+* ``.parquet``: one row group per chunk, column types kept;
+* ``.geojson``: a FeatureCollection of points (``lon_deg``, ``lat_deg``; rows
+  without a position get ``"geometry": null``), other columns as properties;
+* ``.json``: an array of row objects.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import tempfile
+from typing import IO
+
+import numpy as np
+import pandas as pd
+
+from tollcli.errors import UsageError
+
+FORMATS = ("csv", "parquet", "geojson", "json")
+_EXTENSIONS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".geojson": "geojson", ".json": "json"}
+
+
+def format_for(path: str, default: str = "csv") -> str:
+    """The table format an output path asks for by its extension (``-``: ``default``)."""
+    if path == "-":
+        return default
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in _EXTENSIONS:
+        raise UsageError(f"{path}: unknown output format {ext or '(no extension)'!r}; use .csv, .parquet, .geojson or .json")
+    return _EXTENSIONS[ext]
+
+
+def iso_utc(values: pd.Series) -> np.ndarray:
+    """UTC timestamps → ISO 8601 strings with ms and ``Z`` ('' for NaT)."""
+    raw = values.dt.tz_convert(None).to_numpy().astype("datetime64[ms]")
+    text = np.datetime_as_string(raw, unit="ms").astype(object)
+    text = np.where(np.isnat(raw), "", text + "Z")
+    return text
+
+
+def _json_ready(df: pd.DataFrame) -> list[dict]:
+    """Rows as dicts of JSON-safe values (NaN → None, times → ISO strings)."""
+    out = {}
+    for name in df.columns:
+        col = df[name]
+        if isinstance(col.dtype, pd.DatetimeTZDtype):
+            values = [v or None for v in iso_utc(col)]
+        else:
+            values = []
+            for v in col.tolist():
+                if v is pd.NA or (isinstance(v, float) and not math.isfinite(v)):
+                    v = None
+                values.append(v)
+        out[name] = values
+    names = list(out)
+    return [dict(zip(names, row)) for row in zip(*out.values())]
+
+
+class TableWriter:
+    """Stream a table to ``path`` in ``fmt``; call :meth:`commit` when complete.
+
+    Use as a context manager: leaving the block by an exception discards the
+    temporary file; leaving it normally without :meth:`commit` discards it too.
+    """
+
+    def __init__(self, path: str, fmt: str | None = None):
+        self.path = path
+        self.fmt = fmt or format_for(path)
+        if self.fmt not in FORMATS:
+            raise UsageError(f"unknown output format {self.fmt!r}")
+        self._tmp: str | None = None
+        self._fh: IO | None = None
+        self._rows = 0
+        self._parquet = None
+        self._schema = None
+        self._committed = False
+        self._columns: list[str] | None = None
+        self._started = False  # header / opening bracket written
+        self._records = 0  # JSON/GeoJSON records written (for separators)
+        if path != "-":
+            folder = os.path.dirname(os.path.abspath(path))
+            if not os.path.isdir(folder):
+                raise UsageError(f"{path}: folder {folder} does not exist")
+            if os.path.isdir(path):
+                raise UsageError(f"{path}: is a directory, expected an output file")
+
+    # -------------------------------------------------------------- lifecycle
+    def __enter__(self) -> "TableWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if not self._committed:
+            self.discard()
+
+    def _open(self) -> IO:
+        if self._fh is not None:
+            return self._fh
+        binary = self.fmt == "parquet"
+        if self.path == "-":
+            self._fh = sys.stdout.buffer if binary else sys.stdout
+        else:
+            folder = os.path.dirname(os.path.abspath(self.path))
+            fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(self.path)}.", suffix=".tmp", dir=folder)
+            self._fh = os.fdopen(fd, "wb" if binary else "w", encoding=None if binary else "utf-8", newline=None if binary else "")
+        return self._fh
+
+    def write(self, df: pd.DataFrame) -> None:
+        """Append a chunk (same columns every time)."""
+        if self._columns is None:
+            self._columns = list(df.columns)
+        fh = self._open()
+        getattr(self, f"_write_{self.fmt}")(fh, df)
+        self._rows += len(df)
+
+    def commit(self) -> int:
+        """Finish the file and move it into place; returns the number of rows."""
+        fh = self._open()
+        getattr(self, f"_close_{self.fmt}")(fh)
+        fh.flush()
+        if self._tmp is not None:
+            os.fsync(fh.fileno())
+            fh.close()
+            os.replace(self._tmp, self.path)
+            self._tmp = None
+        self._committed = True
+        return self._rows
+
+    def discard(self) -> None:
+        """Drop what was written (the target file is left as it was)."""
+        if self._parquet is not None:
+            try:
+                self._parquet.close()
+            except Exception:  # noqa: BLE001 - discarding anyway
+                pass
+            self._parquet = None
+        if self._tmp is not None:
+            try:
+                if self._fh is not None:
+                    self._fh.close()
+            finally:
+                if os.path.exists(self._tmp):
+                    os.unlink(self._tmp)
+                self._tmp = None
+
+    # -------------------------------------------------------------- CSV
+    def _write_csv(self, fh: IO, df: pd.DataFrame) -> None:
+        out = df.copy(deep=False)
+        for name in out.columns:
+            if isinstance(out[name].dtype, pd.DatetimeTZDtype):
+                out[name] = iso_utc(out[name])
+        out.to_csv(fh, index=False, header=not self._started, lineterminator="\n")
+        self._started = True
+
+    def _close_csv(self, fh: IO) -> None:
+        if not self._started and self._columns is not None:
+            fh.write(",".join(self._columns) + "\n")
+
+    # -------------------------------------------------------------- Parquet
+    def _write_parquet(self, fh: IO, df: pd.DataFrame) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        table = pa.Table.from_pandas(df, preserve_index=False, schema=self._schema)
+        if self._parquet is None:
+            self._schema = table.schema
+            self._parquet = pq.ParquetWriter(fh, self._schema)
+        self._parquet.write_table(table)
+
+    def _close_parquet(self, fh: IO) -> None:
+        if self._parquet is None:
+            raise UsageError("cannot write an empty table without columns to Parquet")
+        self._parquet.close()
+        self._parquet = None
+
+    # -------------------------------------------------------------- GeoJSON
+    def _write_geojson(self, fh: IO, df: pd.DataFrame) -> None:
+        if not self._started:
+            fh.write('{"type": "FeatureCollection", "features": [\n')
+            self._started = True
+        for row in _json_ready(df):
+            lon, lat = row.get("lon_deg"), row.get("lat_deg")
+            geometry = {"type": "Point", "coordinates": [lon, lat]} if lon is not None and lat is not None else None
+            feature = {"type": "Feature", "geometry": geometry, "properties": row}
+            self._record(fh, feature)
+
+    def _close_geojson(self, fh: IO) -> None:
+        if not self._started:
+            fh.write('{"type": "FeatureCollection", "features": [\n')
+        fh.write("\n]}\n")
+
+    # -------------------------------------------------------------- JSON
+    def _write_json(self, fh: IO, df: pd.DataFrame) -> None:
+        if not self._started:
+            fh.write("[\n")
+            self._started = True
+        for row in _json_ready(df):
+            self._record(fh, row)
+
+    def _close_json(self, fh: IO) -> None:
+        if not self._started:
+            fh.write("[\n")
+        fh.write("\n]\n")
+
+    def _record(self, fh: IO, obj: dict) -> None:
+        """One JSON record, comma-separated from the previous one."""
+        fh.write(("" if self._records == 0 else ",\n") + json.dumps(obj, separators=(",", ":")))
+        self._records += 1
