@@ -5,18 +5,33 @@ from __future__ import annotations
 import os
 import sys
 
-from tollcli.errors import EXIT_DATA, TollError
+import typer
+
+from tollcli.errors import EXIT_DATA, EXIT_USAGE, TollError
+
+
+def _fail(message: str, code: int) -> None:
+    sys.stderr.write(f"tollcli: error: {message}\n")
+    sys.exit(code)
 
 
 def main(argv: list[str] | None = None) -> None:
     from tollcli.cli.app import app
 
     try:
-        app(args=argv, prog_name="tollcli", standalone_mode=True)
+        code = app(args=argv, prog_name="tollcli", standalone_mode=False)
     except TollError as exc:
-        sys.stderr.write(f"tollcli: error: {exc}\n")
+        _fail(str(exc), exc.exit_code)
+    except typer.TyperException as exc:  # usage errors: bad option, missing argument, bad value
+        ctx = getattr(exc, "ctx", None)
+        if type(exc).__name__ == "NoArgsIsHelpError":  # bare `tollcli`: the help, as click shows it
+            sys.stderr.write(exc.format_message() + "\n")
+            sys.exit(EXIT_USAGE)
+        where = ctx.command_path if ctx is not None else "tollcli"
+        _fail(f"{exc.format_message()} (see '{where} --help')", exc.exit_code or EXIT_USAGE)
+    except typer.Exit as exc:
         sys.exit(exc.exit_code)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, typer.Abort):
         sys.stderr.write("tollcli: interrupted\n")
         sys.exit(130)
     except BrokenPipeError:  # downstream of a pipe closed early (e.g. | head)
@@ -24,5 +39,5 @@ def main(argv: list[str] | None = None) -> None:
         os.dup2(devnull, sys.stdout.fileno())
         sys.exit(0)
     except MemoryError:
-        sys.stderr.write("tollcli: error: out of memory\n")
-        sys.exit(EXIT_DATA)
+        _fail("out of memory", EXIT_DATA)
+    sys.exit(code if isinstance(code, int) else 0)

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError
-from tollcli.io.sources import iter_text_blocks, open_binary, source_name
+from tollcli.io.sources import BLOCK_BYTES, iter_text_blocks, open_binary, source_name
 from tollcli.nmea.assembler import EpochAssembler
 from tollcli.nmea.dates import DateCarry, resolve_days, to_time_utc_ms
 from tollcli.nmea.fields import checksum
@@ -114,11 +114,13 @@ def iter_nmea_tables(
     strict: bool = False,
     date: _dt.date | None = None,
     chunk_epochs: int = CHUNK_EPOCHS,
+    block_bytes: int = BLOCK_BYTES,
     stats: ReadStats | None = None,
 ) -> Iterator[NmeaTables]:
     """Yield the log's tables chunk by chunk (each chunk ≈ ``chunk_epochs`` epochs).
 
     ``date``: the UTC date of the first epoch, for logs without RMC/ZDA.
+    ``block_bytes``: bytes read at a time (chunks are cut at block ends).
     ``stats`` (optional) is filled in as lines are read.
     """
     stats = stats if stats is not None else ReadStats()
@@ -131,7 +133,7 @@ def iter_nmea_tables(
     asm = EpochAssembler()
     stream = open_binary(source)
     try:
-        for lines in iter_text_blocks(stream, name):
+        for lines in iter_text_blocks(stream, name, block_bytes):
             _feed_lines(lines, asm, stats, strict, name)
             if asm.n_ready >= chunk_epochs:
                 yield from _emit(asm.take(), pending, carry, stats, final=False)

@@ -1,0 +1,111 @@
+"""NMEA reader throughput against plain pynmea2, and peak memory against log size.
+
+Speed: the same synthetic multi-constellation log (RMC, VTG, GGA, 2×GSA, 3×GSV,
+GST per epoch) is read by ``tollcli.nmea.iter_nmea_tables`` (full decoding into
+epoch and satellite tables) and by ``pynmea2.parse`` on every line (sentence
+objects only, no tables). Both read the file from disk; best of ``--repeat`` runs.
+
+Memory: each log size is read in a fresh subprocess that discards the chunks;
+the peak resident set size (``ru_maxrss``) is reported, with the ratio of the
+largest log's peak to the smallest's (1.0 = flat in log length).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from tollcli.nmea import ReadStats, compose, iter_nmea_tables
+
+BYTES_PER_EPOCH = 562  # of compose.straight_drive, measured
+
+
+def write_log(path: Path, target_bytes: int) -> int:
+    """A synthetic drive of about ``target_bytes``; returns the number of lines."""
+    n_epochs = max(1, target_bytes // BYTES_PER_EPOCH)
+    lines = 0
+    with open(path, "w", encoding="ascii") as fh:
+        batch: list[str] = []
+        for line in compose.straight_drive(n_epochs):
+            batch.append(line)
+            if len(batch) >= 100_000:
+                fh.write("\n".join(batch) + "\n")
+                lines += len(batch)
+                batch.clear()
+        fh.write("\n".join(batch) + "\n")
+        lines += len(batch)
+    return lines
+
+
+def ours(path: Path) -> float:
+    start = time.perf_counter()
+    stats = ReadStats()
+    for _ in iter_nmea_tables(path, stats=stats):
+        pass
+    return time.perf_counter() - start
+
+
+def plain_pynmea2(path: Path) -> float:
+    import pynmea2
+
+    start = time.perf_counter()
+    with open(path, encoding="ascii") as fh:
+        for line in fh:
+            pynmea2.parse(line.rstrip("\n"))
+    return time.perf_counter() - start
+
+
+def peak_rss_mb(path: Path) -> float:
+    """Peak RSS of a fresh process that reads ``path`` through the chunked reader."""
+    code = (
+        "import resource, sys\n"
+        "from tollcli.nmea import iter_nmea_tables\n"
+        "n = 0\n"
+        "for chunk in iter_nmea_tables(sys.argv[1]):\n"
+        "    n += len(chunk.epochs)\n"
+        "print(n, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, check=True)
+    epochs, kib = out.stdout.split()
+    return int(kib) / 1024.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--speed-mb", type=float, default=20.0, help="size of the speed-test log, MB")
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--memory-gb", type=float, nargs="*", default=[0.1, 1.0], help="log sizes for the memory test, GB")
+    parser.add_argument("--no-memory", action="store_true")
+    parser.add_argument("--workdir", default=None, help="where to write the logs (default: a temporary folder)")
+    args = parser.parse_args()
+
+    with tempfile.TemporaryDirectory(dir=args.workdir) as tmp:
+        log = Path(tmp) / "speed.nmea"
+        n_lines = write_log(log, int(args.speed_mb * 1e6))
+        t_ours = min(ours(log) for _ in range(args.repeat))
+        t_base = min(plain_pynmea2(log) for _ in range(args.repeat))
+        print(f"log: {n_lines} lines, {os.path.getsize(log) / 1e6:.1f} MB (synthetic, GPS+Galileo, 9 sentences/epoch)")
+        print(f"tollcli reader (epoch+satellite tables): {n_lines / t_ours:12,.0f} lines/s")
+        print(f"pynmea2.parse per line (baseline):       {n_lines / t_base:12,.0f} lines/s")
+        print(f"ratio tollcli / pynmea2:                 {t_base / t_ours:12.2f}")
+        if args.no_memory:
+            return
+        results = []
+        for gb in sorted(args.memory_gb):
+            path = Path(tmp) / f"mem-{gb}.nmea"
+            lines = write_log(path, int(gb * 1e9))
+            mb = peak_rss_mb(path)
+            results.append((gb, lines, mb))
+            print(f"log {os.path.getsize(path) / 1e9:6.2f} GB ({lines:,} lines): peak RSS {mb:8.1f} MB")
+            path.unlink()
+        if len(results) > 1:
+            print(f"peak RSS ratio, {results[-1][0]} GB / {results[0][0]} GB log: {results[-1][2] / results[0][2]:.2f}")
+
+
+if __name__ == "__main__":
+    main()

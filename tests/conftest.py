@@ -1,0 +1,31 @@
+"""Shared test fixtures: where the real data lives, and a CLI runner."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO.parent / "shared" / "data"
+SAMPLES = REPO / "samples"
+
+
+def shared(*parts: str) -> Path:
+    """A path under ../shared/data; skips the test cleanly when it is absent."""
+    path = SHARED_DATA.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"real data not available: {path} (../shared/data is absent)")
+    return path
+
+
+def run_cli(*args: str, stdin: bytes | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """Run ``python -m tollcli ARGS`` as a user would, capturing bytes."""
+    env = dict(os.environ, NO_COLOR="1", COLUMNS="120")
+    return subprocess.run(
+        [sys.executable, "-m", "tollcli", *args],
+        input=stdin, capture_output=True, cwd=cwd or REPO, env=env, timeout=300,
+    )  # fmt: skip
