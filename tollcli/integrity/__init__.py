@@ -1,0 +1,1 @@
+"""Positioning integrity: WLSR RAIM (classic and ETC), its parameters and error models."""

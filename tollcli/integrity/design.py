@@ -1,0 +1,126 @@
+"""RAIM and charging parameter derivations (paper 001 eqs. 16–24; thesis eqs. 5.5, 5.10).
+
+Pure functions of probabilities and degrees of freedom ``dof`` (k = N_s − N_u);
+they broadcast over numpy arrays. Thresholds apply to the WSSE test statistic
+t = rᵀΣ⁻¹r, which is χ²_k without a fault and χ²_{k,λ} with one bias.
+
+* classic WLSR RAIM: Th from P_FA, then λ_det such that P_MD = CDF_χ²_{k,λ_det}(Th);
+  HPL = slope_max·√λ_det.
+* ETC RAIM (HPL = HAL): λ_det = (HAL/slope_max)², Th = CDF⁻¹_χ²_{k,λ_det}(P_MD),
+  and the resulting P_FA = 1 − CDF_χ²_k(Th) is reported per epoch.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+from scipy import optimize, special, stats
+
+
+def classic_threshold(p_fa: float, dof) -> np.ndarray:
+    """Th with P(t > Th) = p_fa for t ~ χ²_dof (NaN where dof < 1)."""
+    dof = np.asarray(dof, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return np.where(dof >= 1, stats.chi2.isf(p_fa, np.maximum(dof, 1)), np.nan)
+
+
+@lru_cache(maxsize=4096)
+def _lambda_det_scalar(p_fa: float, p_md: float, dof: int) -> float:
+    th = float(stats.chi2.isf(p_fa, dof))
+
+    def miss(lam: float) -> float:
+        return float(special.chndtr(th, dof, lam)) - p_md
+
+    hi = 10.0
+    while miss(hi) > 0:
+        hi *= 2.0
+    return float(optimize.brentq(miss, 0.0, hi, xtol=1e-12, rtol=1e-12))
+
+
+def classic_lambda_det(p_fa: float, p_md: float, dof) -> np.ndarray:
+    """λ_det of the classic RAIM: P_MD = CDF_χ²_{k,λ_det}(Th(P_FA)) (NaN where dof < 1)."""
+    dof = np.asarray(dof)
+    out = np.full(dof.shape, np.nan)
+    for k in np.unique(dof[dof >= 1]).astype(int):
+        out[dof == k] = _lambda_det_scalar(float(p_fa), float(p_md), int(k))
+    return out
+
+
+def etc_threshold(p_md: float, dof, lambda_det) -> np.ndarray:
+    """Exact ETC threshold Th = CDF⁻¹_χ²_{k,λ_det}(P_MD) (NaN where dof < 1 or λ not finite)."""
+    dof = np.asarray(dof, dtype=float)
+    lam = np.asarray(lambda_det, dtype=float)
+    ok = (dof >= 1) & np.isfinite(lam)
+    with np.errstate(invalid="ignore"):
+        th = stats.ncx2.ppf(p_md, np.where(ok, dof, 1), np.where(ok, np.maximum(lam, 1e-12), 1.0))
+    return np.where(ok, th, np.nan)
+
+
+class EtcThresholdTable:
+    """Look-up table of ETC thresholds over (k, √λ_det), rounded on the safe side.
+
+    Th grows with λ_det, so the table returns the threshold at the grid point
+    just *below* √λ_det: never above the exact threshold (P_MD is kept; P_FA is
+    a little higher than exact and is reported from the threshold used).
+    Above the grid the last grid value is used (safe for the same reason).
+    Rows for each k are computed on first use: ``n_steps`` quantiles, a few ms.
+    """
+
+    def __init__(self, p_md: float, step: float = 0.01, sqrt_lambda_max: float = 40.0):
+        self.p_md = float(p_md)
+        self.step = float(step)
+        self.grid = np.arange(0.0, sqrt_lambda_max + step / 2, step)
+        self._rows: dict[int, np.ndarray] = {}
+
+    def _row(self, k: int) -> np.ndarray:
+        row = self._rows.get(k)
+        if row is None:
+            row = etc_threshold(self.p_md, np.full(self.grid.shape, k), self.grid**2)
+            self._rows[k] = row
+        return row
+
+    def __call__(self, dof, lambda_det) -> np.ndarray:
+        dof = np.asarray(dof)
+        lam = np.asarray(lambda_det, dtype=float)
+        out = np.full(np.broadcast(dof, lam).shape, np.nan)
+        dof, lam = np.broadcast_arrays(dof, lam)
+        ok = (dof >= 1) & np.isfinite(lam) & (lam >= 0)
+        idx = np.zeros(out.shape, dtype=np.int64)
+        with np.errstate(invalid="ignore"):
+            idx[ok] = np.minimum(np.floor(np.sqrt(lam[ok]) / self.step + 1e-9), self.grid.size - 1).astype(np.int64)
+        for k in np.unique(dof[ok]).astype(int):
+            sel = ok & (dof == k)
+            out[sel] = self._row(int(k))[idx[sel]]
+        return out
+
+
+def false_alarm_probability(threshold, dof) -> np.ndarray:
+    """P_FA = 1 − CDF_χ²_k(Th): the chance a fault-free position is rejected."""
+    dof = np.asarray(dof, dtype=float)
+    th = np.asarray(threshold, dtype=float)
+    ok = (dof >= 1) & np.isfinite(th)
+    return np.where(ok, stats.chi2.sf(np.where(ok, th, 0.0), np.where(ok, dof, 1)), np.nan)
+
+
+def p_mgor_max(invoice_share_pct: float, invoice_error_pct: float) -> float:
+    """Largest P_MGoR meeting "I % of invoices within M_e %" (thesis eq. 5.5, worst case N_Go = ⌊100/M_e⌋ − 1)."""
+    n_go = math.floor(100.0 / invoice_error_pct) - 1
+    if n_go < 1:
+        raise ValueError("invoice error must be below 50 %")
+    return 1.0 - (invoice_share_pct / 100.0) ** (1.0 / n_go)
+
+
+def p_fgor_max(invoice_share_pct: float, n_potential: int) -> float:
+    """Largest P_FGoR with I % of invoices free of false recognition over N_PFGoR segments (eq. 5.10)."""
+    return 1.0 - (invoice_share_pct / 100.0) ** (1.0 / n_potential)
+
+
+def p_md_for_overcharge(n_th: int, n_faulty: int = 72, budget: float = 5e-7 / 1.32e-4) -> float:
+    """P_MD with P(Bin(N_F,PSR, P_MD) ≥ N_Th) = budget (thesis eqs. 5.36–5.38, Table 5.2)."""
+
+    def excess(p: float) -> float:
+        return float(stats.binom.sf(n_th - 1, n_faulty, p)) - budget
+
+    return float(optimize.brentq(excess, 1e-15, 0.5, xtol=1e-15))

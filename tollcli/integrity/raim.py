@@ -1,0 +1,122 @@
+"""WLSR RAIM fault detection, classic and ETC, batched over epochs (paper 001 §III–IV).
+
+Statuses, in the order they are decided:
+
+``insufficient``   fewer measurements than unknowns + 1 (k < 1) or singular geometry
+``unavailable``    classic: HPL > HAL; ETC: a measurement no other one checks
+                   (slope ∞) or no threshold > 0 keeps P_MD
+``unmonitored``    geometry is fine but the log gives no test statistic (no residuals):
+                   slopes, HPL and Th are reported, the position is never ``valid``
+``fault_detected`` t > Th
+``excluded_valid`` (FDE only) t > Th, and exactly one subset without one satellite passes
+``valid``          t ≤ Th (and, classic, HPL ≤ HAL)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tollcli.integrity import design
+from tollcli.integrity.wls import Geometry
+
+STATUSES = ("valid", "fault_detected", "excluded_valid", "unavailable", "unmonitored", "insufficient")
+VALID, FAULT, EXCLUDED, UNAVAILABLE, UNMONITORED, INSUFFICIENT = range(6)
+MODES = ("etc", "classic")
+
+
+@dataclass
+class RaimParams:
+    """What the RAIM is asked to guarantee."""
+
+    mode: str = "etc"  # "etc" (HPL = HAL, P_FA varies) or "classic" (P_FA fixed, HPL varies)
+    hal_m: float = 50.0
+    p_md: float = 5e-5
+    p_fa: float = 5e-3  # classic only
+    fde: bool = False
+    exact_threshold: bool = False  # ETC: exact ncx2 quantile per epoch instead of the safe look-up table
+    _table: design.EtcThresholdTable | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"RAIM mode {self.mode!r}: use one of {', '.join(MODES)}")
+        for name in ("p_md", "p_fa"):
+            value = getattr(self, name)
+            if not 0.0 < value < 1.0:
+                raise ValueError(f"{name} = {value}: a probability strictly between 0 and 1")
+        if not self.hal_m > 0:
+            raise ValueError(f"hal_m = {self.hal_m}: must be positive")
+
+    def etc_threshold(self, dof: np.ndarray, lambda_det: np.ndarray) -> np.ndarray:
+        if self.exact_threshold:
+            return design.etc_threshold(self.p_md, dof, lambda_det)
+        if self._table is None:
+            self._table = design.EtcThresholdTable(self.p_md)
+        return self._table(dof, lambda_det)
+
+
+@dataclass
+class Detection:
+    """Per-epoch results of fault detection (arrays of length E)."""
+
+    dof: np.ndarray
+    slope_max_m: np.ndarray
+    test_stat: np.ndarray
+    threshold: np.ndarray
+    lambda_det: np.ndarray
+    hpl_m: np.ndarray
+    hal_m: np.ndarray
+    p_fa: np.ndarray
+    status: np.ndarray  # int codes into STATUSES
+
+
+def detect(geometry: Geometry, test_stat: np.ndarray, params: RaimParams, hal_m=None) -> Detection:
+    """Thresholds, protection levels and a status for every epoch.
+
+    ``hal_m`` may be an array (one HAL per epoch, e.g. per candidate geo-object);
+    it defaults to ``params.hal_m``.
+    """
+    n = geometry.dof.shape[0]
+    hal = np.broadcast_to(np.asarray(params.hal_m if hal_m is None else hal_m, dtype=float), (n,)).copy()
+    dof = geometry.dof
+    slope_max = geometry.slope_max_m
+    insufficient = (dof < 1) | geometry.singular | (geometry.n_meas == 0)
+    k = np.where(insufficient, 0, dof)
+    if params.mode == "classic":
+        threshold = design.classic_threshold(params.p_fa, k)
+        lambda_det = design.classic_lambda_det(params.p_fa, params.p_md, k)
+        with np.errstate(invalid="ignore"):
+            hpl = slope_max * np.sqrt(lambda_det)
+        p_fa = np.where(insufficient, np.nan, params.p_fa)
+        unavailable = ~(hpl <= hal)
+    else:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lambda_det = np.where(np.isfinite(slope_max) & (slope_max > 0), (hal / slope_max) ** 2, np.nan)
+        threshold = params.etc_threshold(k, lambda_det)
+        p_fa = design.false_alarm_probability(threshold, k)
+        hpl = hal.copy()
+        unavailable = ~np.isfinite(slope_max) | ~(threshold > 0)
+    status = np.full(n, VALID, dtype=np.int8)
+    with np.errstate(invalid="ignore"):
+        status[test_stat > threshold] = FAULT
+    status[np.isnan(test_stat)] = UNMONITORED
+    status[unavailable] = UNAVAILABLE
+    status[insufficient] = INSUFFICIENT
+    nan_if = np.where(insufficient, np.nan, 1.0)
+    return Detection(
+        dof=np.where(insufficient, np.maximum(dof, 0), dof),
+        slope_max_m=slope_max * nan_if,
+        test_stat=test_stat,
+        threshold=threshold * nan_if,
+        lambda_det=lambda_det * nan_if,
+        hpl_m=hpl * nan_if,
+        hal_m=hal,
+        p_fa=p_fa * nan_if,
+        status=status,
+    )
+
+
+def status_names(codes: np.ndarray) -> np.ndarray:
+    """Int status codes → their names."""
+    return np.asarray(STATUSES, dtype=object)[codes]

@@ -1,0 +1,103 @@
+"""Batched weighted least squares over epochs: geometry, slopes and residuals.
+
+Arrays are padded per epoch: ``H`` (E, N, U) observation rows, ``sigma_m``
+(E, N) 1σ pseudorange errors, ``mask`` (E, N) which slots hold a measurement.
+Columns of H are [east, north, up, clock_1 … clock_C]; a clock column with no
+measurement in an epoch is inactive there (it does not count as an unknown).
+Everything is vectorized over epochs: no Python loop per epoch.
+
+Paper 001 eqs. 2–14: A = (HᵀΣ⁻¹H)⁻¹HᵀΣ⁻¹, B = H·A, r = (I − B)Δy,
+t = rᵀΣ⁻¹r, slope_i = σ_i·√(A_E,i² + A_N,i²)/√((I − B)_ii).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: (I − B)_ii below this: the measurement is not checked by the others (slope ∞)
+REDUNDANCY_EPS = 1e-9
+#: relative eigenvalue floor of HᵀΣ⁻¹H below which the geometry is singular
+SINGULAR_RCOND = 1e-10
+
+
+@dataclass
+class Geometry:
+    """WLS geometry of a batch of epochs (all arrays lead with the epoch axis)."""
+
+    A: np.ndarray  # (E, U, N) WLS gain, zero columns for empty slots
+    redundancy: np.ndarray  # (E, N) (I − B)_ii, 0 for empty slots
+    slope: np.ndarray  # (E, N) horizontal slope, m per √λ; NaN for empty slots, inf if unchecked
+    slope_max_m: np.ndarray  # (E,) largest slope (inf if some measurement is unchecked)
+    n_meas: np.ndarray  # (E,) measurements
+    n_unknowns: np.ndarray  # (E,) active unknowns
+    dof: np.ndarray  # (E,) k = n_meas − n_unknowns
+    singular: np.ndarray  # (E,) bool: the normal matrix cannot be inverted
+    weight: np.ndarray  # (E, N) 1/σ², 0 for empty slots
+
+
+def enu_rows(elev_deg: np.ndarray, azim_deg: np.ndarray) -> np.ndarray:
+    """Line-of-sight rows [−e, −n, −u] (receiver→satellite unit vector, negated) for (..., N) angles."""
+    el = np.radians(elev_deg)
+    az = np.radians(azim_deg)
+    cos_el = np.cos(el)
+    return -np.stack([cos_el * np.sin(az), cos_el * np.cos(az), np.sin(el)], axis=-1)
+
+
+def observation_matrix(elev_deg: np.ndarray, azim_deg: np.ndarray, clock_index: np.ndarray, n_clocks: int) -> np.ndarray:
+    """H (E, N, 3 + n_clocks) from angles and each measurement's clock (constellation) column."""
+    los = enu_rows(np.nan_to_num(elev_deg), np.nan_to_num(azim_deg))
+    clocks = (clock_index[..., None] == np.arange(n_clocks)).astype(float)
+    return np.concatenate([los, clocks], axis=-1)
+
+
+def _inverse_psd(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Batched inverse of symmetric positive semi-definite (E, U, U); flags singular ones."""
+    w, v = np.linalg.eigh(G)
+    floor = SINGULAR_RCOND * np.maximum(w[..., -1:], 1e-300)
+    singular = (w <= floor).any(axis=-1)
+    inv_w = np.where(w > floor, 1.0 / np.where(w > floor, w, 1.0), 0.0)
+    return np.einsum("eij,ej,ekj->eik", v, inv_w, v), singular
+
+
+def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geometry:
+    """WLS gain, redundancy, slopes and degrees of freedom for every epoch."""
+    mask = mask & np.isfinite(sigma_m) & (sigma_m > 0)
+    weight = np.where(mask, 1.0 / np.where(mask, sigma_m, 1.0) ** 2, 0.0)
+    Hm = np.where(mask[..., None], H, 0.0)
+    active = np.abs(Hm).sum(axis=1) > 0  # (E, U)
+    G = np.einsum("enu,en,env->euv", Hm, weight, Hm)
+    idx = np.arange(G.shape[-1])
+    G[:, idx, idx] += ~active  # an inactive unknown is decoupled, not singular
+    Ginv, singular = _inverse_psd(G)
+    A = np.einsum("euv,env,en->eun", Ginv, Hm, weight)
+    leverage = np.einsum("enu,eun->en", Hm, A)
+    redundancy = np.where(mask, 1.0 - leverage, 0.0)
+    n_meas = mask.sum(axis=1)
+    n_unknowns = active.sum(axis=1)
+    dof = n_meas - n_unknowns
+    horiz = np.sqrt(A[:, 0, :] ** 2 + A[:, 1, :] ** 2)
+    checked = redundancy > REDUNDANCY_EPS
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.where(checked, sigma_m * horiz / np.sqrt(np.where(checked, redundancy, 1.0)), np.inf)
+    slope = np.where(mask, slope, np.nan)
+    with np.errstate(invalid="ignore"):
+        slope_max = np.where(n_meas > 0, np.nanmax(np.where(mask, slope, -np.inf), axis=1), np.nan)
+    return Geometry(A, redundancy, slope, slope_max, n_meas, n_unknowns, dof, singular, weight)
+
+
+def residuals_from_prefit(H: np.ndarray, geometry: Geometry, dy_m: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Post-fit residuals r = (I − B)Δy and the state correction Δx = AΔy (E, U)."""
+    dy = np.where(mask, dy_m, 0.0)
+    dx = np.einsum("eun,en->eu", geometry.A, dy)
+    r = np.where(mask, dy - np.einsum("enu,eu->en", H, dx), np.nan)
+    return r, dx
+
+
+def wsse(residual_m: np.ndarray, geometry: Geometry) -> np.ndarray:
+    """Test statistic t = rᵀΣ⁻¹r per epoch (NaN where any used residual is missing)."""
+    used = geometry.weight > 0
+    missing = (used & ~np.isfinite(residual_m)).any(axis=1) | (geometry.n_meas == 0)
+    t = np.where(used, geometry.weight * np.nan_to_num(residual_m) ** 2, 0.0).sum(axis=1)
+    return np.where(missing, np.nan, t)
