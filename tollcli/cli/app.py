@@ -7,7 +7,9 @@ from typing import Annotated
 import typer
 
 from tollcli import __version__
+from tollcli.cli.design import design
 from tollcli.cli.epochs import epochs
+from tollcli.cli.integrity import integrity
 
 EPILOG = (
     "Exit codes: 0 ok; 1 data error (input unusable, or a bad line under --strict); "
@@ -43,3 +45,5 @@ def root(
 
 
 app.command(epilog=EPILOG)(epochs)
+app.command(epilog=EPILOG)(integrity)
+app.command(epilog=EPILOG)(design)

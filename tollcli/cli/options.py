@@ -28,3 +28,15 @@ DateOpt = Annotated[
     Optional[_dt.datetime],
     typer.Option("--date", formats=["%Y-%m-%d"], help="UTC date of the first epoch, for logs without RMC/ZDA dates (YYYY-MM-DD)."),
 ]
+
+RaimMode = Annotated[str, typer.Option("--raim", help="RAIM: etc (HPL = HAL, P_FA per epoch) or classic (fixed P_FA, HPL ≤ HAL).")]
+Hal = Annotated[float, typer.Option("--hal", help="Horizontal alert limit, m.", min=0.0)]
+PMd = Annotated[float, typer.Option("--p-md", help="Probability of missed detection.")]
+PFa = Annotated[float, typer.Option("--p-fa", help="Probability of false alarm (classic RAIM).")]
+Fde = Annotated[bool, typer.Option("--fde", help="Fault detection and exclusion: drop one satellite when exactly one subset passes.")]
+SigmaModel = Annotated[
+    str,
+    typer.Option("--sigma-model", help="Pseudorange error model: nominal (thesis; alias urban, rural), constant (--sigma), input (σ from the log)."),
+]
+Sigma = Annotated[float, typer.Option("--sigma", help="σ of every pseudorange for --sigma-model constant, m.", min=0.0)]
+Iono = Annotated[str, typer.Option("--iono", help="Nominal model ionosphere: single (single frequency), sbas, iono-free.")]

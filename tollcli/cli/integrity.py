@@ -1,0 +1,142 @@
+"""``tollcli integrity``: a receiver log → the epoch table with RAIM columns."""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from typing import Annotated, Optional
+
+import pandas as pd
+import typer
+
+from tollcli.cli import options as opt
+from tollcli.cli.console import progress, warn
+from tollcli.cli.epochs import check_usable
+from tollcli.errors import UsageError
+from tollcli.geodesy import enu_shift2geodetic
+from tollcli.integrity.from_nmea import AngleCarry, nmea_measurements
+from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.run import run_raim
+from tollcli.integrity.sigma_models import SIGMA_MODELS, NominalModel
+from tollcli.io.sources import open_binary
+from tollcli.io.writers import TableWriter, format_for
+from tollcli.nmea import ReadStats, iter_nmea_tables
+
+FORMATS = ("auto", "nmea", "gsdc-derived", "rinex")
+
+
+def sniff_format(log: str) -> str:
+    """nmea, gsdc-derived or rinex from the first line of the log."""
+    if log == "-":
+        return "nmea"
+    stream = open_binary(log)
+    try:
+        head = stream.peek(512)[:512] if hasattr(stream, "peek") else stream.read(512)
+    finally:
+        stream.close()
+    first = head.split(b"\n", 1)[0]
+    if b"millisSinceGpsEpoch" in first:
+        return "gsdc-derived"
+    if b"RINEX VERSION" in first:
+        return "rinex"
+    return "nmea"
+
+
+def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
+    """Add ``raim_lat_deg``/``raim_lon_deg``: the position the RAIM vouches for (after any exclusion)."""
+    lat, lon = enu_shift2geodetic(table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float),
+                                  table["fde_shift_e_m"].to_numpy(float), table["fde_shift_n_m"].to_numpy(float))  # fmt: skip
+    return table.assign(raim_lat_deg=lat, raim_lon_deg=lon)
+
+
+def integrity(
+    log: opt.LogArg,
+    output: opt.Output = "-",
+    fmt: Annotated[str, typer.Option("--format", help="Input: auto, nmea, gsdc-derived, rinex (observation file).")] = "auto",
+    nav: Annotated[Optional[str], typer.Option("--nav", help="RINEX navigation file (with --format rinex).")] = None,
+    raim: opt.RaimMode = "etc",
+    hal: opt.Hal = 50.0,
+    p_md: opt.PMd = 5e-5,
+    p_fa: opt.PFa = 5e-3,
+    fde: opt.Fde = False,
+    sigma_model: opt.SigmaModel = "nominal",
+    sigma: opt.Sigma = 5.0,
+    iono: opt.Iono = "single",
+    strict: opt.Strict = False,
+    quiet: opt.Quiet = False,
+    as_json: opt.JsonSummary = False,
+) -> None:
+    """Check every epoch with the WLSR RAIM and write the epoch table with its verdict.
+
+    Adds raim_mode, n_used, dof, slope_max_m, test_stat, test_stat_source,
+    threshold, lambda_det, hpl_m, hal_m, p_fa, p_md, raim_status, excluded_sv,
+    fde_shift_e_m, fde_shift_n_m and raim_lat_deg/raim_lon_deg. Statuses: valid,
+    fault_detected, excluded_valid, unavailable, unmonitored (no residuals in
+    the log), insufficient (fewer than unknowns + 1 measurements).
+    """
+    if fmt not in FORMATS:
+        raise UsageError(f"--format {fmt}: use one of {', '.join(FORMATS)}")
+    if sigma_model not in SIGMA_MODELS:
+        raise UsageError(f"--sigma-model {sigma_model}: use one of {', '.join(SIGMA_MODELS)}")
+    if iono not in ("single", "sbas", "iono-free"):
+        raise UsageError(f"--iono {iono}: use single, sbas or iono-free")
+    if as_json and output == "-":
+        raise UsageError("--json prints the summary on stdout: give the table a file with -o")
+    try:
+        params = RaimParams(mode=raim, hal_m=hal, p_md=p_md, p_fa=p_fa, fde=fde)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    nominal = NominalModel(iono=iono)
+    kind = sniff_format(log) if fmt == "auto" else fmt
+    counts: Counter[str] = Counter()
+    writer = TableWriter(output, format_for(output))
+    with writer:
+        if kind == "nmea":
+            _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts)
+        else:
+            table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal)
+            counts.update(table["raim_status"].astype(str))
+            writer.write(table)
+        writer.commit()
+    summary = {"statuses": dict(sorted(counts.items())), "epochs": sum(counts.values()), "format": kind,
+               "raim": raim, "hal_m": hal, "p_md": p_md, "p_fa": p_fa if raim == "classic" else None,
+               "fde": fde, "sigma_model": sigma_model}  # fmt: skip
+    if as_json:
+        typer.echo(json.dumps(summary, sort_keys=True))
+    else:
+        warn(f"{log}: {summary['epochs']} epochs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())), quiet)
+
+
+def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts) -> None:
+    if sigma_model == "input":
+        raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")
+    stats = ReadStats()
+    carry = AngleCarry()
+    with progress(f"checking {log}", quiet) as advance:
+        for chunk in iter_nmea_tables(log, strict=strict, stats=stats):
+            meas = nmea_measurements(chunk.epochs, chunk.satellites, sigma_model, sigma, nominal, carry)
+            raim = run_raim(meas, params)
+            table = chunk.epochs.rename(columns={"n_used": "n_used_receiver"})
+            table = with_raim_position(pd.concat([table.reset_index(drop=True), raim], axis=1))
+            writer.write(table)
+            counts.update(raim["raim_status"].astype(str))
+            advance(len(table))
+    check_usable(stats)
+    warn(stats.summary(), quiet)
+
+
+def _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal) -> pd.DataFrame:
+    if kind == "gsdc-derived":
+        from tollcli.integrity.gsdc import gsdc_epochs, read_gsdc_derived
+
+        epochs, meas = gsdc_epochs(read_gsdc_derived(log), sigma_model, sigma, nominal)
+    else:
+        from tollcli.integrity.rinex import rinex_epochs
+
+        if nav is None:
+            raise UsageError("--format rinex needs --nav NAVFILE (broadcast ephemerides)")
+        epochs, meas = rinex_epochs(log, nav, sigma_model, sigma, nominal)
+    raim = run_raim(meas, params)
+    return with_raim_position(pd.concat([epochs, raim], axis=1))
+
+

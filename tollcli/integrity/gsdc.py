@@ -1,0 +1,149 @@
+"""The Google Smartphone Decimeter Challenge "derived" CSV: WLS positions and RAIM inputs.
+
+Per satellite-signal row the file gives the satellite's ECEF position at signal
+transmission time (in the ECEF frame of that time), its clock bias and the
+modelled delays. Corrected pseudorange (the data set's own definition):
+
+    pr = rawPrM + satClkBiasM − isrbM − ionoDelayM − tropoDelayM
+
+With ``isrbM`` removed one receiver clock serves every constellation and signal.
+The position is an iterated WLS, batched over epochs: each iteration rotates the
+satellite positions by the Earth's rotation during the flight time (Sagnac),
+linearises, and solves all epochs at once. Every signal (L1 and L5 of one
+satellite) is its own measurement; duplicated rows count once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from tollcli.errors import DataError
+from tollcli.geodesy import OMEGA_EARTH_RADPS, ecef2geodetic, enu_rotation
+from tollcli.integrity.measurements import Measurements, pad, slots, sv_labels
+from tollcli.integrity.sigma_models import NominalModel, sigma_for
+from tollcli.integrity.wls import wls_geometry
+
+C_MPS = 299_792_458.0
+GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ms")
+#: GPS − UTC in seconds from each date on (leap seconds since 1980)
+LEAP_SECONDS = [
+    ("1981-07-01", 1), ("1982-07-01", 2), ("1983-07-01", 3), ("1985-07-01", 4), ("1988-01-01", 5),
+    ("1990-01-01", 6), ("1991-01-01", 7), ("1992-07-01", 8), ("1993-07-01", 9), ("1994-07-01", 10),
+    ("1996-01-01", 11), ("1997-07-01", 12), ("1999-01-01", 13), ("2006-01-01", 14), ("2009-01-01", 15),
+    ("2012-07-01", 16), ("2015-07-01", 17), ("2017-01-01", 18),
+]  # fmt: skip
+ANDROID_CONSTELLATION = {1: "GPS", 2: "SBAS", 3: "GLONASS", 4: "QZSS", 5: "BeiDou", 6: "Galileo", 7: "NavIC"}
+REQUIRED = ("millisSinceGpsEpoch", "constellationType", "svid", "signalType", "xSatPosM", "ySatPosM", "zSatPosM",
+            "satClkBiasM", "rawPrM", "rawPrUncM", "isrbM", "ionoDelayM", "tropoDelayM")  # fmt: skip
+ITERATIONS = 10
+
+
+def gps_millis_to_utc(millis: np.ndarray) -> np.ndarray:
+    """GPS milliseconds since 1980-01-06 → UTC ``datetime64[ms]`` (leap seconds removed)."""
+    gps = GPS_EPOCH + np.asarray(millis, dtype=np.int64).astype("timedelta64[ms]")
+    leap = np.zeros(gps.shape, dtype=np.int64)
+    for date, seconds in LEAP_SECONDS:
+        leap = np.where(gps >= np.datetime64(date, "ms") + np.timedelta64(seconds, "s"), seconds, leap)
+    return gps - leap.astype("timedelta64[s]")
+
+
+def read_gsdc_derived(path) -> pd.DataFrame:
+    """The derived CSV with the columns the WLS needs, checked."""
+    try:
+        table = pd.read_csv(path)
+    except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: not a readable CSV ({exc})") from None
+    missing = [c for c in REQUIRED if c not in table.columns]
+    if missing:
+        raise DataError(f"{path}: not a GSDC derived file, missing columns {', '.join(missing)}")
+    return table
+
+
+def _sagnac(sat_xyz: np.ndarray, flight_s: np.ndarray) -> np.ndarray:
+    """Rotate ECEF satellite positions by the Earth's rotation during the flight time."""
+    theta = OMEGA_EARTH_RADPS * flight_s
+    c, s = np.cos(theta), np.sin(theta)
+    x, y, z = sat_xyz[..., 0], sat_xyz[..., 1], sat_xyz[..., 2]
+    return np.stack([c * x + s * y, -s * x + c * y, z], axis=-1)
+
+
+def gsdc_epochs(
+    derived: pd.DataFrame,
+    sigma_model: str = "input",
+    sigma_m: float = 5.0,
+    nominal: NominalModel | None = None,
+) -> tuple[pd.DataFrame, Measurements]:
+    """WLS position per epoch (an epoch table) and the RAIM measurements at that position."""
+    d = derived.drop_duplicates(["millisSinceGpsEpoch", "constellationType", "svid", "signalType"])
+    pr = (d["rawPrM"] + d["satClkBiasM"] - d["isrbM"] - d["ionoDelayM"] - d["tropoDelayM"]).to_numpy(float)
+    good = np.isfinite(pr) & np.isfinite(d[["xSatPosM", "ySatPosM", "zSatPosM"]].to_numpy(float)).all(axis=1)
+    d, pr = d[good], pr[good]
+    millis = d["millisSinceGpsEpoch"].to_numpy(np.int64)
+    epoch_millis, row = np.unique(millis, return_inverse=True)
+    order = np.argsort(row, kind="stable")
+    d, pr, row = d.iloc[order], pr[order], row[order]
+    n_epochs = epoch_millis.size
+    slot, n_slots = slots(row, n_epochs)
+    shape = (n_epochs, n_slots)
+    mask = pad(np.ones(len(d), dtype=bool), row, slot, shape, False)
+    sat = np.stack([pad(d[c].to_numpy(float), row, slot, shape, 0.0) for c in ("xSatPosM", "ySatPosM", "zSatPosM")], -1)
+    prp = pad(pr, row, slot, shape, 0.0)
+    unc = pad(d["rawPrUncM"].to_numpy(float), row, slot, shape, np.nan)
+    const_rows = pd.Series(d["constellationType"].to_numpy(int)).map(ANDROID_CONSTELLATION).fillna("unknown").to_numpy(object)
+    const_pad = pad(const_rows, row, slot, shape, "")
+    signal = d["signalType"].astype(str).str.split("_").str[-1].to_numpy(object)
+    labels = pad(sv_labels(const_rows, d["svid"].to_numpy()) + " " + signal, row, slot, shape, "")
+
+    # initial guess: on the Earth's surface below the satellites' mean direction; clock 0
+    mean_sat = np.where(mask[..., None], sat, 0.0).sum(1) / np.maximum(mask.sum(1), 1)[:, None]
+    norm = np.linalg.norm(mean_sat, axis=1, keepdims=True)
+    x = np.concatenate([6_371_000.0 * mean_sat / np.where(norm > 0, norm, 1.0), np.zeros((n_epochs, 1))], axis=1)
+    sigma_iter = np.where(mask, np.where(np.isfinite(unc) & (unc > 0), unc, sigma_m), np.nan)
+    for _ in range(ITERATIONS):
+        los, dy = _linearise(sat, prp, x, mask)
+        H = np.concatenate([-los, np.ones(shape + (1,))], axis=-1)
+        geom = wls_geometry(H, sigma_iter, mask)
+        dx = np.einsum("eun,en->eu", geom.A, np.where(mask, dy, 0.0))
+        x = x + dx
+        if np.nanmax(np.abs(dx[:, :3]), initial=0.0) < 1e-4:
+            break
+    lat, lon, height = ecef2geodetic(x[:, 0], x[:, 1], x[:, 2])
+    los, dy = _linearise(sat, prp, x, mask)
+    los_enu = np.einsum("eij,enj->eni", enu_rotation(lat, lon), los)
+    elev = np.degrees(np.arcsin(np.clip(los_enu[..., 2], -1, 1)))
+    azim = np.degrees(np.arctan2(los_enu[..., 0], los_enu[..., 1])) % 360.0
+    sigma = np.where(
+        mask,
+        sigma_for(sigma_model, elev_deg=elev, cn0_dbhz=np.full(shape, np.nan), constellation=const_pad,
+                  lat_deg=lat[:, None], lon_deg=lon[:, None], sigma_input_m=unc, sigma_const_m=sigma_m, nominal=nominal),
+        np.nan,
+    )  # fmt: skip
+    H_enu = np.concatenate([-los_enu, np.ones(shape + (1,))], axis=-1)
+    ok = mask.sum(axis=1) >= 4
+    epochs = pd.DataFrame(
+        {
+            "epoch": np.arange(n_epochs, dtype=np.int64),
+            "time_utc": pd.DatetimeIndex(gps_millis_to_utc(epoch_millis)).tz_localize("UTC"),
+            "gps_millis": epoch_millis,
+            "lat_deg": np.where(ok, lat, np.nan),
+            "lon_deg": np.where(ok, lon, np.nan),
+            "height_m": np.where(ok, height, np.nan),
+            "clock_bias_m": np.where(ok, x[:, 3], np.nan),
+            "n_measurements": mask.sum(axis=1).astype(np.int16),
+        }
+    )
+    source = np.full(n_epochs, "pseudorange", dtype=object)
+    meas = Measurements(H_enu, sigma, mask, labels, dy_m=np.where(mask, dy, np.nan), test_stat_source=source)
+    return epochs, meas
+
+
+def _linearise(sat: np.ndarray, pr: np.ndarray, x: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vectors receiver→satellite (Sagnac-corrected) and pre-fit residuals at state ``x``."""
+    rough = np.linalg.norm(sat - x[:, None, :3], axis=-1)
+    sat_rot = _sagnac(sat, rough / C_MPS)
+    vec = sat_rot - x[:, None, :3]
+    rng = np.linalg.norm(vec, axis=-1)
+    los = vec / np.where(rng > 0, rng, 1.0)[..., None]
+    dy = np.where(mask, pr - (rng + x[:, None, 3]), 0.0)
+    return los, dy

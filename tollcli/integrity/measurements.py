@@ -1,0 +1,54 @@
+"""The padded per-epoch measurement arrays the RAIM works on.
+
+One row per epoch, one slot per measurement (satellite or satellite-signal),
+padded to the epoch with the most; ``mask`` says which slots are real. Input
+adapters (NMEA, GSDC derived, RINEX) all produce a :class:`Measurements`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+CONSTELLATION_LETTER = {
+    "GPS": "G", "GLONASS": "R", "Galileo": "E", "BeiDou": "C", "QZSS": "J", "NavIC": "I", "SBAS": "S", "unknown": "X",
+}  # fmt: skip
+
+
+@dataclass
+class Measurements:
+    """Padded arrays (E epochs × N slots) plus what the RAIM needs per epoch."""
+
+    H: np.ndarray  # (E, N, 3 + C): [−e, −n, −u, clock one-hot]
+    sigma_m: np.ndarray  # (E, N)
+    mask: np.ndarray  # (E, N)
+    sv: np.ndarray  # (E, N) labels, e.g. "G05" or "E11 E5a" ('' for empty slots)
+    residual_m: np.ndarray | None = None  # (E, N) post-fit residuals (NMEA GRS), or
+    dy_m: np.ndarray | None = None  # (E, N) pre-fit residuals at the linearisation point (pseudoranges)
+    test_stat_override: np.ndarray | None = None  # (E,) a statistic from elsewhere (GST approximation), NaN = none
+    test_stat_source: np.ndarray | None = None  # (E,) 'grs', 'gst_approx', 'pseudorange', 'none'
+
+
+def slots(epoch_row: np.ndarray, n_epochs: int) -> tuple[np.ndarray, int]:
+    """Slot index of each (sorted-by-epoch) measurement row, and the slot count N."""
+    if epoch_row.size == 0:
+        return np.zeros(0, dtype=np.int64), 0
+    starts = np.searchsorted(epoch_row, np.arange(n_epochs))
+    slot = np.arange(epoch_row.size) - starts[epoch_row]
+    return slot, int(slot.max()) + 1
+
+
+def pad(values: np.ndarray, epoch_row: np.ndarray, slot: np.ndarray, shape: tuple[int, int], fill) -> np.ndarray:
+    """Scatter per-measurement ``values`` into an (E, N) array."""
+    out = np.full(shape, fill, dtype=np.asarray(values).dtype if values.dtype != object else object)
+    out[epoch_row, slot] = values
+    return out
+
+
+def sv_labels(constellation: np.ndarray, svid: np.ndarray) -> np.ndarray:
+    """RINEX-style satellite names: ('GPS', 5) → 'G05'."""
+    import pandas as pd
+
+    letters = pd.Series(np.asarray(constellation, dtype=object)).map(CONSTELLATION_LETTER).fillna("X")
+    return (letters + pd.Series(np.asarray(svid)).astype(str).str.zfill(2)).to_numpy(dtype=object)
