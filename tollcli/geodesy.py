@@ -26,6 +26,11 @@ def geodetic2ecef(lat_deg, lon_deg, alt_m):
 def ecef2geodetic(x, y, z):
     """ECEF → geodetic latitude, longitude (degrees) and ellipsoidal height (m); iterative, mm-exact."""
     x, y, z = (np.asarray(v, dtype=float) for v in (x, y, z))
+    with np.errstate(divide="ignore", invalid="ignore"):  # the Earth's centre has no latitude: NaN
+        return _ecef2geodetic(x, y, z)
+
+
+def _ecef2geodetic(x, y, z):
     lon = np.arctan2(y, x)
     p = np.hypot(x, y)
     lat = np.arctan2(z, p * (1.0 - WGS84_E2))

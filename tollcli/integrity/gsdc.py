@@ -76,11 +76,11 @@ def gsdc_epochs(
 ) -> tuple[pd.DataFrame, Measurements]:
     """WLS position per epoch (an epoch table) and the RAIM measurements at that position."""
     d = derived.drop_duplicates(["millisSinceGpsEpoch", "constellationType", "svid", "signalType"])
+    epoch_millis = np.unique(d["millisSinceGpsEpoch"].to_numpy(np.int64))  # every epoch keeps its row
     pr = (d["rawPrM"] + d["satClkBiasM"] - d["isrbM"] - d["ionoDelayM"] - d["tropoDelayM"]).to_numpy(float)
     good = np.isfinite(pr) & np.isfinite(d[["xSatPosM", "ySatPosM", "zSatPosM"]].to_numpy(float)).all(axis=1)
     d, pr = d[good], pr[good]
-    millis = d["millisSinceGpsEpoch"].to_numpy(np.int64)
-    epoch_millis, row = np.unique(millis, return_inverse=True)
+    row = np.searchsorted(epoch_millis, d["millisSinceGpsEpoch"].to_numpy(np.int64))
     order = np.argsort(row, kind="stable")
     d, pr, row = d.iloc[order], pr[order], row[order]
     n_epochs = epoch_millis.size

@@ -82,8 +82,10 @@ def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geomet
     with np.errstate(divide="ignore", invalid="ignore"):
         slope = np.where(checked, sigma_m * horiz / np.sqrt(np.where(checked, redundancy, 1.0)), np.inf)
     slope = np.where(mask, slope, np.nan)
-    with np.errstate(invalid="ignore"):
-        slope_max = np.where(n_meas > 0, np.nanmax(np.where(mask, slope, -np.inf), axis=1), np.nan)
+    if mask.shape[1] == 0:
+        slope_max = np.full(mask.shape[0], np.nan)
+    else:
+        slope_max = np.where(n_meas > 0, np.max(np.where(mask, slope, -np.inf), axis=1), np.nan)
     return Geometry(A, redundancy, slope, slope_max, n_meas, n_unknowns, dof, singular, weight)
 
 

@@ -159,11 +159,9 @@ def _feed_lines(lines: list[str], asm: EpochAssembler, stats: ReadStats, strict:
         if line.startswith(ANDROID_PREFIX):
             line = line[len(ANDROID_PREFIX) :]
         star = line.rfind("*")
-        start = line.rfind("$", 0, star) if star >= 0 else line.rfind("$")
+        end = star if star >= 0 else len(line)
+        start = max(line.rfind("$", 0, end), line.rfind("!", 0, end))  # '!': encapsulated (AIS) sentences
         if start < 0:
-            if "!" in line and star > 0:  # AIS and other '!' encapsulated sentences
-                stats.unused += 1
-                continue
             _problem(stats, "not_nmea", line_no, "not an NMEA sentence", strict, name)
             continue
         if star < 0:

@@ -1,0 +1,127 @@
+"""RAIM inputs from real and constructed logs: NMEA (GRS, GST, none) and the GSDC derived CSV."""
+
+from __future__ import annotations
+
+import datetime as dt
+import io
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from conftest import shared
+from tollcli.geodesy import enu_rotation, geodetic2ecef
+from tollcli.integrity.from_nmea import AngleCarry, nmea_measurements
+from tollcli.integrity.gsdc import gps_millis_to_utc, gsdc_epochs, read_gsdc_derived
+from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.run import run_raim
+from tollcli.integrity.sigma_models import NominalModel
+from tollcli.nmea import compose, read_nmea
+
+
+def _tables(lines):
+    return read_nmea(io.BytesIO(("\n".join(lines) + "\n").encode()))
+
+
+def _epoch_with_grs(tod, residuals, with_gsv=True):
+    sats = [(3, 62.0, 45.0, 44.0), (7, 35.0, 130.0, 41.0), (9, 48.0, 250.0, 42.0), (16, 21.0, 310.0, 37.0),
+            (22, 15.0, 200.0, 35.0), (27, 70.0, 90.0, 45.0)]  # fmt: skip
+    lines = [compose.rmc(tod, 42.7, 2.9, 10.0, 45.0, dt.date(2024, 5, 6)), compose.gga(tod, 42.7, 2.9, n_used=6),
+             compose.gsa([p for p, *_ in sats], 1.5, 0.9, 1.2, talker="GP")]  # fmt: skip
+    if with_gsv:
+        lines += compose.gsv(sats)
+    lines.append(compose.grs(tod, residuals, talker="GP"))
+    return lines
+
+
+def test_grs_residuals_give_the_exact_statistic():
+    residuals = [1.0, -2.0, 0.5, 3.0, -1.5, 0.25]
+    tables = _tables(_epoch_with_grs(100.0, residuals))
+    meas = nmea_measurements(tables.epochs, tables.satellites, sigma_model="constant", sigma_m=2.0)
+    out = run_raim(meas, RaimParams("etc"))
+    assert out["test_stat_source"].iloc[0] == "grs"
+    assert out["test_stat"].iloc[0] == pytest.approx(sum(r * r for r in residuals) / 4.0)
+    assert out["n_used"].iloc[0] == 6 and out["dof"].iloc[0] == 2
+
+
+def test_gsv_angles_carry_forward_within_their_age_and_across_chunks():
+    lines = _epoch_with_grs(100.0, [0.1] * 6) + _epoch_with_grs(101.0, [0.1] * 6, with_gsv=False)
+    lines += _epoch_with_grs(200.0, [0.1] * 6, with_gsv=False)  # 99 s later: too old to reuse
+    tables = _tables(lines)
+    out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
+    assert out["n_used"].tolist() == [6, 6, 0]
+    assert out["raim_status"].tolist()[2] == "insufficient"
+    # the same when the second epoch arrives in a later chunk
+    carry = AngleCarry()
+    first, second = tables.epochs.iloc[:1], tables.epochs.iloc[1:2]
+    s = tables.satellites
+    nmea_measurements(first, s[s.epoch == 0], carry=carry)
+    later = nmea_measurements(second, s[s.epoch == 1], carry=carry)
+    assert later.mask.sum() == 6
+
+
+def test_gst_only_is_a_flagged_approximation_and_nothing_is_unmonitored():
+    tables = _tables(list(compose.straight_drive(3)))  # GST, no GRS
+    out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
+    assert (out["test_stat_source"] == "gst_approx").all()
+    bare = _tables([line for line in compose.straight_drive(3) if "GST" not in line])
+    out = run_raim(nmea_measurements(bare.epochs, bare.satellites), RaimParams("etc"))
+    assert (out["raim_status"] == "unmonitored").all() and out["hpl_m"].notna().all() and out["threshold"].notna().all()
+    classic = run_raim(nmea_measurements(bare.epochs, bare.satellites), RaimParams("classic"))
+    assert classic["slope_max_m"].notna().all() and (classic["raim_status"] != "valid").all()
+
+
+def test_android_log_without_satellites_cannot_be_monitored():
+    tables = read_nmea(shared("android", "pixel6.nmea"))
+    out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
+    assert len(out) == 48 and (out["raim_status"] == "insufficient").all() and (out["test_stat_source"] == "none").all()
+
+
+def test_every_gpsd_log_gets_a_status_per_epoch():
+    folder = shared("gpsd")
+    for log in sorted(folder.glob("*.log")):
+        tables = read_nmea(log)
+        out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc", fde=True))
+        assert len(out) == len(tables.epochs)
+        assert out["raim_status"].notna().all()
+
+
+def test_gps_time_to_utc():
+    # GSDC 2020-05-14: GPS − UTC = 18 s
+    assert str(gps_millis_to_utc(np.array([1273529464442]))[0]) == "2020-05-14T22:10:46.442"
+
+
+def test_gsdc_wls_positions_against_ground_truth():
+    derived = read_gsdc_derived(shared("gsdc2021", "Pixel4_derived.csv"))
+    truth = pd.read_csv(shared("gsdc2021", "Pixel4_ground_truth.csv")).set_index("millisSinceGpsEpoch")
+    for model in ("input", "nominal"):
+        epochs, meas = gsdc_epochs(derived, sigma_model=model, nominal=NominalModel())
+        assert len(epochs) == 7
+        gt = truth.loc[epochs["gps_millis"]]
+        ours = np.array(geodetic2ecef(epochs.lat_deg.to_numpy(), epochs.lon_deg.to_numpy(), epochs.height_m.to_numpy())).T
+        ref = np.array(geodetic2ecef(gt.latDeg.to_numpy(), gt.lngDeg.to_numpy(), gt.heightAboveWgs84EllipsoidM.to_numpy())).T
+        enu = np.einsum("eij,ej->ei", enu_rotation(gt.latDeg.to_numpy(), gt.lngDeg.to_numpy()), ours - ref)
+        horizontal = np.hypot(enu[:, 0], enu[:, 1])
+        # a Pixel 4 single-frequency WLS: metres. (The truth file's heights sit ~65 m above every WLS solution,
+        # gnss_lib_py's included, so only the horizontal error is asserted.)
+        assert horizontal.max() < 5.0, horizontal
+        out = run_raim(meas, RaimParams("etc", fde=True))
+        assert out["raim_status"].notna().all() and (out["test_stat_source"] == "pseudorange").all()
+        assert (out["n_used"] >= 27).all()
+
+
+def test_gsdc_bad_rows_do_not_raise(tmp_path):
+    derived = read_gsdc_derived(shared("gsdc2021", "Pixel4_derived.csv"))
+    bad = derived.copy()
+    millis = np.sort(bad["millisSinceGpsEpoch"].unique())
+    in_epoch = bad.groupby("millisSinceGpsEpoch").cumcount()
+    bad.loc[(bad["millisSinceGpsEpoch"] == millis[0]) & (in_epoch >= 3), "rawPrM"] = np.nan  # 3 left for 4 unknowns
+    bad.loc[bad["millisSinceGpsEpoch"] == millis[1], "xSatPosM"] = np.nan  # nothing usable left
+    bad = pd.concat([bad, bad.iloc[-3:]])  # duplicated rows count once
+    epochs, meas = gsdc_epochs(bad, sigma_model="input")
+    out = run_raim(meas, RaimParams("etc", fde=True))
+    assert len(epochs) == 7  # every epoch keeps its row
+    assert out["raim_status"].iloc[0] == out["raim_status"].iloc[1] == "insufficient"
+    assert out["n_used"].tolist()[:2] == [3, 0]
+    assert epochs["lat_deg"].iloc[:2].isna().all()
+    assert (out["raim_status"].iloc[2:] == "valid").all()
