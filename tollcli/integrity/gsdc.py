@@ -90,10 +90,15 @@ def gsdc_epochs(
     sat = np.stack([pad(d[c].to_numpy(float), row, slot, shape, 0.0) for c in ("xSatPosM", "ySatPosM", "zSatPosM")], -1)
     prp = pad(pr, row, slot, shape, 0.0)
     unc = pad(d["rawPrUncM"].to_numpy(float), row, slot, shape, np.nan)
-    const_rows = pd.Series(d["constellationType"].to_numpy(int)).map(ANDROID_CONSTELLATION).fillna("unknown").to_numpy(object)
+    # labels and constellation names: computed once per distinct satellite-signal, then indexed
+    keys = d[["constellationType", "svid", "signalType"]]
+    codes, uniques = pd.factorize(pd.MultiIndex.from_frame(keys))
+    u = pd.DataFrame(list(uniques), columns=list(keys.columns))
+    u_const = u["constellationType"].astype(int).map(ANDROID_CONSTELLATION).fillna("unknown").to_numpy(object)
+    u_label = sv_labels(u_const, u["svid"].to_numpy()) + " " + u["signalType"].astype(str).str.split("_").str[-1].to_numpy(object)
+    const_rows = u_const[codes]
     const_pad = pad(const_rows, row, slot, shape, "")
-    signal = d["signalType"].astype(str).str.split("_").str[-1].to_numpy(object)
-    labels = pad(sv_labels(const_rows, d["svid"].to_numpy()) + " " + signal, row, slot, shape, "")
+    labels = pad(u_label[codes], row, slot, shape, "")
 
     # initial guess: on the Earth's surface below the satellites' mean direction; clock 0
     mean_sat = np.where(mask[..., None], sat, 0.0).sum(1) / np.maximum(mask.sum(1), 1)[:, None]

@@ -18,7 +18,7 @@ import numpy as np
 
 #: (I − B)_ii below this: the measurement is not checked by the others (slope ∞)
 REDUNDANCY_EPS = 1e-9
-#: relative eigenvalue floor of HᵀΣ⁻¹H below which the geometry is singular
+#: determinant of the unit-diagonal HᵀΣ⁻¹H below which the geometry is singular
 SINGULAR_RCOND = 1e-10
 
 
@@ -53,12 +53,21 @@ def observation_matrix(elev_deg: np.ndarray, azim_deg: np.ndarray, clock_index: 
 
 
 def _inverse_psd(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Batched inverse of symmetric positive semi-definite (E, U, U); flags singular ones."""
-    w, v = np.linalg.eigh(G)
-    floor = SINGULAR_RCOND * np.maximum(w[..., -1:], 1e-300)
-    singular = (w <= floor).any(axis=-1)
-    inv_w = np.where(w > floor, 1.0 / np.where(w > floor, w, 1.0), 0.0)
-    return np.einsum("eij,ej,ekj->eik", v, inv_w, v), singular
+    """Batched inverse of symmetric positive semi-definite (E, U, U); flags singular ones.
+
+    The matrix is scaled to unit diagonal first (a correlation matrix, whose
+    determinant lies in [0, 1]); a determinant below ``SINGULAR_RCOND`` marks the
+    geometry singular (its inverse is returned as zeros).
+    """
+    diag = np.einsum("eii->ei", G)
+    scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
+    Gs = G * scale[:, :, None] * scale[:, None, :]
+    singular = (diag <= 0).any(axis=1) | ~(np.linalg.det(Gs) > SINGULAR_RCOND)
+    if singular.any():
+        Gs[singular] = np.eye(G.shape[-1])
+    inv = np.linalg.inv(Gs) * scale[:, :, None] * scale[:, None, :]
+    inv[singular] = 0.0
+    return inv, singular
 
 
 def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geometry:
@@ -67,12 +76,13 @@ def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geomet
     weight = np.where(mask, 1.0 / np.where(mask, sigma_m, 1.0) ** 2, 0.0)
     Hm = np.where(mask[..., None], H, 0.0)
     active = np.abs(Hm).sum(axis=1) > 0  # (E, U)
-    G = np.einsum("enu,en,env->euv", Hm, weight, Hm)
+    HwT = (Hm * weight[..., None]).transpose(0, 2, 1)  # (E, U, N) = HᵀW
+    G = HwT @ Hm
     idx = np.arange(G.shape[-1])
     G[:, idx, idx] += ~active  # an inactive unknown is decoupled, not singular
     Ginv, singular = _inverse_psd(G)
-    A = np.einsum("euv,env,en->eun", Ginv, Hm, weight)
-    leverage = np.einsum("enu,eun->en", Hm, A)
+    A = Ginv @ HwT
+    leverage = (Hm * A.transpose(0, 2, 1)).sum(axis=-1)
     redundancy = np.where(mask, 1.0 - leverage, 0.0)
     n_meas = mask.sum(axis=1)
     n_unknowns = active.sum(axis=1)
