@@ -7,9 +7,8 @@ modelled delays. Corrected pseudorange (the data set's own definition):
     pr = rawPrM + satClkBiasM − isrbM − ionoDelayM − tropoDelayM
 
 With ``isrbM`` removed one receiver clock serves every constellation and signal.
-The position is an iterated WLS, batched over epochs: each iteration rotates the
-satellite positions by the Earth's rotation during the flight time (Sagnac),
-linearises, and solves all epochs at once. Every signal (L1 and L5 of one
+The position is the iterated, Sagnac-corrected WLS of
+:mod:`tollcli.integrity.pseudorange_wls`, batched over epochs. Every signal (L1 and L5 of one
 satellite) is its own measurement; duplicated rows count once.
 """
 
@@ -19,12 +18,10 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError
-from tollcli.geodesy import OMEGA_EARTH_RADPS, ecef2geodetic, enu_rotation
 from tollcli.integrity.measurements import Measurements, pad, slots, sv_labels
+from tollcli.integrity.pseudorange_wls import final_geometry, solve_positions
 from tollcli.integrity.sigma_models import NominalModel, sigma_for
-from tollcli.integrity.wls import wls_geometry
 
-C_MPS = 299_792_458.0
 GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ms")
 #: GPS − UTC in seconds from each date on (leap seconds since 1980)
 LEAP_SECONDS = [
@@ -36,7 +33,6 @@ LEAP_SECONDS = [
 ANDROID_CONSTELLATION = {1: "GPS", 2: "SBAS", 3: "GLONASS", 4: "QZSS", 5: "BeiDou", 6: "Galileo", 7: "NavIC"}
 REQUIRED = ("millisSinceGpsEpoch", "constellationType", "svid", "signalType", "xSatPosM", "ySatPosM", "zSatPosM",
             "satClkBiasM", "rawPrM", "rawPrUncM", "isrbM", "ionoDelayM", "tropoDelayM")  # fmt: skip
-ITERATIONS = 10
 
 
 def gps_millis_to_utc(millis: np.ndarray) -> np.ndarray:
@@ -58,14 +54,6 @@ def read_gsdc_derived(path) -> pd.DataFrame:
     if missing:
         raise DataError(f"{path}: not a GSDC derived file, missing columns {', '.join(missing)}")
     return table
-
-
-def _sagnac(sat_xyz: np.ndarray, flight_s: np.ndarray) -> np.ndarray:
-    """Rotate ECEF satellite positions by the Earth's rotation during the flight time."""
-    theta = OMEGA_EARTH_RADPS * flight_s
-    c, s = np.cos(theta), np.sin(theta)
-    x, y, z = sat_xyz[..., 0], sat_xyz[..., 1], sat_xyz[..., 2]
-    return np.stack([c * x + s * y, -s * x + c * y, z], axis=-1)
 
 
 def gsdc_epochs(
@@ -100,31 +88,17 @@ def gsdc_epochs(
     const_pad = pad(const_rows, row, slot, shape, "")
     labels = pad(u_label[codes], row, slot, shape, "")
 
-    # initial guess: on the Earth's surface below the satellites' mean direction; clock 0
-    mean_sat = np.where(mask[..., None], sat, 0.0).sum(1) / np.maximum(mask.sum(1), 1)[:, None]
-    norm = np.linalg.norm(mean_sat, axis=1, keepdims=True)
-    x = np.concatenate([6_371_000.0 * mean_sat / np.where(norm > 0, norm, 1.0), np.zeros((n_epochs, 1))], axis=1)
     sigma_iter = np.where(mask, np.where(np.isfinite(unc) & (unc > 0), unc, sigma_m), np.nan)
-    for _ in range(ITERATIONS):
-        los, dy = _linearise(sat, prp, x, mask)
-        H = np.concatenate([-los, np.ones(shape + (1,))], axis=-1)
-        geom = wls_geometry(H, sigma_iter, mask)
-        dx = np.einsum("eun,en->eu", geom.A, np.where(mask, dy, 0.0))
-        x = x + dx
-        if np.nanmax(np.abs(dx[:, :3]), initial=0.0) < 1e-4:
-            break
-    lat, lon, height = ecef2geodetic(x[:, 0], x[:, 1], x[:, 2])
-    los, dy = _linearise(sat, prp, x, mask)
-    los_enu = np.einsum("eij,enj->eni", enu_rotation(lat, lon), los)
-    elev = np.degrees(np.arcsin(np.clip(los_enu[..., 2], -1, 1)))
-    azim = np.degrees(np.arctan2(los_enu[..., 0], los_enu[..., 1])) % 360.0
+    x = solve_positions(sat, prp, mask, sigma_iter)
+    g = final_geometry(sat, prp, mask, x)
+    lat, lon, height = g["lat_deg"], g["lon_deg"], g["height_m"]
     sigma = np.where(
         mask,
-        sigma_for(sigma_model, elev_deg=elev, cn0_dbhz=np.full(shape, np.nan), constellation=const_pad,
+        sigma_for(sigma_model, elev_deg=g["elev_deg"], cn0_dbhz=np.full(shape, np.nan), constellation=const_pad,
                   lat_deg=lat[:, None], lon_deg=lon[:, None], sigma_input_m=unc, sigma_const_m=sigma_m, nominal=nominal),
         np.nan,
     )  # fmt: skip
-    H_enu = np.concatenate([-los_enu, np.ones(shape + (1,))], axis=-1)
+    H_enu, dy = g["H"], g["dy_m"]
     ok = mask.sum(axis=1) >= 4
     epochs = pd.DataFrame(
         {
@@ -139,16 +113,5 @@ def gsdc_epochs(
         }
     )
     source = np.full(n_epochs, "pseudorange", dtype=object)
-    meas = Measurements(H_enu, sigma, mask, labels, dy_m=np.where(mask, dy, np.nan), test_stat_source=source)
+    meas = Measurements(H_enu, sigma, mask, labels, dy_m=dy, test_stat_source=source)
     return epochs, meas
-
-
-def _linearise(sat: np.ndarray, pr: np.ndarray, x: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit vectors receiver→satellite (Sagnac-corrected) and pre-fit residuals at state ``x``."""
-    rough = np.linalg.norm(sat - x[:, None, :3], axis=-1)
-    sat_rot = _sagnac(sat, rough / C_MPS)
-    vec = sat_rot - x[:, None, :3]
-    rng = np.linalg.norm(vec, axis=-1)
-    los = vec / np.where(rng > 0, rng, 1.0)[..., None]
-    dy = np.where(mask, pr - (rng + x[:, None, 3]), 0.0)
-    return los, dy

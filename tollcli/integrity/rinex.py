@@ -1,0 +1,152 @@
+"""RINEX 3 observation + navigation files → WLS positions and RAIM measurements (GPS, Galileo).
+
+* Observations (georinex): code pseudorange on L1/E1 (``C1C``, else ``C1X``/``C1P``
+  for Galileo/GPS) and its C/N0 (``S1…``); receiver time from the file (GPS time).
+* Orbits and clocks: the broadcast ephemeris of each satellite nearest in time
+  (:mod:`tollcli.integrity.broadcast`) at the transmission time
+  t_tx = t_rx − pr/c − dt_sv, iterated.
+* Corrections inside the WLS: satellite clock (+ c·dt_sv, with relativity and
+  group delay), Klobuchar ionosphere from the navigation header (GPSA/GPSB),
+  Saastamoinen troposphere; Sagnac in the geometry. One receiver clock per
+  constellation (the GPS–Galileo time offset stays an unknown).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from tollcli.errors import DataError, UsageError
+from tollcli.integrity.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
+from tollcli.integrity.broadcast import EPHEMERIS_FIELDS, WEEK_S, kepler_position_clock
+from tollcli.integrity.measurements import Measurements, pad, slots
+from tollcli.integrity.pseudorange_wls import C_MPS, final_geometry, solve_positions
+from tollcli.integrity.sigma_models import NominalModel, sigma_for
+
+GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ns")
+CODES = {"G": ("C1C", "C1P", "C1W"), "E": ("C1C", "C1X", "C1B")}
+NAMES = {"G": "GPS", "E": "Galileo"}
+
+
+def gps_seconds(times: np.ndarray) -> np.ndarray:
+    """datetime64 (GPS time scale) → seconds since 1980-01-06."""
+    return (np.asarray(times, dtype="datetime64[ns]") - GPS_EPOCH).astype(np.int64) / 1e9
+
+
+def _load(path: str, what: str):
+    try:
+        import georinex
+    except ImportError:  # pragma: no cover - a dependency of the package
+        raise UsageError("reading RINEX needs georinex (pip install georinex)") from None
+    try:
+        return georinex.load(path, use={"G", "E"})
+    except FileNotFoundError:
+        raise UsageError(f"{path}: no such file") from None
+    except Exception as exc:  # georinex raises many kinds on bad files
+        raise DataError(f"{path}: not a readable RINEX {what} file ({type(exc).__name__}: {exc})") from None
+
+
+def observations(obs) -> pd.DataFrame:
+    """One row per (epoch, satellite) with a pseudorange: time, sv, pr_m, cn0_dbhz."""
+    frames = []
+    for system, codes in CODES.items():
+        svs = [s for s in obs.sv.values if str(s).startswith(system)]
+        code = next((c for c in codes if c in obs and np.isfinite(obs[c].sel(sv=svs).values).any()), None) if svs else None
+        if code is None:
+            continue
+        pr = obs[code].sel(sv=svs).to_pandas()
+        snr_name = "S" + code[1:]
+        snr = obs[snr_name].sel(sv=svs).to_pandas() if snr_name in obs else pr * np.nan
+        table = pd.DataFrame({"pr_m": pr.stack(future_stack=True), "cn0_dbhz": snr.stack(future_stack=True)}).reset_index()
+        frames.append(table.rename(columns={table.columns[0]: "time", table.columns[1]: "sv"}))
+    if not frames:
+        raise DataError("no GPS or Galileo L1/E1 code observations (C1C/C1X/C1P) in the observation file")
+    rows = pd.concat(frames, ignore_index=True)
+    return rows[np.isfinite(rows["pr_m"])].sort_values(["time", "sv"], kind="stable").reset_index(drop=True)
+
+
+def _ephemerides(nav, sv: np.ndarray, t_s: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Per query, the fields of the satellite's ephemeris with the nearest clock reference time."""
+    table = nav.to_dataframe().reset_index().dropna(subset=["sqrtA"])
+    if table.empty:
+        raise DataError("no GPS or Galileo ephemerides in the navigation file")
+    table["toc_s"] = gps_seconds(table["time"].to_numpy())
+    week = table["GPSWeek"] if "GPSWeek" in table else np.nan
+    if "GALWeek" in table:
+        week = np.where(table["sv"].str.startswith("E"), table["GALWeek"], week)
+    table["toe_s"] = np.asarray(week, float) * WEEK_S + table["Toe"].to_numpy(float)
+    gd = table["TGD"] if "TGD" in table else 0.0
+    if "BGDe5b" in table:
+        gd = np.where(table["sv"].str.startswith("E"), table["BGDe5b"], gd)
+    table["group_delay_s"] = np.nan_to_num(np.asarray(gd, float))
+    table = table.sort_values("toc_s", kind="stable")
+    queries = pd.DataFrame({"sv": sv, "t_s": t_s, "i": np.arange(sv.size)}).sort_values("t_s", kind="stable")
+    merged = pd.merge_asof(queries, table, left_on="t_s", right_on="toc_s", by="sv", direction="nearest",
+                           tolerance=4 * 3600.0).sort_values("i")  # fmt: skip
+    have = merged["sqrtA"].notna().to_numpy()
+    eph = {k: merged[k].to_numpy(float) for k in (*EPHEMERIS_FIELDS, "toc_s", "toe_s", "group_delay_s")}
+    return eph, have
+
+
+def rinex_epochs(obs_path: str, nav_path: str, sigma_model: str = "nominal", sigma_m: float = 5.0,
+                 nominal: NominalModel | None = None) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
+    """WLS position per epoch (an epoch table) and the RAIM measurements at that position."""
+    if sigma_model == "input":
+        raise UsageError("--sigma-model input: RINEX observations carry no per-measurement σ; use nominal or constant")
+    obs, nav = _load(obs_path, "observation"), _load(nav_path, "navigation")
+    rows = observations(obs)
+    t_rx = gps_seconds(rows["time"].to_numpy())
+    sv = rows["sv"].to_numpy(str)
+    pr = rows["pr_m"].to_numpy(float)
+    eph, have = _ephemerides(nav, sv, t_rx)
+    galileo = np.char.startswith(sv, "E")
+    t_tx = t_rx - pr / C_MPS
+    for _ in range(3):
+        pos, clock = kepler_position_clock(eph, t_tx, galileo)
+        t_tx = t_rx - pr / C_MPS - clock
+    pos, clock = kepler_position_clock(eph, t_tx, galileo)
+    usable = have & np.isfinite(pos).all(axis=1) & np.isfinite(clock)
+
+    epoch_times, row = np.unique(rows["time"].to_numpy(), return_inverse=True)
+    keep = np.flatnonzero(usable)
+    row = row[keep]
+    slot, n_slots = slots(row, epoch_times.size)
+    shape = (epoch_times.size, n_slots)
+    mask = pad(np.ones(keep.size, bool), row, slot, shape, False)
+    sat = np.stack([pad(pos[keep, k], row, slot, shape, 0.0) for k in range(3)], -1)
+    pr_corr = pad(pr[keep] + C_MPS * clock[keep], row, slot, shape, 0.0)
+    labels = pad(sv[keep].astype(object), row, slot, shape, "")
+    letters = pad(np.array([s[0] for s in sv[keep]], dtype=object), row, slot, shape, "")
+    cn0 = pad(rows["cn0_dbhz"].to_numpy(float)[keep], row, slot, shape, np.nan)
+    tow = np.mod(gps_seconds(epoch_times), WEEK_S)[:, None]
+    coeffs = nav.attrs.get("ionospheric_corr_GPS")
+
+    def correction(lat, lon, h, elev, azim):
+        delay = saastamoinen_delay_m(lat[:, None], h[:, None], elev)
+        if coeffs is not None and len(coeffs) == 8:
+            delay = delay + klobuchar_delay_m(lat[:, None], lon[:, None], elev, azim, tow, coeffs[:4], coeffs[4:])
+        return delay
+
+    clock_index = np.where(letters == "E", 1, 0)  # one receiver clock per constellation
+    x = solve_positions(sat, pr_corr, mask, np.where(mask, sigma_m, np.nan), correction, clock_index)
+    g = final_geometry(sat, pr_corr, mask, x, correction, clock_index)
+    const = np.where(letters == "E", "Galileo", "GPS")
+    sigma = np.where(mask, sigma_for(sigma_model, elev_deg=g["elev_deg"], cn0_dbhz=cn0, constellation=const,
+                                     lat_deg=g["lat_deg"][:, None], lon_deg=g["lon_deg"][:, None],
+                                     sigma_const_m=sigma_m, nominal=nominal), np.nan)  # fmt: skip
+    H = g["H"]
+    ok = mask.sum(axis=1) >= 4
+    epochs = pd.DataFrame(
+        {
+            "epoch": np.arange(epoch_times.size, dtype=np.int64),
+            "time_gps": pd.DatetimeIndex(epoch_times),
+            "lat_deg": np.where(ok, g["lat_deg"], np.nan),
+            "lon_deg": np.where(ok, g["lon_deg"], np.nan),
+            "height_m": np.where(ok, g["height_m"], np.nan),
+            "clock_bias_m": np.where(ok, x[:, 3], np.nan),
+            "n_measurements": mask.sum(axis=1).astype(np.int16),
+        }
+    )
+    meas = Measurements(H, sigma, mask, labels, dy_m=g["dy_m"],
+                        test_stat_source=np.full(epoch_times.size, "pseudorange", dtype=object))  # fmt: skip
+    return epochs, meas
