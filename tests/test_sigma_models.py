@@ -15,9 +15,9 @@ PERPIGNAN = (42.6987, 2.8956)
 )  # fmt: skip
 def test_dll_thermal_noise_at_30_35_40_dbhz(signal, values):
     got = sm.sigma_noise_dll_m(np.array([30.0, 35.0, 40.0]), signal)
-    # the narrowband case integrates a 2 MHz front end at one-chip spacing, where the
-    # quadrature is most sensitive: 2 % there, 1 % elsewhere
-    assert got == pytest.approx(values, rel=0.02 if signal == "bpsk1_narrow" else 0.01)
+    # the table is rounded to 0.01 m; the narrowband case (2 MHz front end, one-chip spacing)
+    # is where the quadrature is most sensitive: 2 % there
+    assert got == pytest.approx(values, rel=0.02 if signal == "bpsk1_narrow" else 0.01, abs=0.01)
 
 
 def test_troposphere_and_sbas_ionosphere_columns():
