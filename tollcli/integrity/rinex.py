@@ -13,6 +13,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 
@@ -39,7 +41,10 @@ def _load(path: str, what: str):
     except ImportError:  # pragma: no cover - a dependency of the package
         raise UsageError("reading RINEX needs georinex (pip install georinex)") from None
     try:
-        return georinex.load(path, use={"G", "E"})
+        with warnings.catch_warnings():  # georinex's own xarray deprecations are not the user's business
+            warnings.simplefilter("ignore", FutureWarning)
+            warnings.simplefilter("ignore", DeprecationWarning)
+            return georinex.load(path, use={"G", "E"})
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
     except Exception as exc:  # georinex raises many kinds on bad files

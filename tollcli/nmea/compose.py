@@ -27,24 +27,23 @@ def hhmmss(tod_s: float, decimals: int = 2) -> str:
     return f"{int(hh):02d}{int(mm):02d}{ss:0{3 + decimals}.{decimals}f}"
 
 
-def ddmm(lat_deg: float, decimals: int = 7) -> tuple[str, str]:
-    """Latitude → (``ddmm.mmmmmmm``, N/S)."""
-    a = abs(lat_deg)
+def _degrees_minutes(value_deg: float, width: int, decimals: int) -> str:
+    a = abs(value_deg)
     d = int(a)
     m = round((a - d) * 60.0, decimals)
     if m >= 60.0:
         d, m = d + 1, 0.0
-    return f"{d:02d}{m:0{3 + decimals}.{decimals}f}", "S" if lat_deg < 0 else "N"
+    return f"{d:0{width}d}{m:0{3 + decimals}.{decimals}f}"
+
+
+def ddmm(lat_deg: float, decimals: int = 7) -> tuple[str, str]:
+    """Latitude → (``ddmm.mmmmmmm``, N/S)."""
+    return _degrees_minutes(lat_deg, 2, decimals), "S" if lat_deg < 0 else "N"
 
 
 def dddmm(lon_deg: float, decimals: int = 7) -> tuple[str, str]:
     """Longitude → (``dddmm.mmmmmmm``, E/W)."""
-    a = abs(lon_deg)
-    d = int(a)
-    m = round((a - d) * 60.0, decimals)
-    if m >= 60.0:
-        d, m = d + 1, 0.0
-    return f"{d:03d}{m:0{3 + decimals}.{decimals}f}", "W" if lon_deg < 0 else "E"
+    return _degrees_minutes(lon_deg, 3, decimals), "W" if lon_deg < 0 else "E"
 
 
 def _f(value: float | None, fmt: str) -> str:

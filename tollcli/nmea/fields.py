@@ -39,42 +39,31 @@ def integer(field: str, missing: int = -1) -> int:
     return int(field)
 
 
-def lat_deg(value: str, hemisphere: str) -> float:
-    """``ddmm.mmmm`` + N/S → signed latitude in degrees (NaN when empty)."""
+def _ddmm(value: str, hemisphere: str, max_deg: float, negative: str, positive: str, what: str) -> float:
+    """``(d)ddmm.mmmm`` + hemisphere → signed degrees (NaN when empty)."""
     if not value:
         return NAN
     raw = float(value)
     deg = math.floor(raw / 100.0)
     minutes = raw - 100.0 * deg
-    if not (0.0 <= minutes < 60.0) or deg > 90 or raw < 0:
-        raise ValueError(f"latitude out of range {value!r}")
     out = deg + minutes / 60.0
-    if out > 90.0:
-        raise ValueError(f"latitude out of range {value!r}")
-    if hemisphere == "S":
+    if raw < 0 or not (0.0 <= minutes < 60.0) or out > max_deg:
+        raise ValueError(f"{what} out of range {value!r}")
+    if hemisphere == negative:
         return -out
-    if hemisphere not in ("N", ""):
-        raise ValueError(f"latitude hemisphere {hemisphere!r}")
+    if hemisphere not in (positive, ""):
+        raise ValueError(f"{what} hemisphere {hemisphere!r}")
     return out
+
+
+def lat_deg(value: str, hemisphere: str) -> float:
+    """``ddmm.mmmm`` + N/S → signed latitude in degrees (NaN when empty)."""
+    return _ddmm(value, hemisphere, 90.0, "S", "N", "latitude")
 
 
 def lon_deg(value: str, hemisphere: str) -> float:
     """``dddmm.mmmm`` + E/W → signed longitude in degrees (NaN when empty)."""
-    if not value:
-        return NAN
-    raw = float(value)
-    deg = math.floor(raw / 100.0)
-    minutes = raw - 100.0 * deg
-    if not (0.0 <= minutes < 60.0) or deg > 180 or raw < 0:
-        raise ValueError(f"longitude out of range {value!r}")
-    out = deg + minutes / 60.0
-    if out > 180.0:
-        raise ValueError(f"longitude out of range {value!r}")
-    if hemisphere == "W":
-        return -out
-    if hemisphere not in ("E", ""):
-        raise ValueError(f"longitude hemisphere {hemisphere!r}")
-    return out
+    return _ddmm(value, hemisphere, 180.0, "W", "E", "longitude")
 
 
 def time_of_day_s(value: str) -> float:
