@@ -9,6 +9,7 @@ import typer
 from tollcli import __version__
 from tollcli.cli.design import design
 from tollcli.cli.epochs import epochs
+from tollcli.cli.geoobjects import app as geoobjects_app
 from tollcli.cli.integrity import integrity
 
 EPILOG = (
@@ -47,3 +48,4 @@ def root(
 app.command(epilog=EPILOG)(epochs)
 app.command(epilog=EPILOG)(integrity)
 app.command(epilog=EPILOG)(design)
+app.add_typer(geoobjects_app, name="geoobjects")

@@ -218,3 +218,24 @@ class TableWriter:
         """One JSON record, comma-separated from the previous one."""
         fh.write(("" if self._records == 0 else ",\n") + json.dumps(obj, separators=(",", ":")))
         self._records += 1
+
+
+def write_text_atomic(path: str, text: str) -> None:
+    """Write a whole document: to stdout for ``-``, else to a temporary file renamed into place."""
+    if path == "-":
+        sys.stdout.write(text)
+        return
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise UsageError(f"{path}: folder {folder} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

@@ -1,0 +1,1 @@
+"""Charging: geo-objects, recognition, tariffs and invoices."""
