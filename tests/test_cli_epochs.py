@@ -49,7 +49,7 @@ def test_formats_round_trip(tmp_path):
     outs = {ext: tmp_path / f"e.{ext}" for ext in ("csv", "parquet", "geojson", "json")}
     for path in outs.values():
         assert run_cli("epochs", SAMPLE, "-o", str(path), "-q").returncode == 0
-    csv = pd.read_csv(outs["csv"])
+    csv = pd.read_csv(outs["csv"], float_precision="round_trip")  # exact parse of the shortest repr
     parquet = pd.read_parquet(outs["parquet"])
     assert str(parquet["time_utc"].dtype) == "datetime64[ms, UTC]"
     pd.testing.assert_series_equal(csv["lat_deg"], parquet["lat_deg"], check_exact=True)
