@@ -4,13 +4,44 @@
   (NMEA 4.10: RMC, VTG, GGA, GSA with system ids, GSV with signal ids, GST), with
   a comment header and one sentence whose checksum was damaged in transit, so
   the reader's skip report has something to say.
+* ``../geoobjects/example-roads.geojson``: motorway A9 along that drive in two tolled
+  segments meeting at a junction, and a free road 80 m to its left (so HAL = 40 m);
+  ``../geoobjects/example-geoobjects.geojson`` is what ``tollcli geoobjects build`` makes of it.
 """
 
+import json
+import math
 from pathlib import Path
 
+from tollcli.charging.geoobjects import build_geoobjects
 from tollcli.nmea.compose import straight_drive
 
 HERE = Path(__file__).resolve().parent
+GEO = HERE.parent / "geoobjects"
+START = (42.6987, 2.8956)  # the drive's first fix
+COURSE_DEG = 45.0
+
+
+def along(s_m: float, offset_m: float = 0.0) -> list[float]:
+    """[lon, lat] of a point s metres along the drive's course, offset metres to its left."""
+    c, o = math.radians(COURSE_DEG), math.radians(COURSE_DEG - 90.0)
+    north = s_m * math.cos(c) + offset_m * math.cos(o)
+    east = s_m * math.sin(c) + offset_m * math.sin(o)
+    lat = START[0] + north / 111_132.0
+    lon = START[1] + east / (111_320.0 * math.cos(math.radians(START[0])))
+    return [round(lon, 8), round(lat, 8)]
+
+
+def roads() -> dict:
+    """Motorway A9 along the drive in two tolled segments, a free road 80 m to its left."""
+    def road(props, points):
+        return {"type": "Feature", "properties": props, "geometry": {"type": "LineString", "coordinates": points}}
+
+    return {"type": "FeatureCollection", "features": [
+        road({"id": "A9-N1", "name": "A9 Perpignan-Nord 1", "road_class": "motorway"}, [along(-300), along(1250)]),
+        road({"id": "A9-N2", "name": "A9 Perpignan-Nord 2", "road_class": "motorway"}, [along(1250), along(2900)]),
+        road({"id": "D900", "name": "D900 (free)", "road_class": "primary", "tolled": False}, [along(-300, 80), along(2900, 80)]),
+    ]}  # fmt: skip
 
 
 def main() -> None:
@@ -22,6 +53,9 @@ def main() -> None:
         "# made by samples/make_samples.py; line 103 has a damaged checksum on purpose",
     ]
     (HERE / "straight-drive.nmea").write_text("\n".join(header + lines) + "\n", encoding="ascii")
+    (GEO / "example-roads.geojson").write_text(json.dumps(roads(), indent=1) + "\n")
+    built = build_geoobjects(str(GEO / "example-roads.geojson"))
+    (GEO / "example-geoobjects.geojson").write_text(json.dumps(built, separators=(",", ":"), sort_keys=True) + "\n")
 
 
 if __name__ == "__main__":

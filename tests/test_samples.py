@@ -6,12 +6,15 @@ from conftest import SAMPLES
 from tollcli.nmea import read_nmea
 
 
-def test_sample_is_reproducible(tmp_path, monkeypatch):
-    committed = (SAMPLES / "straight-drive.nmea").read_bytes()
+def test_samples_are_reproducible(tmp_path, monkeypatch):
     module = runpy.run_path(str(SAMPLES / "make_samples.py"), run_name="not_main")
     monkeypatch.setitem(module["main"].__globals__, "HERE", tmp_path)
+    monkeypatch.setitem(module["main"].__globals__, "GEO", tmp_path)
     module["main"]()
-    assert (tmp_path / "straight-drive.nmea").read_bytes() == committed
+    assert (tmp_path / "straight-drive.nmea").read_bytes() == (SAMPLES / "straight-drive.nmea").read_bytes()
+    geo = SAMPLES.parent / "geoobjects"
+    for name in ("example-roads.geojson", "example-geoobjects.geojson"):
+        assert (tmp_path / name).read_bytes() == (geo / name).read_bytes(), name
 
 
 def test_sample_reads_as_documented():

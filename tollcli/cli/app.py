@@ -11,6 +11,7 @@ from tollcli.cli.design import design
 from tollcli.cli.epochs import epochs
 from tollcli.cli.geoobjects import app as geoobjects_app
 from tollcli.cli.integrity import integrity
+from tollcli.cli.process import process
 
 EPILOG = (
     "Exit codes: 0 ok; 1 data error (input unusable, or a bad line under --strict); "
@@ -45,6 +46,7 @@ def root(
     """GNSS road-user charging log processor."""
 
 
+app.command(epilog=EPILOG)(process)
 app.command(epilog=EPILOG)(epochs)
 app.command(epilog=EPILOG)(integrity)
 app.command(epilog=EPILOG)(design)

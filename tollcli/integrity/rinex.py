@@ -20,6 +20,7 @@ import pandas as pd
 
 from tollcli.errors import DataError, UsageError
 from tollcli.integrity.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
+from tollcli.integrity.gsdc import gps_millis_to_utc
 from tollcli.integrity.broadcast import EPHEMERIS_FIELDS, WEEK_S, kepler_position_clock
 from tollcli.integrity.measurements import Measurements, pad, slots
 from tollcli.integrity.pseudorange_wls import C_MPS, final_geometry, solve_positions
@@ -144,6 +145,7 @@ def rinex_epochs(obs_path: str, nav_path: str, sigma_model: str = "nominal", sig
     epochs = pd.DataFrame(
         {
             "epoch": np.arange(epoch_times.size, dtype=np.int64),
+            "time_utc": pd.DatetimeIndex(gps_millis_to_utc((gps_seconds(epoch_times) * 1000).round().astype(np.int64))).tz_localize("UTC"),
             "time_gps": pd.DatetimeIndex(epoch_times),
             "lat_deg": np.where(ok, g["lat_deg"], np.nan),
             "lon_deg": np.where(ok, g["lon_deg"], np.nan),

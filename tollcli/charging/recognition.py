@@ -1,0 +1,175 @@
+"""Geo-object recognition: which tolled segments a trip really used (paper 001 §II, thesis eq. 3.6).
+
+For every epoch with a position, candidate geo-objects come from a spatial index
+in the geo-objects' metric CRS (bulk ``STRtree.query``). A position counts for a
+geo-object when it lies inside it **and** is valid under that geo-object's own
+HAL: for the ETC RAIM the threshold depends on HAL, so the RAIM runs per
+(epoch, candidate geo-object) pair. After an exclusion the shifted position must
+still be inside.
+
+Positions inside one geo-object are grouped into passages (a new passage after
+``passage_gap_s`` without a fix inside). In each passage the valid positions are
+thinned to independent ones, at least ``tc_s`` apart (greedy from the first:
+exact), and the geo-object is charged when N_valid,in ≥ ``n_th``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import shapely
+
+from tollcli.charging.geoobjects import project, read_features
+from tollcli.errors import DataError
+from tollcli.integrity.measurements import Measurements
+from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.run import run_raim
+
+VALID_STATUSES = ("valid", "excluded_valid")
+PASSAGE_GAP_S = 120.0
+
+
+@dataclass
+class GeoObjects:
+    ids: np.ndarray
+    names: np.ndarray
+    road_class: np.ndarray
+    hal_m: np.ndarray
+    polygons: np.ndarray  # metric CRS
+    crs: str
+    tree: shapely.STRtree
+
+
+def load_geoobjects(path: str) -> GeoObjects:
+    """A geo-object file (as written by ``tollcli geoobjects build``) ready for recognition."""
+    features = read_features(path)
+    if not features:
+        raise DataError(f"{path}: no geo-objects")
+    ids, names, classes, hals, polys, crss = [], [], [], [], [], set()
+    for i, feature in enumerate(features):
+        props = feature.get("properties") or {}
+        fid = props.get("id")
+        if fid in (None, ""):
+            raise DataError(f"{path}: feature #{i} has no id")
+        try:
+            hal = float(props.get("hal_m"))
+            geom = shapely.geometry.shape(feature.get("geometry") or {})
+        except (TypeError, ValueError, AttributeError, KeyError):
+            raise DataError(f"{path}: feature {fid}: needs a numeric hal_m and a polygon geometry") from None
+        if geom.geom_type not in ("Polygon", "MultiPolygon") or geom.is_empty or not hal > 0:
+            raise DataError(f"{path}: feature {fid}: needs a non-empty polygon and hal_m > 0")
+        ids.append(str(fid))
+        names.append(str(props.get("name", "")))
+        classes.append(str(props.get("road_class", "")))
+        hals.append(hal)
+        polys.append(geom)
+        crss.add(props.get("crs_metric"))
+    if len(set(ids)) != len(ids):
+        raise DataError(f"{path}: duplicate geo-object ids")
+    crs = crss.pop() if len(crss) == 1 and None not in crss else None
+    if crs is None:
+        from tollcli.charging.geoobjects import metric_crs
+
+        crs = metric_crs(polys)
+    metric = project(polys, crs)
+    return GeoObjects(np.array(ids, dtype=object), np.array(names, dtype=object), np.array(classes, dtype=object),
+                      np.array(hals), metric, crs, shapely.STRtree(metric))  # fmt: skip
+
+
+def _subset(meas: Measurements, rows: np.ndarray) -> Measurements:
+    pick = lambda a: None if a is None else a[rows]  # noqa: E731
+    return Measurements(meas.H[rows], meas.sigma_m[rows], meas.mask[rows], meas.sv[rows], residual_m=pick(meas.residual_m),
+                        dy_m=pick(meas.dy_m), test_stat_override=pick(meas.test_stat_override),
+                        test_stat_source=pick(meas.test_stat_source))  # fmt: skip
+
+
+def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(epoch row, geo-object index) for every position inside a geo-object, and the metric x, y of all rows."""
+    from pyproj import Transformer
+
+    lon, lat = epochs["lon_deg"].to_numpy(float), epochs["lat_deg"].to_numpy(float)
+    x, y = Transformer.from_crs("EPSG:4326", geo.crs, always_xy=True).transform(lon, lat)
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    have = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
+    inside, obj = geo.tree.query(shapely.points(x[have], y[have]), predicate="within")
+    order = np.lexsort((obj, have[inside]))
+    return have[inside][order], obj[order], x, y
+
+
+def utc_seconds(time_utc: pd.Series) -> np.ndarray:
+    """A tz-aware UTC column → float seconds since 1970 (DataError if any time is missing)."""
+    if time_utc.isna().any():
+        raise DataError("some epochs have no date (a log without RMC/ZDA): give --date")
+    return time_utc.dt.tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64) / 1000.0
+
+
+def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams,
+              tc_s: float = 5.0, n_th: int = 1, passage_gap_s: float = PASSAGE_GAP_S) -> pd.DataFrame:  # fmt: skip
+    """One row per (epoch, geo-object) position inside, with its RAIM verdict under that HAL.
+
+    Columns: ``epoch_row``, ``geoobject``, ``time_utc``, ``passage`` (per geo-object),
+    ``raim_status``, ``test_stat``, ``threshold``, ``p_fa``, ``test_stat_source``,
+    ``valid`` (counts for the geo-object), ``independent`` (kept by T_c thinning).
+    """
+    rows, obj, x, y = candidate_pairs(epochs, geo)
+    if rows.size == 0:
+        return pd.DataFrame(columns=["epoch_row", "geoobject", "time_utc", "passage", "raim_status", "test_stat",
+                                     "threshold", "p_fa", "test_stat_source", "valid", "independent"])  # fmt: skip
+    raim = run_raim(_subset(meas, rows), params, hal_m=geo.hal_m[obj])
+    status = raim["raim_status"].to_numpy(dtype=object)
+    shifted_inside = shapely.contains_xy(geo.polygons[obj], x[rows] + raim["fde_shift_e_m"].to_numpy(),
+                                         y[rows] + raim["fde_shift_n_m"].to_numpy())  # fmt: skip
+    valid = np.isin(status, VALID_STATUSES) & shifted_inside
+    t_s = utc_seconds(epochs["time_utc"])[rows]
+    # passages: consecutive inside fixes of one geo-object less than passage_gap_s apart
+    by_obj = np.lexsort((t_s, obj))
+    rows, obj, t_s, valid, status = rows[by_obj], obj[by_obj], t_s[by_obj], valid[by_obj], status[by_obj]
+    raim = raim.iloc[by_obj].reset_index(drop=True)
+    new = np.ones(rows.size, dtype=bool)
+    new[1:] = (obj[1:] != obj[:-1]) | (np.diff(t_s) > passage_gap_s)
+    passage = np.cumsum(new) - 1
+    independent = thin_independent(t_s, passage, valid, tc_s)
+    return pd.DataFrame({
+        "epoch_row": rows, "geoobject": geo.ids[obj], "time_utc": epochs["time_utc"].iloc[rows].to_numpy(), "passage": passage,
+        "raim_status": status, "test_stat": raim["test_stat"].to_numpy(), "threshold": raim["threshold"].to_numpy(),
+        "p_fa": raim["p_fa"].to_numpy(), "test_stat_source": raim["test_stat_source"].to_numpy(dtype=object),
+        "valid": valid, "independent": independent,
+    })  # fmt: skip
+
+
+def thin_independent(t_s: np.ndarray, group: np.ndarray, valid: np.ndarray, tc_s: float) -> np.ndarray:
+    """Greedy T_c thinning per group: keep the first valid time, then each next one ≥ T_c after the last kept.
+
+    Rows must be sorted by (group, time). Vectorized: every valid row gets a pointer
+    to the first valid row of its group at least T_c later; the kept rows are the
+    chain of pointers from each group's first valid row (one step per kept position).
+    """
+    keep = np.zeros(t_s.size, dtype=bool)
+    idx = np.flatnonzero(valid)
+    if idx.size == 0:
+        return keep
+    g, t = group[idx], t_s[idx] - t_s[idx].min()
+    key = g * (t.max() + 2 * tc_s + 1.0) + t  # groups one after another on one axis, times kept exact
+    nxt = np.searchsorted(key, key + tc_s - 1e-9, side="left")
+    nxt = np.where((nxt < idx.size) & (g[np.minimum(nxt, idx.size - 1)] == g), nxt, -1)
+    first = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+    cur = first
+    while cur.size:
+        keep[idx[cur]] = True
+        cur = nxt[cur]
+        cur = cur[cur >= 0]
+    return keep
+
+
+def charges(positions: pd.DataFrame, n_th: int) -> pd.DataFrame:
+    """Per (geo-object, passage): entry/exit times, counts, and whether it is charged (N_valid,in ≥ N_Th)."""
+    if positions.empty:
+        return pd.DataFrame(columns=["geoobject", "passage", "entry_utc", "exit_utc", "n_inside", "n_valid",
+                                     "n_independent", "charged"])  # fmt: skip
+    grouped = positions.groupby(["geoobject", "passage"], sort=False)
+    out = grouped.agg(entry_utc=("time_utc", "min"), exit_utc=("time_utc", "max"), n_inside=("valid", "size"),
+                      n_valid=("valid", "sum"), n_independent=("independent", "sum")).reset_index()  # fmt: skip
+    out["charged"] = out["n_independent"] >= n_th
+    return out.sort_values(["entry_utc", "geoobject"], kind="stable").reset_index(drop=True)
