@@ -7,6 +7,7 @@ from typing import Annotated
 import typer
 
 from tollcli import __version__
+from tollcli.cli.audit import audit
 from tollcli.cli.design import design
 from tollcli.cli.epochs import epochs
 from tollcli.cli.geoobjects import app as geoobjects_app
@@ -47,6 +48,7 @@ def root(
 
 
 app.command(epilog=EPILOG)(process)
+app.command(epilog=EPILOG)(audit)
 app.command(epilog=EPILOG)(epochs)
 app.command(epilog=EPILOG)(integrity)
 app.command(epilog=EPILOG)(design)

@@ -1,0 +1,171 @@
+"""Audit invoices: undercharges and overcharges against the truth, or the risk without it.
+
+With truth (the geo-objects really driven: a list of ids, or a truth trajectory
+whose positions inside a geo-object mark it driven):
+
+* per geo-object and run: undercharge = driven but not charged (missed
+  recognition, MGoR); overcharge = charged but not driven (false recognition, FGoR);
+* rates across runs with Wilson 95 % intervals, money per run, and the share of
+  invoices whose total is within ``invoice_error_pct`` of the true total
+  (ISO/TS 17444-1 style), with its interval.
+
+Without truth, a risk report from the invoices alone:
+
+* revenue at risk: passages where fixes fell inside a geo-object but too few
+  valid independent positions remained, with the statuses that explain why;
+* per charge, an upper bound on the chance it is false: at least N_Th of its n
+  independent valid positions must be misleading, each with probability ≤ P_MD
+  even when a fault is present, so P(false) ≤ P(Bin(n, P_MD) ≥ N_Th).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from decimal import Decimal
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from tollcli.errors import DataError
+
+Z95 = 1.959963984540054
+
+
+def wilson(successes: int, trials: int, z: float = Z95) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion (0, 1 for no trials)."""
+    if trials == 0:
+        return 0.0, 1.0
+    p = successes / trials
+    centre = (p + z * z / (2 * trials)) / (1 + z * z / trials)
+    half = z * math.sqrt(p * (1 - p) / trials + z * z / (4 * trials * trials)) / (1 + z * z / trials)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def load_invoice(path: str) -> dict:
+    try:
+        with open(path, encoding="utf-8") as fh:
+            doc = json.load(fh)
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DataError(f"{path}: not an invoice ({exc})") from None
+    if not isinstance(doc, dict) or "lines" not in doc or "total" not in doc:
+        raise DataError(f"{path}: not a tollcli invoice (no lines/total)")
+    return doc
+
+
+def driven_from_truth(path: str, geo) -> set[str]:
+    """Truly driven geo-object ids: from a list (JSON array, or one id per line) or a trajectory (CSV/GeoJSON)."""
+    from tollcli.charging.recognition import candidate_pairs
+
+    try:
+        text = open(path, encoding="utf-8").read()
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: unreadable ({exc})") from None
+    stripped = text.strip()
+    if stripped.startswith("["):
+        ids = json.loads(stripped)
+        return {str(i) for i in ids}
+    if stripped.startswith("{"):
+        doc = json.loads(stripped)
+        coords = []
+        for feature in doc.get("features", []):
+            geom = feature.get("geometry") or {}
+            if geom.get("type") == "Point":
+                coords.append(geom["coordinates"][:2])
+            elif geom.get("type") == "LineString":
+                coords.extend(c[:2] for c in geom["coordinates"])
+        points = pd.DataFrame(coords, columns=["lon_deg", "lat_deg"]) if coords else pd.DataFrame(columns=["lon_deg", "lat_deg"])
+    else:
+        first = stripped.splitlines()[0] if stripped else ""
+        if "lat" not in first.lower():
+            return {line.strip() for line in stripped.splitlines() if line.strip() and not line.startswith("#")}
+        table = pd.read_csv(path)
+        lat = next((c for c in table.columns if c.lower() in ("lat_deg", "latdeg", "lat", "latitude")), None)
+        lon = next((c for c in table.columns if c.lower() in ("lon_deg", "lngdeg", "lon", "lng", "longitude")), None)
+        if lat is None or lon is None:
+            raise DataError(f"{path}: a truth trajectory needs latitude and longitude columns")
+        points = table.rename(columns={lat: "lat_deg", lon: "lon_deg"})[["lat_deg", "lon_deg"]]
+    if points.empty:
+        return set()
+    _, obj, _, _ = candidate_pairs(points.astype(float), geo)
+    return {str(geo.ids[i]) for i in np.unique(obj)}
+
+
+def audit_with_truth(invoices: list[dict], driven: set[str], fees: dict[str, Decimal], invoice_error_pct: float = 1.0) -> dict:
+    """Under/overcharges per geo-object and per run against the truly driven set."""
+    charged_sets = [{line["geoobject"] for line in inv["lines"]} for inv in invoices]
+    every = sorted(driven.union(*charged_sets)) if charged_sets else sorted(driven)
+    n = len(invoices)
+    per_object = []
+    for gid in every:
+        was_driven = gid in driven
+        n_charged = sum(gid in s for s in charged_sets)
+        n_under = (n - n_charged) if was_driven else 0
+        n_over = 0 if was_driven else n_charged
+        misses = n_under if was_driven else n_over
+        low, high = wilson(misses, n)
+        per_object.append({
+            "geoobject": gid, "driven": was_driven, "runs": n, "charged": n_charged,
+            "undercharges": n_under, "overcharges": n_over,
+            "rate": misses / n if n else 0.0, "rate_ci95": [low, high],
+            "error_kind": "missed recognition" if was_driven else "false recognition",
+        })  # fmt: skip
+    true_total = sum((fees.get(g, Decimal(0)) for g in driven), Decimal(0))
+    per_run, within = [], 0
+    for inv, charged in zip(invoices, charged_sets):
+        under = sorted(driven - charged)
+        over = sorted(charged - driven)
+        money_under = sum((fees.get(g, Decimal(0)) for g in under), Decimal(0))
+        money_over = sum((Decimal(line["fee"]) for line in inv["lines"] if line["geoobject"] in over), Decimal(0))
+        total = Decimal(inv["total"])
+        error_pct = float(abs(total - true_total) / true_total * 100) if true_total else (0.0 if total == 0 else math.inf)
+        within += error_pct <= invoice_error_pct
+        per_run.append({"vehicle": inv.get("vehicle", ""), "total": str(total), "true_total": str(true_total),
+                        "undercharged": under, "overcharged": over, "money_under": str(money_under),
+                        "money_over": str(money_over), "error_pct": error_pct})  # fmt: skip
+    low, high = wilson(within, n)
+    return {
+        "runs": n, "driven": sorted(driven), "geoobjects": per_object, "invoices": per_run,
+        "invoice_error_pct": invoice_error_pct, "share_within": within / n if n else 0.0, "share_within_ci95": [low, high],
+        "missed_recognitions": sum(o["undercharges"] for o in per_object),
+        "false_recognitions": sum(o["overcharges"] for o in per_object),
+    }  # fmt: skip
+
+
+def risk_report(invoices: list[dict], fees: dict[str, Decimal]) -> dict:
+    """Revenue at risk and per-charge bounds on a false charge, from invoices alone."""
+    at_risk, charges = [], []
+    money = Decimal(0)
+    for inv in invoices:
+        p_md = float(inv.get("parameters", {}).get("p_md", 5e-5))
+        n_th = int(inv.get("parameters", {}).get("n_th", 1))
+        for item in inv.get("not_charged", []):
+            fee = fees.get(item["geoobject"])
+            money += fee or Decimal(0)
+            at_risk.append({"vehicle": inv.get("vehicle", ""), "geoobject": item["geoobject"],
+                            "entry_utc": item["entry_utc"], "n_inside": item["n_inside"], "n_valid": item["n_valid"],
+                            "why": item.get("statuses", {}), "fee": str(fee) if fee is not None else None})  # fmt: skip
+        for line in inv["lines"]:
+            n = int(line["n_valid_independent"])
+            bound = float(stats.binom.sf(n_th - 1, n, p_md))
+            charges.append({"vehicle": inv.get("vehicle", ""), "geoobject": line["geoobject"], "entry_utc": line["entry_utc"],
+                            "n_valid_independent": n, "p_false_bound": bound})  # fmt: skip
+    exponent = min((Decimal(inv["total"]).as_tuple().exponent for inv in invoices), default=-2)
+    return {"runs": len(invoices), "revenue_at_risk": at_risk, "money_at_risk": str(money.quantize(Decimal(1).scaleb(exponent))),
+            "charges": charges}  # fmt: skip
+
+
+def fee_table(invoices: list[dict]) -> dict[str, Decimal]:
+    """The fee each geo-object was charged at in the invoices (the most frequent one)."""
+    seen: dict[str, dict[Decimal, int]] = {}
+    for inv in invoices:
+        for line in inv["lines"]:
+            counts = seen.setdefault(line["geoobject"], {})
+            fee = Decimal(line["fee"])
+            counts[fee] = counts.get(fee, 0) + 1
+    return {g: max(c.items(), key=lambda kv: (kv[1], kv[0]))[0] for g, c in seen.items()}
