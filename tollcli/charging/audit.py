@@ -29,6 +29,7 @@ import pandas as pd
 from scipy import stats
 
 from tollcli.errors import DataError
+from tollcli.io.sources import read_json
 
 Z95 = 1.959963984540054
 
@@ -44,13 +45,7 @@ def wilson(successes: int, trials: int, z: float = Z95) -> tuple[float, float]:
 
 
 def load_invoice(path: str) -> dict:
-    try:
-        with open(path, encoding="utf-8") as fh:
-            doc = json.load(fh)
-    except FileNotFoundError:
-        raise DataError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise DataError(f"{path}: not an invoice ({exc})") from None
+    doc = read_json(path, "an invoice")
     if not isinstance(doc, dict) or "lines" not in doc or "total" not in doc:
         raise DataError(f"{path}: not a tollcli invoice (no lines/total)")
     return doc

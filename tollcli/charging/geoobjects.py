@@ -22,7 +22,6 @@ per feature (``crs_metric``), so recognition can project positions the same way.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 
@@ -31,6 +30,7 @@ import shapely
 from shapely.ops import substring
 
 from tollcli.errors import DataError
+from tollcli.io.sources import read_json
 
 HAL_MAX_M = 50.0
 CONNECT_TOL_M = 1.0
@@ -50,13 +50,7 @@ class Finding:
 
 def read_features(path: str) -> list[dict]:
     """GeoJSON features of a file, with a clear error for anything else."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            doc = json.load(fh)
-    except FileNotFoundError:
-        raise DataError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise DataError(f"{path}: not a GeoJSON file ({exc})") from None
+    doc = read_json(path, "a GeoJSON file")
     if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection" or not isinstance(doc.get("features"), list):
         raise DataError(f"{path}: not a GeoJSON FeatureCollection")
     crs = (doc.get("crs") or {}).get("properties", {}).get("name", "")

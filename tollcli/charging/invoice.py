@@ -39,10 +39,11 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame, geo: GeoObject
                   vehicle: str, vehicle_class: str, inputs: dict[str, str], parameters: dict, period) -> dict:  # fmt: skip
     """The invoice document (a dict of JSON-ready values)."""
     index = {gid: i for i, gid in enumerate(geo.ids)}
+    by_passage = dict(iter(positions.groupby(["geoobject", "passage"], sort=False))) if len(positions) else {}
     lines, not_charged, total = [], [], Decimal(0)
     for row in charges.itertuples(index=False):
         i = index[row.geoobject]
-        mine = positions[(positions["geoobject"] == row.geoobject) & (positions["passage"] == row.passage)]
+        mine = by_passage[(row.geoobject, row.passage)]
         statuses = mine["raim_status"].value_counts().sort_index()
         base = {
             "geoobject": row.geoobject, "name": geo.names[i], "road_class": geo.road_class[i], "hal_m": float(geo.hal_m[i]),

@@ -74,3 +74,16 @@ def iter_text_blocks(stream: BinaryIO, name: str, block_bytes: int = BLOCK_BYTES
         yield data[:cut].decode("latin-1").replace("\r", "").split("\n")
     if rest:
         yield rest.decode("latin-1").replace("\r", "").split("\n")
+
+
+def read_json(path: str, what: str):
+    """A whole JSON document, or a one-line DataError naming the file and saying it is not a ``what``."""
+    import json
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return json.load(fh)
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DataError(f"{path}: not {what} ({exc})") from None
