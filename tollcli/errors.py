@@ -6,7 +6,7 @@ Exit codes (also in ``tollcli --help`` and the man pages):
 * 1 — data error: the input exists but cannot be used (empty, not NMEA, a bad
   line under ``--strict``)
 * 2 — usage error: bad option, missing file, a directory where a file was expected
-* 3 — partial: reserved for runs that skipped more than a ``--max-bad`` threshold
+* 3 — partial: outputs were written, but more lines were skipped than ``--max-bad`` allows
 """
 
 EXIT_OK = 0
@@ -31,3 +31,9 @@ class UsageError(TollError):
     """The command line asks for something impossible (missing file, bad option)."""
 
     exit_code = EXIT_USAGE
+
+
+class PartialError(TollError):
+    """The job finished and wrote its outputs, but more input was skipped than allowed (--max-bad)."""
+
+    exit_code = EXIT_PARTIAL

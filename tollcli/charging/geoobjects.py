@@ -59,8 +59,24 @@ def read_features(path: str) -> list[dict]:
     return doc["features"]
 
 
-def _feature_id(feature: dict, index: int) -> str:
-    fid = (feature.get("properties") or {}).get("id")
+def feature_geometry(feature) -> tuple[object | None, str]:
+    """A feature's shapely geometry, or None and why it cannot be read (never raises)."""
+    if not isinstance(feature, dict):
+        return None, "not a GeoJSON feature"
+    try:
+        with np.errstate(invalid="ignore"):
+            geom = shapely.geometry.shape(feature.get("geometry") or {})
+    except (ValueError, TypeError, AttributeError, KeyError, IndexError, shapely.errors.ShapelyError) as exc:
+        return None, f"unreadable geometry ({type(exc).__name__}: {exc})"
+    coords = shapely.get_coordinates(geom)
+    if not np.isfinite(coords).all():
+        return None, "coordinates must be finite numbers"
+    return geom, ""
+
+
+def _feature_id(feature, index: int) -> str:
+    props = feature.get("properties") if isinstance(feature, dict) else None
+    fid = props.get("id") if isinstance(props, dict) else None
     return str(fid) if fid not in (None, "") else f"#{index}"
 
 
@@ -69,19 +85,20 @@ def _roads(features: list[dict], path: str):
     ids, props, lines = [], [], []
     for i, feature in enumerate(features):
         fid = _feature_id(feature, i)
-        try:
-            geom = shapely.geometry.shape(feature.get("geometry") or {})
-        except (ValueError, TypeError, AttributeError, KeyError) as exc:
-            raise DataError(f"{path}: feature {fid}: unreadable geometry ({exc})") from None
+        geom, why = feature_geometry(feature)
+        if geom is None:
+            raise DataError(f"{path}: feature {fid}: {why}")
         if geom.geom_type == "MultiLineString" and len(geom.geoms) == 1:
             geom = geom.geoms[0]
         if geom.geom_type != "LineString" or geom.is_empty:
             raise DataError(f"{path}: feature {fid}: a road must be a LineString, got {geom.geom_type}")
+        if geom.length == 0:
+            raise DataError(f"{path}: feature {fid}: a road of zero length (all its points are the same)")
         lon, lat = np.asarray(geom.coords)[:, 0], np.asarray(geom.coords)[:, 1]
         if (np.abs(lon) > 180).any() or (np.abs(lat) > 90).any():
             raise DataError(f"{path}: feature {fid}: coordinates are not longitude/latitude degrees")
         ids.append(fid)
-        props.append(dict(feature.get("properties") or {}))
+        props.append(dict(feature.get("properties") or {}) if isinstance(feature.get("properties"), dict) else {})
         lines.append(geom)
     if len(set(ids)) != len(ids):
         dup = sorted({i for i in ids if ids.count(i) > 1})
@@ -93,9 +110,10 @@ def _roads(features: list[dict], path: str):
 
 def metric_crs(lines_wgs84) -> str:
     """The UTM zone (EPSG code) of the data's centroid."""
-    centre = shapely.union_all(lines_wgs84).centroid
-    zone = int(math.floor((centre.x + 180.0) / 6.0)) % 60 + 1
-    return f"EPSG:{32600 + zone if centre.y >= 0 else 32700 + zone}"
+    coords = shapely.get_coordinates(np.asarray(lines_wgs84, dtype=object))
+    lon, lat = (coords.mean(axis=0) if len(coords) else (0.0, 0.0))
+    zone = int(math.floor((lon + 180.0) / 6.0)) % 60 + 1
+    return f"EPSG:{32600 + zone if lat >= 0 else 32700 + zone}"
 
 
 def _transformer(crs: str, inverse: bool = False):
@@ -165,16 +183,15 @@ def check_geoobjects(path: str, hal_min_m: float = 5.0) -> list[Finding]:
     polys = []
     for i, feature in enumerate(features):
         fid = _feature_id(feature, i)
-        props = feature.get("properties") or {}
+        props = feature.get("properties") if isinstance(feature, dict) and isinstance(feature.get("properties"), dict) else {}
         if fid.startswith("#"):
             findings.append(Finding(fid, "missing id"))
         if fid in ids:
             findings.append(Finding(fid, "duplicate id"))
         ids.append(fid)
-        try:
-            geom = shapely.geometry.shape(feature.get("geometry") or {})
-        except (ValueError, TypeError, AttributeError, KeyError) as exc:
-            findings.append(Finding(fid, f"unreadable geometry ({exc})"))
+        geom, why = feature_geometry(feature)
+        if geom is None:
+            findings.append(Finding(fid, why))
             polys.append(None)
             continue
         if geom.is_empty or geom.geom_type not in ("Polygon", "MultiPolygon"):

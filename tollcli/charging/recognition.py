@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from tollcli.charging.geoobjects import project, read_features
+from tollcli.charging.geoobjects import feature_geometry, project, read_features
 from tollcli.errors import DataError
 from tollcli.integrity.measurements import Measurements
 from tollcli.integrity.raim import RaimParams
@@ -49,17 +49,18 @@ def load_geoobjects(path: str) -> GeoObjects:
         raise DataError(f"{path}: no geo-objects")
     ids, names, classes, hals, polys, crss = [], [], [], [], [], set()
     for i, feature in enumerate(features):
-        props = feature.get("properties") or {}
+        props = feature.get("properties") if isinstance(feature, dict) else None
+        props = props if isinstance(props, dict) else {}
         fid = props.get("id")
         if fid in (None, ""):
             raise DataError(f"{path}: feature #{i} has no id")
+        geom, why = feature_geometry(feature)
         try:
             hal = float(props.get("hal_m"))
-            geom = shapely.geometry.shape(feature.get("geometry") or {})
-        except (TypeError, ValueError, AttributeError, KeyError):
-            raise DataError(f"{path}: feature {fid}: needs a numeric hal_m and a polygon geometry") from None
-        if geom.geom_type not in ("Polygon", "MultiPolygon") or geom.is_empty or not hal > 0:
-            raise DataError(f"{path}: feature {fid}: needs a non-empty polygon and hal_m > 0")
+        except (TypeError, ValueError):
+            hal = float("nan")
+        if geom is None or geom.geom_type not in ("Polygon", "MultiPolygon") or geom.is_empty or not hal > 0 or not geom.is_valid:
+            raise DataError(f"{path}: feature {fid}: needs a valid non-empty polygon and hal_m > 0 ({why or 'run tollcli geoobjects check'})")
         ids.append(str(fid))
         names.append(str(props.get("name", "")))
         classes.append(str(props.get("road_class", "")))

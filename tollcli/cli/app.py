@@ -13,10 +13,11 @@ from tollcli.cli.epochs import epochs
 from tollcli.cli.geoobjects import app as geoobjects_app
 from tollcli.cli.integrity import integrity
 from tollcli.cli.process import process
+from tollcli.cli.verify import verify
 
 EPILOG = (
-    "Exit codes: 0 ok; 1 data error (input unusable, or a bad line under --strict); "
-    "2 usage error (bad option, missing file, directory); 3 partial (reserved: more skipped than --max-bad)."
+    "Exit codes: 0 ok; 1 data error (input unusable, a bad line under --strict, or verify found a difference); "
+    "2 usage error (bad option, missing file, directory); 3 partial (outputs written, more lines skipped than --max-bad)."
 )
 
 app = typer.Typer(
@@ -49,6 +50,7 @@ def root(
 
 app.command(epilog=EPILOG)(process)
 app.command(epilog=EPILOG)(audit)
+app.command(epilog=EPILOG)(verify)
 app.command(epilog=EPILOG)(epochs)
 app.command(epilog=EPILOG)(integrity)
 app.command(epilog=EPILOG)(design)

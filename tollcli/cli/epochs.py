@@ -9,7 +9,7 @@ import typer
 
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
-from tollcli.errors import DataError, UsageError
+from tollcli.errors import DataError, PartialError, UsageError
 from tollcli.io.writers import TableWriter, format_for
 from tollcli.nmea import ReadStats, iter_nmea_tables
 
@@ -25,6 +25,7 @@ def epochs(
     date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
     as_json: opt.JsonSummary = False,
+    max_bad: opt.MaxBad = None,
 ) -> None:
     """Decode an NMEA 0183 log into one row per epoch.
 
@@ -60,6 +61,14 @@ def epochs(
         typer.echo(json.dumps(stats.as_dict(), sort_keys=True))
     else:
         warn(stats.summary(), quiet)
+    check_partial(stats, max_bad)
+
+
+def check_partial(stats: ReadStats, max_bad: int | None) -> None:
+    """Raise PartialError (exit 3) when more lines were skipped than ``--max-bad`` allows."""
+    if max_bad is not None and stats.skipped > max_bad:
+        raise PartialError(f"{stats.source}: {stats.skipped} lines skipped, more than --max-bad {max_bad} "
+                           f"(first: {stats.first_problem}); outputs were written")  # fmt: skip
 
 
 def check_usable(stats: ReadStats) -> None:

@@ -11,7 +11,7 @@ import typer
 
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
-from tollcli.cli.epochs import check_usable
+from tollcli.cli.epochs import check_partial, check_usable
 from tollcli.errors import UsageError
 from tollcli.geodesy import enu_shift2geodetic
 from tollcli.integrity.from_nmea import AngleCarry, nmea_measurements
@@ -65,6 +65,7 @@ def integrity(
     strict: opt.Strict = False,
     quiet: opt.Quiet = False,
     as_json: opt.JsonSummary = False,
+    max_bad: opt.MaxBad = None,
 ) -> None:
     """Check every epoch with the WLSR RAIM and write the epoch table with its verdict.
 
@@ -90,9 +91,10 @@ def integrity(
     kind = sniff_format(log) if fmt == "auto" else fmt
     counts: Counter[str] = Counter()
     writer = TableWriter(output, format_for(output))
+    stats = ReadStats()
     with writer:
         if kind == "nmea":
-            _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts)
+            _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats)
         else:
             table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal)
             counts.update(table["raim_status"].astype(str))
@@ -105,12 +107,13 @@ def integrity(
         typer.echo(json.dumps(summary, sort_keys=True))
     else:
         warn(f"{log}: {summary['epochs']} epochs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())), quiet)
+    if kind == "nmea":
+        check_partial(stats, max_bad)
 
 
-def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts) -> None:
+def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats) -> None:
     if sigma_model == "input":
         raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")
-    stats = ReadStats()
     carry = AngleCarry()
     with progress(f"checking {log}", quiet) as advance:
         for chunk in iter_nmea_tables(log, strict=strict, stats=stats):

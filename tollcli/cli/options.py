@@ -40,3 +40,7 @@ SigmaModel = Annotated[
 ]
 Sigma = Annotated[float, typer.Option("--sigma", help="σ of every pseudorange for --sigma-model constant, m.", min=0.0)]
 Iono = Annotated[str, typer.Option("--iono", help="Nominal model ionosphere: single (single frequency), sbas, iono-free.")]
+MaxBad = Annotated[
+    Optional[int],
+    typer.Option("--max-bad", help="Exit 3 (partial) when more than this many lines were skipped; outputs are still written.", min=0),
+]

@@ -2,25 +2,18 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from typing import Annotated, Optional
 
 import typer
 
-from tollcli.charging.invoice import build_invoice, file_sha256, invoice_csv, invoice_json
-from tollcli.charging.recognition import charges, load_geoobjects, recognise
-from tollcli.charging.tariffs import load_tariff
+from tollcli.charging.invoice import invoice_csv, invoice_json
+from tollcli.charging.pipeline import ChargeSettings, charge_log
 from tollcli.cli import options as opt
 from tollcli.cli.console import warn
-from tollcli.cli.epochs import check_usable
-from tollcli.cli.integrity import sniff_format
+from tollcli.cli.epochs import check_partial
 from tollcli.errors import UsageError
-from tollcli.integrity.from_nmea import nmea_measurements
-from tollcli.integrity.raim import RaimParams
-from tollcli.integrity.sigma_models import NominalModel
 from tollcli.io.writers import write_text_atomic
-from tollcli.nmea import read_nmea
 
 
 def process(
@@ -42,56 +35,30 @@ def process(
     strict: opt.Strict = False,
     date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
+    max_bad: opt.MaxBad = None,
 ) -> None:
     """Charge a trip: valid, independent positions inside geo-objects → invoice lines with evidence.
 
     The invoice (JSON by default; .csv with -o file.csv; a table on a terminal)
     lists each charged geo-object passage with its fee, entry and exit times and
     the positions that support it, the passages seen but not charged, the input
-    files' SHA-256 and every parameter used.
+    files and their SHA-256, every parameter used, and the SHA-256 of its own
+    content; 'tollcli verify' re-runs it.
     """
     if output != "-" and not output.lower().endswith((".json", ".csv")):
         raise UsageError(f"{output}: invoices are written as .json or .csv")
-    try:
-        params = RaimParams(mode=raim, p_md=p_md, p_fa=p_fa, fde=fde)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    geo_objects = load_geoobjects(geo)
-    tariff_doc = load_tariff(tariff)
-    kind = sniff_format(log)
-    if kind == "nmea":
-        tables = read_nmea(log, strict=strict, date=date.date() if date else None)
-        check_usable(tables.stats)
-        epochs = tables.epochs
-        meas = nmea_measurements(epochs, tables.satellites, sigma_model if sigma_model != "input" else "nominal", sigma, NominalModel())
-    elif kind == "gsdc-derived":
-        from tollcli.integrity.gsdc import gsdc_epochs, read_gsdc_derived
-
-        epochs, meas = gsdc_epochs(read_gsdc_derived(log), sigma_model, sigma, NominalModel())
-    else:
-        from tollcli.integrity.rinex import rinex_epochs
-
-        if nav is None:
-            raise UsageError("RINEX input needs --nav NAVFILE")
-        epochs, meas = rinex_epochs(log, nav, sigma_model, sigma, NominalModel())
-    positions = recognise(epochs, meas, geo_objects, params, tc_s=tc, n_th=n_th)
-    table = charges(positions, n_th)
-    dated = epochs["time_utc"].dropna()
-    inputs = {"log": os.path.basename(log), "geoobjects": os.path.basename(geo), "tariff": os.path.basename(tariff)}
-    if log != "-":
-        inputs["log_sha256"] = file_sha256(log)
-    inputs.update(geoobjects_sha256=file_sha256(geo), tariff_sha256=file_sha256(tariff))
-    parameters = {"raim": raim, "p_md": p_md, "p_fa": p_fa if raim == "classic" else None, "fde": fde, "tc_s": tc,
-                  "n_th": n_th, "sigma_model": sigma_model, "valid_statuses": ["valid", "excluded_valid"]}  # fmt: skip
-    invoice = build_invoice(table, positions, geo_objects, tariff_doc, vehicle=vehicle or os.path.basename(log),
-                            vehicle_class=vehicle_class, inputs=inputs, parameters=parameters,
-                            period=(dated.min(), dated.max()) if len(dated) else None)  # fmt: skip
+    settings = ChargeSettings(vehicle_class=vehicle_class, vehicle=vehicle, raim=raim, p_md=p_md, p_fa=p_fa, fde=fde,
+                              sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
+                              date=date.date().isoformat() if date else None)  # fmt: skip
+    invoice, stats = charge_log(log, geo, tariff, settings, nav)
     if output == "-" and sys.stdout.isatty():
         _table(invoice)
     else:
         write_text_atomic(output, invoice_csv(invoice) if output.lower().endswith(".csv") else invoice_json(invoice))
     warn(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged, "
          f"total {invoice['total']} {invoice['currency']}", quiet)  # fmt: skip
+    if stats is not None:
+        check_partial(stats, max_bad)
 
 
 def _table(invoice: dict) -> None:
@@ -105,5 +72,3 @@ def _table(invoice: dict) -> None:
         table.add_row(line["geoobject"], line["entry_utc"], line["exit_utc"], str(line["n_valid_independent"]), line["band"], line["fee"])
     table.add_row("TOTAL", "", "", "", "", invoice["total"])
     Console().print(table)
-
-

@@ -33,6 +33,13 @@ FORMATS = ("csv", "parquet", "geojson", "json")
 _EXTENSIONS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".geojson": "geojson", ".json": "json"}
 
 
+def _umask_mode() -> int:
+    """The mode a plainly created file would get (temporary files are 0600 until renamed)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def format_for(path: str, default: str = "csv") -> str:
     """The table format an output path asks for by its extension (``-``: ``default``)."""
     if path == "-":
@@ -114,6 +121,7 @@ class TableWriter:
         else:
             folder = os.path.dirname(os.path.abspath(self.path))
             fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(self.path)}.", suffix=".tmp", dir=folder)
+            os.chmod(self._tmp, _umask_mode())
             self._fh = os.fdopen(fd, "wb" if binary else "w", encoding=None if binary else "utf-8", newline=None if binary else "")
         return self._fh
 
@@ -229,6 +237,7 @@ def write_text_atomic(path: str, text: str) -> None:
     if not os.path.isdir(folder):
         raise UsageError(f"{path}: folder {folder} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
+    os.chmod(tmp, _umask_mode())
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
             fh.write(text)

@@ -1,0 +1,179 @@
+"""Fuzzing: whatever the input, a result or a clear error — never an exception escaping.
+
+Budget: ``FUZZ_EXAMPLES`` examples per fuzzer (default small, for CI);
+``benchmarks/fuzz_nightly.py`` runs the same fuzzers with many more.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import io
+import json
+import os
+import tempfile
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tollcli.charging.geoobjects import build_geoobjects, check_geoobjects
+from tollcli.charging.recognition import load_geoobjects
+from tollcli.charging.tariffs import load_tariff
+from tollcli.errors import TollError
+from tollcli.integrity.from_nmea import nmea_measurements
+from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.run import run_raim
+from tollcli.nmea import compose, read_nmea
+
+EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "60"))
+FUZZ = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=list(HealthCheck), derandomize=EXAMPLES <= 200)
+
+# ----------------------------------------------------------------------------------------------- NMEA
+_tod = st.one_of(st.floats(0, 86_399.99), st.just(86_400.0), st.sampled_from([0.0, 86_399.0, 43_200.0]))  # 23:59:60 leap
+_lat = st.one_of(st.floats(-90, 90), st.floats(-1000, 1000))
+_lon = st.one_of(st.floats(-180, 180), st.floats(-1000, 1000))
+_date = st.one_of(st.dates(dt.date(1980, 1, 6), dt.date(2099, 12, 31)), st.sampled_from([dt.date(2019, 4, 6), dt.date(1999, 8, 21)]))
+
+
+def _safe(fn, *args, **kw):
+    try:
+        return fn(*args, **kw)
+    except (ValueError, OverflowError):
+        return "$GPTXT,01,01,02,unrepresentable*00"
+
+
+_valid = st.one_of(
+    st.builds(lambda t, la, lo: _safe(compose.gga, t, la, lo), _tod, _lat, _lon),
+    st.builds(lambda t, la, lo, d: _safe(compose.rmc, t, la, lo, 10.0, 90.0, d), _tod, _lat, _lon, _date),
+    st.builds(lambda t, d: _safe(compose.zda, t, d), _tod, _date),
+    st.builds(lambda p: compose.gsa(p, 1.2, 0.8, 1.0, system_id=1), st.lists(st.integers(1, 437), max_size=14)),
+    st.builds(lambda s: "\n".join(compose.gsv(s)), st.lists(st.tuples(st.integers(1, 437), st.floats(-5, 95), st.floats(0, 365), st.floats(0, 60)), max_size=9)),
+    st.builds(lambda t, r: compose.grs(t, r), _tod, st.lists(st.floats(-1e6, 1e6), max_size=12)),
+    st.builds(lambda t: compose.gst(t, 2.0, 3.0, 2.0, 10.0, 2.0, 2.0, 3.0), _tod),
+)  # fmt: skip
+_field = st.sampled_from(["", "nan", "inf", "-inf", "1e999", "NaN", "-0", "99999999999", "x" * 5000, "12.3.4", "ÿ", "-", ","])
+
+
+def _mutate(line: str, how: int, pos: int, junk: str) -> str:
+    pos = pos % (len(line) + 1)
+    if how == 0:
+        return line[:pos]  # truncated
+    if how == 1:
+        return line[:-2] + "00" if len(line) > 3 else line  # wrong checksum
+    if how == 2:
+        return line[:pos] + junk + line[pos:]  # noise inside
+    if how == 3:
+        body = line[1:].split("*")[0].split(",")
+        body[pos % len(body)] = junk  # a field replaced, checksum recomputed: decodes, then must be judged
+        return compose.with_checksum(",".join(body))
+    return junk + line  # binary before the sentence
+
+
+_mutated = st.builds(_mutate, _valid, st.integers(0, 4), st.integers(0, 200), st.one_of(_field, st.binary(max_size=40).map(lambda b: b.decode("latin-1"))))
+_line = st.one_of(_valid, _mutated, st.binary(max_size=80).map(lambda b: b.decode("latin-1")), st.just("# comment"))
+
+
+@FUZZ
+@given(st.lists(_line, max_size=60), st.booleans())
+def test_fuzz_nmea_logs_read_and_check_without_exceptions(lines, shuffle_time):
+    text = "\n".join(reversed(lines) if shuffle_time else lines)  # backwards timestamps too
+    try:
+        tables = read_nmea(io.BytesIO(text.encode("latin-1", "replace")))
+    except TollError:
+        return  # a clear, documented error (e.g. gzip magic bytes that are not gzip)
+    assert len(tables.epochs) == tables.stats.epochs
+    out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc", fde=True))
+    assert len(out) == len(tables.epochs)
+
+
+@FUZZ
+@given(st.lists(_line, max_size=40))
+def test_fuzz_cli_ends_in_an_exit_code_never_a_traceback(lines):
+    from tollcli.cli.main import main
+
+    with tempfile.TemporaryDirectory() as tmp:
+        log = os.path.join(tmp, "log.nmea")
+        with open(log, "w", encoding="latin-1", errors="replace") as fh:
+            fh.write("\n".join(lines))
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            try:
+                main(["epochs", log, "-o", os.path.join(tmp, "e.parquet"), "-q"])
+                code = 0
+            except SystemExit as exc:
+                code = exc.code
+    assert code in (0, 1, 3), err.getvalue()
+    assert "Traceback" not in err.getvalue()
+
+
+# ------------------------------------------------------------------------------------------ GeoJSON
+_coord = st.one_of(st.tuples(st.floats(-200, 200), st.floats(-100, 100)).map(list), st.just([]), st.just(["a", "b"]),
+                   st.just([float("nan"), 1.0]), st.tuples(st.floats(2.9, 2.91), st.floats(42.7, 42.71)).map(list))  # fmt: skip
+_ring = st.lists(_coord, max_size=6)
+_geometry = st.one_of(
+    st.builds(lambda c: {"type": "LineString", "coordinates": c}, _ring),
+    st.builds(lambda r: {"type": "Polygon", "coordinates": [r]}, _ring),
+    st.builds(lambda r: {"type": "Polygon", "coordinates": [r + r[:1]]}, _ring),
+    st.builds(lambda c: {"type": "Point", "coordinates": c}, _coord),
+    st.just({"type": "Polygon", "coordinates": []}), st.just({"type": "Nonsense"}), st.just(None), st.just({}),
+    st.just({"type": "Polygon", "coordinates": [[[2.9, 42.7], [2.91, 42.71], [2.91, 42.7], [2.9, 42.71], [2.9, 42.7]]]}),
+    st.just({"type": "LineString", "coordinates": [[0.0, 0.0], [0.0, 0.0]]}),  # found by the nightly run: zero length
+)  # fmt: skip
+_props = st.one_of(
+    st.just({}), st.fixed_dictionaries({"id": st.one_of(st.text(max_size=5), st.integers(), st.none())},
+                                       optional={"hal_m": st.one_of(st.floats(allow_nan=True), st.text(max_size=3), st.none()),
+                                                 "tolled": st.one_of(st.booleans(), st.text(max_size=3)),
+                                                 "road_class": st.text(max_size=5)}),
+)  # fmt: skip
+_feature = st.builds(lambda g, p: {"type": "Feature", "geometry": g, "properties": p}, _geometry, _props)
+_doc = st.one_of(
+    st.builds(lambda f: {"type": "FeatureCollection", "features": f}, st.lists(_feature, max_size=6)),
+    st.builds(lambda f, c: {"type": "FeatureCollection", "features": f, "crs": {"type": "name", "properties": {"name": c}}},
+              st.lists(_feature, max_size=3), st.sampled_from(["EPSG:3857", "urn:ogc:def:crs:OGC:1.3:CRS84", "EPSG:4326"])),
+    st.just([]), st.just({"type": "Feature"}), st.text(max_size=20),
+)  # fmt: skip
+
+
+@FUZZ
+@given(_doc)
+def test_fuzz_geoobject_files_give_results_or_data_errors(doc):
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "g.geojson")
+        with open(path, "w", encoding="utf-8") as fh:
+            fh.write(doc if isinstance(doc, str) else json.dumps(doc))
+        for fn in (build_geoobjects, check_geoobjects, load_geoobjects):
+            try:
+                fn(path)
+            except TollError:
+                pass
+
+
+# ------------------------------------------------------------------------------------------- tariffs
+_toml_value = st.one_of(st.integers(-5, 10**6).map(str), st.decimals(allow_nan=False, allow_infinity=False, places=3).map(str),
+                        st.text(alphabet="abc0123456789:", max_size=6).map(json.dumps), st.just("nan"), st.just("inf"),
+                        st.just("true"), st.just("[1, 2]"), st.just("{a = 1}"))  # fmt: skip
+_key = st.text(alphabet="abcdefghij_-", min_size=1, max_size=6)
+_section = st.builds(lambda head, kvs: f"[{head}]\n" + "".join(f"{k} = {v}\n" for k, v in kvs),
+                     st.one_of(_key.map(lambda k: f"road_class.{k}"), _key.map(lambda k: f'geoobject."{k}"'), _key),
+                     st.lists(st.tuples(_key, _toml_value), max_size=4))  # fmt: skip
+_band = st.builds(lambda s, e, f, d: f'[[band]]\nstart = "{s}"\nend = "{e}"\nfactor = {f}\n' + (f"days = {d}\n" if d else ""),
+                  st.sampled_from(["07:00", "25:00", "22:00", "x", "00:00"]), st.sampled_from(["09:00", "06:00", "07:00", ""]),
+                  _toml_value, st.sampled_from(["", '["mon"]', '["funday"]', "3"]))  # fmt: skip
+_tariff = st.builds(lambda cur, tz, parts, junk: f"currency = {cur}\ntimezone = {tz}\n" + "".join(parts) + junk,
+                    st.sampled_from(['"EUR"', '"E"', "1", '"€€€"']), st.sampled_from(['"Europe/Paris"', '"UTC"', '"Nowhere/X"', "5"]),
+                    st.lists(st.one_of(_section, _band), max_size=5), st.sampled_from(["", "= broken", "[x", "\x00"]))  # fmt: skip
+
+
+@FUZZ
+@given(_tariff, _key, _key, st.datetimes(dt.datetime(1990, 1, 1), dt.datetime(2090, 1, 1)))
+def test_fuzz_tariffs_give_fees_or_data_errors(text, road_class, vehicle_class, when):
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "t.toml")
+        with open(path, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        try:
+            tariff = load_tariff(path)
+            fee, _ = tariff.fee("g", road_class, vehicle_class, when.replace(tzinfo=dt.timezone.utc))
+            assert fee >= 0
+        except TollError:
+            pass

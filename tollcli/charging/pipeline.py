@@ -1,0 +1,100 @@
+"""The whole charging job as one function: log + geo-objects + tariff → invoice (used by process and verify)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import os
+from dataclasses import asdict, dataclass
+
+from tollcli.charging.invoice import build_invoice, file_sha256, invoice_json
+from tollcli.charging.recognition import charges, load_geoobjects, recognise
+from tollcli.charging.tariffs import load_tariff
+from tollcli.errors import UsageError
+from tollcli.integrity.from_nmea import nmea_measurements
+from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.sigma_models import NominalModel
+from tollcli.nmea import ReadStats, read_nmea
+
+
+@dataclass
+class ChargeSettings:
+    """Everything besides the input files that decides an invoice (recorded in it, for ``verify``)."""
+
+    vehicle_class: str = "car"
+    vehicle: str | None = None
+    raim: str = "etc"
+    p_md: float = 5e-5
+    p_fa: float = 5e-3
+    fde: bool = False
+    sigma_model: str = "nominal"
+    sigma_m: float = 5.0
+    tc_s: float = 5.0
+    n_th: int = 1
+    strict: bool = False
+    date: str | None = None  # YYYY-MM-DD for logs without dates
+
+
+def content_sha256(invoice: dict) -> str:
+    """SHA-256 of the invoice's canonical JSON without its own ``content_sha256``."""
+    body = {k: v for k, v in invoice.items() if k != "content_sha256"}
+    return hashlib.sha256(invoice_json(body).encode("utf-8")).hexdigest()
+
+
+def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | None = None) -> tuple[dict, ReadStats | None]:
+    """The invoice for one log (with its content hash) and the reader's statistics (NMEA)."""
+    from tollcli.cli.epochs import check_usable
+    from tollcli.cli.integrity import sniff_format
+
+    try:
+        params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    geo_objects = load_geoobjects(geo)
+    tariff_doc = load_tariff(tariff)
+    kind = sniff_format(log)
+    stats = None
+    nominal = NominalModel()
+    if kind == "nmea":
+        date = dt.date.fromisoformat(settings.date) if settings.date else None
+        tables = read_nmea(log, strict=settings.strict, date=date)
+        check_usable(tables.stats)
+        stats = tables.stats
+        epochs = tables.epochs
+        model = settings.sigma_model if settings.sigma_model != "input" else "nominal"
+        meas = nmea_measurements(epochs, tables.satellites, model, settings.sigma_m, nominal)
+    elif kind == "gsdc-derived":
+        from tollcli.integrity.gsdc import gsdc_epochs, read_gsdc_derived
+
+        epochs, meas = gsdc_epochs(read_gsdc_derived(log), settings.sigma_model, settings.sigma_m, nominal)
+    else:
+        from tollcli.integrity.rinex import rinex_epochs
+
+        if nav is None:
+            raise UsageError("RINEX input needs --nav NAVFILE")
+        epochs, meas = rinex_epochs(log, nav, settings.sigma_model, settings.sigma_m, nominal)
+    positions = recognise(epochs, meas, geo_objects, params, tc_s=settings.tc_s, n_th=settings.n_th)
+    table = charges(positions, settings.n_th)
+    dated = epochs["time_utc"].dropna()
+    inputs = {"log": log, "geoobjects": geo, "tariff": tariff,
+              "geoobjects_sha256": file_sha256(geo), "tariff_sha256": file_sha256(tariff)}  # fmt: skip
+    if log != "-":
+        inputs["log_sha256"] = file_sha256(log)
+    if nav is not None:
+        inputs.update(nav=nav, nav_sha256=file_sha256(nav))
+    parameters = {**asdict(settings), "valid_statuses": ["valid", "excluded_valid"]}
+    invoice = build_invoice(table, positions, geo_objects, tariff_doc,
+                            vehicle=settings.vehicle or os.path.basename(log), vehicle_class=settings.vehicle_class,
+                            inputs=inputs, parameters=parameters,
+                            period=(dated.min(), dated.max()) if len(dated) else None)  # fmt: skip
+    invoice["content_sha256"] = content_sha256(invoice)
+    return invoice, stats
+
+
+def settings_from_invoice(invoice: dict) -> ChargeSettings:
+    """The settings an invoice was made with."""
+    recorded = invoice.get("parameters") or {}
+    fields = ChargeSettings.__dataclass_fields__
+    return ChargeSettings(**{k: recorded[k] for k in fields if k in recorded})
+
+

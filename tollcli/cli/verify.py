@@ -1,0 +1,28 @@
+"""``tollcli verify``: confirm an invoice is reproduced byte for byte from its inputs."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated
+
+import typer
+
+from tollcli.charging.verify import verify_invoice
+from tollcli.cli import options as opt
+from tollcli.cli.console import warn
+
+
+def verify(
+    invoice: Annotated[str, typer.Argument(metavar="INVOICE", help="An invoice JSON written by 'tollcli process'.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print what was checked as JSON on stdout.")] = False,
+    quiet: opt.Quiet = False,
+) -> None:
+    """Check the invoice's own hash and its inputs' hashes, re-run the processing and compare byte for byte.
+
+    Exit 0 when reproduced; 1 with the reason (content modified, an input changed or
+    missing, or a different result) otherwise.
+    """
+    summary = verify_invoice(invoice)
+    if as_json:
+        typer.echo(json.dumps({"reproduced": True, **summary}, sort_keys=True))
+    warn(f"{invoice}: reproduced byte for byte (content {summary['content_sha256'][:12]}…)", quiet)
