@@ -95,3 +95,14 @@ def test_killed_mid_write_leaves_the_old_output(tmp_path):
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     assert out.read_bytes() == b"old output"  # never half a file under the real name
+
+
+@pytest.mark.parametrize("key, label", [("log", "log"), ("geoobjects", "geo-objects"), ("tariff", "tariff")])
+def test_verify_names_each_corrupted_recorded_hash(invoiced, key, label):
+    inv = json.loads((invoiced / "inv.json").read_text())
+    inv["inputs"][f"{key}_sha256"] = "0" * 64  # a recorded hash corrupted, content hash recomputed to match
+    inv["content_sha256"] = content_sha256(inv)
+    (invoiced / "inv.json").write_text(json.dumps(inv, indent=2, sort_keys=True, ensure_ascii=False) + "\n")
+    code, message = _verify(invoiced)
+    assert code == 1 and f"{label} {inv['inputs'][key]} changed since the invoice was made" in message
+    assert "recorded 000000000000" in message
