@@ -53,6 +53,8 @@ def test_rmc_date_pivot_and_validation():
     with pytest.raises(ValueError):
         fields.rmc_date_days("310224")  # 31 February
     assert fields.rmc_date_days("") == -1
+    with pytest.raises(ValueError):
+        fields.civil_days(99_999_999_999, 4, 2019)  # found by the nightly fuzz run: an OverflowError escaped
 
 
 def test_numbers_reject_nan_and_inf():

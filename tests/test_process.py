@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import REPO, SAMPLES, run_cli
+from conftest import REPO, SAMPLES, run_cli, shared
 from tollcli.charging.recognition import charges, load_geoobjects, recognise, thin_independent
 from tollcli.integrity.from_nmea import nmea_measurements
 from tollcli.integrity.raim import RaimParams
@@ -123,9 +123,7 @@ def test_truck_in_the_morning_peak_pays_the_band(tmp_path):
 
 
 def test_log_outside_every_geoobject_gives_an_empty_invoice():
-    log = str(REPO / ".." / "shared" / "data" / "android" / "pixel6.nmea")
-    if not (REPO.parent / "shared" / "data" / "android" / "pixel6.nmea").exists():
-        pytest.skip("real data not available")
+    log = str(shared("android", "pixel6.nmea"))
     proc = run_cli("process", log, "--geo", GEO, "--tariff", TARIFF, "-q")
     inv = json.loads(proc.stdout)
     assert proc.returncode == 0 and inv["lines"] == [] and inv["total"] == "0.00"

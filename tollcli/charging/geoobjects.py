@@ -151,27 +151,26 @@ def build_geoobjects(path: str, hal_max_m: float = HAL_MAX_M, connect_tol_m: flo
     own = np.array([float(p["hal_m"]) if p.get("hal_m") not in (None, "") else np.inf for p in props])
     hal = np.minimum(hal, own)
     np.minimum.at(hal, left[~connected], dist[~connected] / 2.0)
-    features = []
-    for i in tolled_idx:
+    cores = []
+    for i in tolled_idx:  # trimming needs shapely's substring, which works on one line at a time
         line = metric[i]
         touching = right[(left == i) & connected]
-        start_cut = end_cut = 0.0
-        for j in touching:
-            near = metric[j]
-            if shapely.distance(shapely.Point(line.coords[0]), near) <= connect_tol_m:
-                start_cut = trim_factor * hal[i]
-            if shapely.distance(shapely.Point(line.coords[-1]), near) <= connect_tol_m:
-                end_cut = trim_factor * hal[i]
+        ends = shapely.points(np.asarray([line.coords[0], line.coords[-1]]))
+        near_end = (shapely.distance(ends[:, None], metric[touching][None, :]) <= connect_tol_m).any(axis=1) if touching.size else (False, False)
+        start_cut, end_cut = (trim_factor * hal[i] if near else 0.0 for near in near_end)
         if start_cut + end_cut >= line.length:
             raise DataError(f"{path}: feature {ids[i]}: too short ({line.length:.1f} m) to trim {start_cut + end_cut:.1f} m at its junctions")
-        core = substring(line, start_cut, line.length - end_cut)
-        polygon = project([core.buffer(hal[i])], crs, inverse=True)[0]
+        cores.append(substring(line, start_cut, line.length - end_cut))
+    cores = np.asarray(cores, dtype=object)
+    polygons = project(shapely.buffer(cores, hal[tolled_idx], quad_segs=16), crs, inverse=True)
+    features = []
+    for k, i in enumerate(tolled_idx):
         properties = {
             "id": ids[i], "name": props[i].get("name", ""), "road_class": props[i].get("road_class", ""),
             "direction": props[i].get("direction"), "hal_m": round(float(hal[i]), 3), "crs_metric": crs,
-            "length_m": round(core.length, 1),
+            "length_m": round(cores[k].length, 1),
         }  # fmt: skip
-        features.append({"type": "Feature", "properties": properties, "geometry": shapely.geometry.mapping(polygon)})
+        features.append({"type": "Feature", "properties": properties, "geometry": shapely.geometry.mapping(polygons[k])})
     return {"type": "FeatureCollection", "features": features}
 
 

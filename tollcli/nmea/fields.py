@@ -102,5 +102,5 @@ def civil_days(day: int, month: int, year: int) -> int:
 
     try:
         return (_dt.date(year, month, day) - _dt.date(1970, 1, 1)).days
-    except ValueError as exc:
+    except (ValueError, OverflowError) as exc:
         raise ValueError(f"date {year:04d}-{month:02d}-{day:02d}: {exc}") from None

@@ -190,7 +190,7 @@ def _feed_lines(lines: list[str], asm: EpochAssembler, stats: ReadStats, strict:
             continue
         try:
             asm.feed(address[:2], stype, fields[1:], line_no)
-        except (ValueError, IndexError) as exc:
+        except (ValueError, IndexError, OverflowError) as exc:
             _problem(stats, "malformed", line_no, f"malformed {address}: {exc}", strict, name)
             continue
         stats.decoded += 1
