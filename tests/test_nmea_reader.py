@@ -205,3 +205,15 @@ def test_any_lines_give_tables_not_exceptions(lines):
     s = tables.stats
     assert len(tables.epochs) == s.epochs
     assert s.sentences == s.decoded + s.unused + s.malformed
+
+
+def test_huge_integer_fields_are_malformed_not_crashes():
+    # found by the nightly fuzz run: these overflowed the int8/int16 columns when a chunk was built
+    lines = [
+        compose.with_checksum("GPGGA,120000.00,4500.0,N,00700.0,E,99999999999,08,1.0,10.0,M,0,M,,"),
+        compose.with_checksum("GPGSA,A,99999999999,01,02,03,04,,,,,,,,,1.0,1.0,1.0"),
+        compose.with_checksum("GPGSV,1,1,01,99999999999,40,100,40"),
+        compose.gga(10.0, 45.0, 7.0),
+    ]
+    tables = _read(lines)
+    assert tables.stats.malformed == 3 and len(tables.epochs) == 1

@@ -320,8 +320,8 @@ class EpochAssembler:
         tod = time_of_day_s(f[0])
         lat = lat_deg(f[1], f[2])
         lon = lon_deg(f[3], f[4])
-        quality = integer(f[5])
-        n_used = integer(f[6])
+        quality = integer(f[5], hi=127)
+        n_used = integer(f[6], hi=9_999)
         hdop = num(f[7])
         alt = num(f[8])
         sep = num(f[10]) if len(f) > 10 else NAN
@@ -341,7 +341,7 @@ class EpochAssembler:
         lat = lat_deg(f[1], f[2])
         lon = lon_deg(f[3], f[4])
         mode = f[5]
-        n_used = integer(f[6])
+        n_used = integer(f[6], hi=9_999)
         hdop = num(f[7])
         alt = num(f[8])
         sep = num(f[9]) if len(f) > 9 else NAN
@@ -419,9 +419,9 @@ class EpochAssembler:
         else:
             dops, prns = f[-3:], f[2:-3]
         pdop, hdop, vdop = num(dops[0]), num(dops[1]), num(dops[2])
-        fix_mode = integer(f[1])
+        fix_mode = integer(f[1], hi=127)
         hint = SYSTEM_ID_CONSTELLATION.get(sysid) if sysid else TALKER_CONSTELLATION.get(talker)
-        keys = [satellite_id(hint, int(p)) for p in prns if p]
+        keys = [satellite_id(hint, integer(p, lo=1, hi=9_999)) for p in prns if p]
         ep = self._epoch_for(line)
         if fix_mode > ep.fix_mode:
             ep.fix_mode = fix_mode
@@ -434,6 +434,8 @@ class EpochAssembler:
         signal = -1
         if len(body) % 4 == 1:
             signal = int(body[-1], 16) if body[-1] else -1
+            if not -1 <= signal <= 127:
+                raise ValueError(f"signal id {body[-1]!r}")
             body = body[:-1]
         hint = TALKER_CONSTELLATION.get(talker)
         rows = []
@@ -441,7 +443,8 @@ class EpochAssembler:
             prn_text = body[i]
             if not prn_text:
                 continue
-            key = satellite_id(hint, int(prn_text))
+            prn = integer(prn_text, lo=1, hi=9_999)
+            key = satellite_id(hint, prn)
             elev = num(body[i + 1])
             azim = num(body[i + 2])
             cn0 = num(body[i + 3])
@@ -449,7 +452,7 @@ class EpochAssembler:
                 raise ValueError(f"elevation {elev}")
             if not math.isnan(azim) and not 0.0 <= azim <= 360.0:
                 raise ValueError(f"azimuth {azim}")
-            rows.append((key, (signal, int(prn_text), elev, azim, cn0)))
+            rows.append((key, (signal, prn, elev, azim, cn0)))
         view = self._epoch_for(line).view
         for key, value in rows:
             old = view.get(key)
@@ -495,7 +498,7 @@ class EpochAssembler:
             gbs_bias_m=num(f[6]),
             gbs_bias_sd_m=num(f[7]),
         )
-        svid = integer(f[4])
+        svid = integer(f[4], hi=9_999)
         ep = self._at(tod, line)
         self._set(ep, **values)
         if svid >= 0:

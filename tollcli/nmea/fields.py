@@ -32,11 +32,14 @@ def num(field: str) -> float:
     return value
 
 
-def integer(field: str, missing: int = -1) -> int:
-    """An integer field; empty → ``missing``."""
+def integer(field: str, missing: int = -1, lo: int = 0, hi: int = 32_767) -> int:
+    """An integer field in [lo, hi]; empty → ``missing``; outside the range → ValueError."""
     if not field:
         return missing
-    return int(field)
+    value = int(field)
+    if not lo <= value <= hi:
+        raise ValueError(f"{field!r} outside {lo}…{hi}")
+    return value
 
 
 def _ddmm(value: str, hemisphere: str, max_deg: float, negative: str, positive: str, what: str) -> float:
