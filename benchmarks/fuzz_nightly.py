@@ -26,7 +26,7 @@ def main() -> None:
     start = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--hypothesis-show-statistics",
                            "tests/test_fuzz.py"], cwd=ROOT, env=env, capture_output=True, text=True)  # fmt: skip
-    tried = [line.strip() for line in proc.stdout.splitlines() if "passing examples" in line or line.startswith("tests/test_fuzz.py::")]
+    tried = [line.strip() for line in proc.stdout.splitlines() if " passing, " in line or line.startswith("tests/test_fuzz.py::")]
     print(f"fuzz run: {args.examples} examples per fuzzer, {time.perf_counter() - start:.0f} s")
     print("\n".join(tried))
     print(proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else "(no output)")
