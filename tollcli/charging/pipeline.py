@@ -11,10 +11,13 @@ from tollcli.charging.invoice import build_invoice, file_sha256, invoice_json
 from tollcli.charging.recognition import charges, load_geoobjects, recognise
 from tollcli.charging.tariffs import load_tariff
 from tollcli.errors import UsageError
+from tollcli.integrity.pseudorange_inputs import pseudorange_epochs
+from tollcli.io.sources import sniff_format
 from tollcli.integrity.from_nmea import nmea_measurements
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.sigma_models import NominalModel
 from tollcli.nmea import ReadStats, read_nmea
+from tollcli.nmea.reader import check_usable
 
 
 @dataclass
@@ -43,9 +46,6 @@ def content_sha256(invoice: dict) -> str:
 
 def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | None = None) -> tuple[dict, ReadStats | None]:
     """The invoice for one log (with its content hash) and the reader's statistics (NMEA)."""
-    from tollcli.cli.epochs import check_usable
-    from tollcli.cli.integrity import sniff_format
-
     try:
         params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde)
     except ValueError as exc:
@@ -63,16 +63,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         epochs = tables.epochs
         model = settings.sigma_model if settings.sigma_model != "input" else "nominal"
         meas = nmea_measurements(epochs, tables.satellites, model, settings.sigma_m, nominal)
-    elif kind == "gsdc-derived":
-        from tollcli.integrity.gsdc import gsdc_epochs, read_gsdc_derived
-
-        epochs, meas = gsdc_epochs(read_gsdc_derived(log), settings.sigma_model, settings.sigma_m, nominal)
     else:
-        from tollcli.integrity.rinex import rinex_epochs
-
-        if nav is None:
-            raise UsageError("RINEX input needs --nav NAVFILE")
-        epochs, meas = rinex_epochs(log, nav, settings.sigma_model, settings.sigma_m, nominal)
+        epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal)
     positions = recognise(epochs, meas, geo_objects, params, tc_s=settings.tc_s, n_th=settings.n_th)
     table = charges(positions, settings.n_th)
     dated = epochs["time_utc"].dropna()

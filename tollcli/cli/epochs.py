@@ -9,9 +9,10 @@ import typer
 
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
-from tollcli.errors import DataError, PartialError, UsageError
+from tollcli.errors import UsageError
 from tollcli.io.writers import TableWriter, format_for
 from tollcli.nmea import ReadStats, iter_nmea_tables
+from tollcli.nmea.reader import check_partial, check_usable
 
 
 def epochs(
@@ -62,26 +63,6 @@ def epochs(
     else:
         warn(stats.summary(), quiet)
     check_partial(stats, max_bad)
-
-
-def check_partial(stats: ReadStats, max_bad: int | None) -> None:
-    """Raise PartialError (exit 3) when more lines were skipped than ``--max-bad`` allows."""
-    if max_bad is not None and stats.skipped > max_bad:
-        raise PartialError(f"{stats.source}: {stats.skipped} lines skipped, more than --max-bad {max_bad} "
-                           f"(first: {stats.first_problem}); outputs were written")  # fmt: skip
-
-
-def check_usable(stats: ReadStats) -> None:
-    """Raise DataError when a log gave nothing a toll processor can use."""
-    if stats.lines == 0:
-        raise DataError(f"{stats.source}: empty file")
-    if stats.sentences == 0:
-        hint = f"; first problem at {stats.first_problem}" if stats.first_problem else ""
-        raise DataError(f"{stats.source}: no NMEA sentences in {stats.lines} lines (not an NMEA log?){hint}")
-    if stats.epochs == 0:
-        raise DataError(
-            f"{stats.source}: {stats.sentences} NMEA sentences but no epoch: no GGA/RMC/GLL/GNS/ZDA gave a time of day"
-        )
 
 
 class _Null:

@@ -11,35 +11,19 @@ import typer
 
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
-from tollcli.cli.epochs import check_partial, check_usable
 from tollcli.errors import UsageError
 from tollcli.geodesy import enu_shift2geodetic
 from tollcli.integrity.from_nmea import AngleCarry, nmea_measurements
+from tollcli.integrity.pseudorange_inputs import pseudorange_epochs
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
 from tollcli.integrity.sigma_models import SIGMA_MODELS, NominalModel
-from tollcli.io.sources import open_binary
+from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for
 from tollcli.nmea import ReadStats, iter_nmea_tables
+from tollcli.nmea.reader import check_partial, check_usable
 
 FORMATS = ("auto", "nmea", "gsdc-derived", "rinex")
-
-
-def sniff_format(log: str) -> str:
-    """nmea, gsdc-derived or rinex from the first line of the log."""
-    if log == "-":
-        return "nmea"
-    stream = open_binary(log)
-    try:
-        head = stream.peek(512)[:512] if hasattr(stream, "peek") else stream.read(512)
-    finally:
-        stream.close()
-    first = head.split(b"\n", 1)[0]
-    if b"millisSinceGpsEpoch" in first:
-        return "gsdc-derived"
-    if b"RINEX VERSION" in first:
-        return "rinex"
-    return "nmea"
 
 
 def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
@@ -129,16 +113,7 @@ def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, count
 
 
 def _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal) -> pd.DataFrame:
-    if kind == "gsdc-derived":
-        from tollcli.integrity.gsdc import gsdc_epochs, read_gsdc_derived
-
-        epochs, meas = gsdc_epochs(read_gsdc_derived(log), sigma_model, sigma, nominal)
-    else:
-        from tollcli.integrity.rinex import rinex_epochs
-
-        if nav is None:
-            raise UsageError("--format rinex needs --nav NAVFILE (broadcast ephemerides)")
-        epochs, meas = rinex_epochs(log, nav, sigma_model, sigma, nominal)
+    epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma, nominal)
     raim = run_raim(meas, params)
     return with_raim_position(pd.concat([epochs, raim], axis=1))
 

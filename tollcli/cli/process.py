@@ -11,9 +11,9 @@ from tollcli.charging.invoice import invoice_csv, invoice_json
 from tollcli.charging.pipeline import ChargeSettings, charge_log
 from tollcli.cli import options as opt
 from tollcli.cli.console import warn
-from tollcli.cli.epochs import check_partial
 from tollcli.errors import UsageError
 from tollcli.io.writers import write_text_atomic
+from tollcli.nmea.reader import check_partial
 
 
 def process(

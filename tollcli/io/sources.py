@@ -87,3 +87,20 @@ def read_json(path: str, what: str):
         raise DataError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DataError(f"{path}: not {what} ({exc})") from None
+
+
+def sniff_format(log: str) -> str:
+    """The log's kind from its first line: ``nmea``, ``gsdc-derived`` or ``rinex`` (stdin: ``nmea``)."""
+    if log == "-":
+        return "nmea"
+    stream = open_binary(log)
+    try:
+        head = stream.peek(512)[:512] if hasattr(stream, "peek") else stream.read(512)
+    finally:
+        stream.close()
+    first = head.split(b"\n", 1)[0]
+    if b"millisSinceGpsEpoch" in first:
+        return "gsdc-derived"
+    if b"RINEX VERSION" in first:
+        return "rinex"
+    return "nmea"

@@ -20,7 +20,7 @@ from typing import BinaryIO
 import numpy as np
 import pandas as pd
 
-from tollcli.errors import DataError
+from tollcli.errors import DataError, PartialError
 from tollcli.io.sources import BLOCK_BYTES, iter_text_blocks, open_binary, source_name
 from tollcli.nmea.assembler import EpochAssembler
 from tollcli.nmea.dates import DateCarry, resolve_days, to_time_utc_ms
@@ -233,3 +233,23 @@ def _emit(
     stats.satellite_rows += len(sats)
     stats.undated_epochs += int((days < 0).sum())
     yield NmeaTables(epochs, sats, stats)
+
+
+def check_partial(stats: ReadStats, max_bad: int | None) -> None:
+    """Raise PartialError (exit 3) when more lines were skipped than ``--max-bad`` allows."""
+    if max_bad is not None and stats.skipped > max_bad:
+        raise PartialError(f"{stats.source}: {stats.skipped} lines skipped, more than --max-bad {max_bad} "
+                           f"(first: {stats.first_problem}); outputs were written")  # fmt: skip
+
+
+def check_usable(stats: ReadStats) -> None:
+    """Raise DataError when a log gave nothing a toll processor can use."""
+    if stats.lines == 0:
+        raise DataError(f"{stats.source}: empty file")
+    if stats.sentences == 0:
+        hint = f"; first problem at {stats.first_problem}" if stats.first_problem else ""
+        raise DataError(f"{stats.source}: no NMEA sentences in {stats.lines} lines (not an NMEA log?){hint}")
+    if stats.epochs == 0:
+        raise DataError(
+            f"{stats.source}: {stats.sentences} NMEA sentences but no epoch: no GGA/RMC/GLL/GNS/ZDA gave a time of day"
+        )

@@ -1,0 +1,25 @@
+"""Pseudorange inputs by kind: the GSDC derived CSV and RINEX 3 obs + nav → (epochs, measurements)."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from tollcli.errors import UsageError
+from tollcli.integrity.measurements import Measurements
+from tollcli.integrity.sigma_models import NominalModel
+
+
+def pseudorange_epochs(log: str, kind: str, nav: str | None, sigma_model: str, sigma_m: float,
+                       nominal: NominalModel) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
+    """WLS epochs and RAIM measurements for a ``gsdc-derived`` or ``rinex`` log."""
+    if kind == "gsdc-derived":
+        from tollcli.integrity.gsdc import gsdc_epochs, read_gsdc_derived
+
+        return gsdc_epochs(read_gsdc_derived(log), sigma_model, sigma_m, nominal)
+    if kind == "rinex":
+        from tollcli.integrity.rinex import rinex_epochs
+
+        if nav is None:
+            raise UsageError("RINEX input needs --nav NAVFILE (broadcast ephemerides)")
+        return rinex_epochs(log, nav, sigma_model, sigma_m, nominal)
+    raise UsageError(f"{log}: {kind} is not a pseudorange format")
