@@ -7,10 +7,16 @@
 * ``../geoobjects/example-roads.geojson``: motorway A9 along that drive in two tolled
   segments meeting at a junction, and a free road 80 m to its left (so HAL = 40 m);
   ``../geoobjects/example-geoobjects.geojson`` is what ``tollcli geoobjects build`` makes of it.
+* ``sim/<name>/``: simulated drives along that motorway (``tollcli simulate``), urban and
+  rural, with and without faults: NMEA log, GSDC derived CSV, truth trajectory, the
+  geo-objects really driven and a manifest with the command that made each (``DRIVES``).
 """
 
 import json
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 from tollcli.charging.geoobjects import build_geoobjects
@@ -44,6 +50,25 @@ def roads() -> dict:
     ]}  # fmt: skip
 
 
+#: simulated drives: name → options of ``tollcli simulate`` (route, geo-objects and output added)
+DRIVES = {
+    "rural-clean": ["--env", "rural", "--seed", "1"],
+    "urban-clean": ["--env", "urban", "--seed", "2"],
+    "urban-fault": ["--env", "urban", "--seed", "3", "--fault-bias", "80", "--fault-at", "60,150", "--fault-duration", "20"],
+    "rural-fault": ["--env", "rural", "--seed", "4", "--fault-bias", "60", "--fault-prob", "0.2"],
+}
+
+
+def simulate_drives(here: Path, geo: Path) -> None:
+    """Run ``tollcli simulate`` for every drive of ``DRIVES`` (paths relative to the repository root)."""
+    root = HERE.parent
+    for name, options in DRIVES.items():
+        out = here / "sim" / name
+        args = ["simulate", "--route", os.path.relpath(geo / "example-roads.geojson", root), "--via", "A9-N1,A9-N2",
+                "--geo", os.path.relpath(geo / "example-geoobjects.geojson", root), *options, "-q", "-o", os.path.relpath(out, root)]  # fmt: skip
+        subprocess.run([sys.executable, "-m", "tollcli", *args], check=True, cwd=root)
+
+
 def main() -> None:
     lines = list(straight_drive(180))
     damaged = 100
@@ -56,6 +81,7 @@ def main() -> None:
     (GEO / "example-roads.geojson").write_text(json.dumps(roads(), indent=1) + "\n")
     built = build_geoobjects(str(GEO / "example-roads.geojson"))
     (GEO / "example-geoobjects.geojson").write_text(json.dumps(built, separators=(",", ":"), sort_keys=True) + "\n")
+    simulate_drives(HERE, GEO)
 
 
 if __name__ == "__main__":

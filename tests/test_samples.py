@@ -1,5 +1,6 @@
 """The bundled samples are what their script makes, and they read as documented."""
 
+import json
 import runpy
 
 from conftest import SAMPLES
@@ -15,6 +16,12 @@ def test_samples_are_reproducible(tmp_path, monkeypatch):
     geo = SAMPLES.parent / "geoobjects"
     for name in ("example-roads.geojson", "example-geoobjects.geojson"):
         assert (tmp_path / name).read_bytes() == (geo / name).read_bytes(), name
+    for drive in module["DRIVES"]:
+        for name in ("drive.nmea", "drive-derived.csv", "truth.csv", "truth-geoobjects.json"):
+            assert (tmp_path / "sim" / drive / name).read_bytes() == (SAMPLES / "sim" / drive / name).read_bytes(), (drive, name)
+        made = json.loads((SAMPLES / "sim" / drive / "manifest.json").read_text())
+        assert made["command"].startswith("tollcli simulate --route geoobjects/example-roads.geojson")
+        assert made["command"].endswith(f"-o samples/sim/{drive}")
 
 
 def test_sample_reads_as_documented():

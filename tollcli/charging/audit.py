@@ -115,13 +115,14 @@ def audit_with_truth(invoices: list[dict], driven: set[str], fees: dict[str, Dec
     for inv, charged in zip(invoices, charged_sets):
         under = sorted(driven - charged)
         over = sorted(charged - driven)
+        causes = [{"geoobject": g, **undercharge_cause(inv, g)} for g in under]
         money_under = sum((fees.get(g, Decimal(0)) for g in under), Decimal(0))
         money_over = sum((Decimal(line["fee"]) for line in inv["lines"] if line["geoobject"] in over), Decimal(0))
         total = Decimal(inv["total"])
         error_pct = float(abs(total - true_total) / true_total * 100) if true_total else (0.0 if total == 0 else math.inf)
         within += error_pct <= invoice_error_pct
         per_run.append({"vehicle": inv.get("vehicle", ""), "total": str(total), "true_total": str(true_total),
-                        "undercharged": under, "overcharged": over, "money_under": str(money_under),
+                        "undercharged": under, "undercharge_causes": causes, "overcharged": over, "money_under": str(money_under),
                         "money_over": str(money_over), "error_pct": error_pct})  # fmt: skip
     low, high = wilson(within, n)
     return {
@@ -130,6 +131,28 @@ def audit_with_truth(invoices: list[dict], driven: set[str], fees: dict[str, Dec
         "missed_recognitions": sum(o["undercharges"] for o in per_object),
         "false_recognitions": sum(o["overcharges"] for o in per_object),
     }  # fmt: skip
+
+
+def undercharge_cause(invoice: dict, gid: str) -> dict:
+    """Why a driven geo-object is not on the invoice, from the invoice's own ``not_charged`` evidence."""
+    n_th = int((invoice.get("parameters") or {}).get("n_th", 1))
+    seen = [item for item in invoice.get("not_charged", []) if item["geoobject"] == gid]
+    if not seen:
+        return {"cause": "no position inside the geo-object (no fix there, or every fix fell outside it)",
+                "n_inside": 0, "n_valid": 0, "statuses": {}}  # fmt: skip
+    n_inside = sum(int(i["n_inside"]) for i in seen)
+    n_valid = sum(int(i["n_valid"]) for i in seen)
+    statuses: dict[str, int] = {}
+    for item in seen:
+        for k, v in item.get("statuses", {}).items():
+            statuses[k] = statuses.get(k, 0) + int(v)
+    if n_valid == 0:
+        listed = ", ".join(f"{k} {v}" for k, v in sorted(statuses.items()))
+        cause = f"{n_inside} positions inside, none valid ({listed})"
+    else:
+        best = max(int(i["n_valid_independent"]) for i in seen)
+        cause = f"{n_valid} valid positions inside but only {best} independent in a passage (N_Th = {n_th})"
+    return {"cause": cause, "n_inside": n_inside, "n_valid": n_valid, "statuses": statuses}
 
 
 def risk_report(invoices: list[dict], fees: dict[str, Decimal]) -> dict:

@@ -13,6 +13,7 @@ from tollcli.cli.epochs import epochs
 from tollcli.cli.geoobjects import app as geoobjects_app
 from tollcli.cli.integrity import integrity
 from tollcli.cli.process import process
+from tollcli.cli.simulate import simulate
 from tollcli.cli.verify import verify
 
 EPILOG = (
@@ -54,4 +55,5 @@ app.command(epilog=EPILOG)(verify)
 app.command(epilog=EPILOG)(epochs)
 app.command(epilog=EPILOG)(integrity)
 app.command(epilog=EPILOG)(design)
+app.command(epilog=EPILOG)(simulate)
 app.add_typer(geoobjects_app, name="geoobjects")

@@ -18,6 +18,8 @@ from tollcli.charging.tariffs import load_tariff
 from tollcli.cli import options as opt
 from tollcli.cli.console import warn
 from tollcli.errors import UsageError
+from tollcli.integrity.truth_check import check_against_truth
+from tollcli.io.sources import read_table
 from tollcli.io.writers import write_text_atomic
 
 
@@ -36,12 +38,13 @@ def _expand(runs: list[str]) -> list[str]:
 
 
 def audit(
-    runs: Annotated[list[str], typer.Argument(metavar="RUN...", help="Invoices (JSON from 'tollcli process'), folders or globs.")],
+    runs: Annotated[Optional[list[str]], typer.Argument(metavar="[RUN...]", help="Invoices (JSON from 'tollcli process'), folders or globs.", show_default=False)] = None,
     truth: Annotated[Optional[str], typer.Option("--truth", help="Driven geo-objects: ids (JSON list or one per line) or a trajectory (CSV/GeoJSON, needs --geo).")] = None,
     geo: Annotated[Optional[str], typer.Option("--geo", help="Geo-objects, to read a truth trajectory and price missed ones.")] = None,
     tariff: Annotated[Optional[str], typer.Option("--tariff", help="Tariff, to price geo-objects no invoice charged.")] = None,
     vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class for --tariff prices.")] = "car",
     invoice_error: Annotated[float, typer.Option("--invoice-error", help="M_e: an invoice is right when within this %% of the true total.", min=0.0)] = 1.0,
+    epochs: Annotated[Optional[str], typer.Option("--epochs", help="An integrity epoch table ('tollcli integrity -o', CSV/Parquet): with a --truth trajectory, count positioning failures and those the RAIM missed.")] = None,
     output: opt.Output = "-",
     quiet: opt.Quiet = False,
 ) -> None:
@@ -50,6 +53,19 @@ def audit(
     Without --truth: revenue at risk (fixes inside, too few valid positions, and
     why) and for each charge a bound on the chance that it is false.
     """
+    if not runs and not epochs:
+        raise UsageError("give invoices (RUN...) and/or --epochs with --truth")
+    integrity = None
+    if epochs:
+        if not truth or _is_id_list(truth):
+            raise UsageError("--epochs needs --truth to be a trajectory (CSV with time_utc, lat_deg, lon_deg)")
+        integrity = check_against_truth(read_table(epochs), read_table(truth))
+    if not runs:
+        report = {"mode": "integrity", "integrity": integrity}
+        summary = (f"{integrity['with_position']} positions: {integrity['positioning_failures']} positioning failures, "
+                   f"{integrity['undetected']} undetected (rate {integrity['undetected_rate']:.2e}, P_MD {integrity['p_md']:g})")  # fmt: skip
+        _emit(report, summary, output, quiet)
+        return
     invoices = [load_invoice(p) for p in _expand(runs)]
     fees = fee_table(invoices)
     geo_objects = load_geoobjects(geo) if geo else None
@@ -73,6 +89,13 @@ def audit(
         report = {"mode": "risk", **risk_report(invoices, fees)}
         summary = (f"{report['runs']} runs: {len(report['revenue_at_risk'])} passages at risk "
                    f"({report['money_at_risk']} not charged), {len(report['charges'])} charges")  # fmt: skip
+    if integrity is not None:
+        report["integrity"] = integrity
+        summary += f"; {integrity['positioning_failures']} positioning failures, {integrity['undetected']} undetected"
+    _emit(report, summary, output, quiet)
+
+
+def _emit(report: dict, summary: str, output: str, quiet: bool) -> None:
     text = json.dumps(report, indent=2, sort_keys=True, default=str) + "\n"
     if output == "-" and sys.stdout.isatty():
         typer.echo(summary)

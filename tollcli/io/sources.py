@@ -104,3 +104,17 @@ def sniff_format(log: str) -> str:
     if b"RINEX VERSION" in first:
         return "rinex"
     return "nmea"
+
+
+def read_table(path: str):
+    """A CSV or Parquet table (by extension) as a pandas DataFrame; one-line errors."""
+    import pandas as pd
+
+    if not os.path.exists(path):
+        raise UsageError(f"{path}: no such file")
+    try:
+        if path.lower().endswith(".parquet"):
+            return pd.read_parquet(path)
+        return pd.read_csv(path)
+    except (OSError, ValueError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: not a readable table ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None

@@ -248,3 +248,35 @@ def write_text_atomic(path: str, text: str) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+class AtomicText:
+    """A text file written line by line to a temporary file and renamed into place on :meth:`commit`."""
+
+    def __init__(self, path: str):
+        folder = os.path.dirname(os.path.abspath(path))
+        if not os.path.isdir(folder):
+            raise UsageError(f"{path}: folder {folder} does not exist")
+        self.path = path
+        fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
+        os.chmod(self._tmp, _umask_mode())
+        self._fh = os.fdopen(fd, "w", encoding="utf-8", newline="")
+
+    def __enter__(self) -> "AtomicText":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self._tmp is not None:
+            self._fh.close()
+            os.unlink(self._tmp)
+            self._tmp = None
+
+    def writelines(self, lines) -> None:
+        self._fh.writelines(line + "\n" for line in lines)
+
+    def commit(self) -> None:
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+        self._fh.close()
+        os.replace(self._tmp, self.path)
+        self._tmp = None

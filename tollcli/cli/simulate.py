@@ -1,0 +1,108 @@
+"""``tollcli simulate``: a synthetic drive with known truth (logs, truth, manifest) into a folder."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import shlex
+from typing import Annotated, Optional
+
+import typer
+
+from tollcli.cli import options as opt
+from tollcli.cli.console import progress, warn
+from tollcli.errors import UsageError
+from tollcli.simulate.drive import SimConfig
+from tollcli.simulate.errors import FaultPlan
+from tollcli.simulate.route import PERPIGNAN, along_route, load_route, straight
+from tollcli.simulate.run import write_drive
+from tollcli.simulate.streets import ENVIRONMENTS
+
+
+def _floats(text: str, what: str) -> list[float]:
+    try:
+        return [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise UsageError(f"{what}: expected comma-separated numbers, got {text!r}") from None
+
+
+def _command(ctx: typer.Context) -> str:
+    """The command line that makes these files, rebuilt from the options (defaults left out)."""
+    words = ["tollcli", "simulate"]
+    for param in ctx.command.params:
+        if param.name in ("quiet", "json_summary", "output") or not param.opts:
+            continue
+        value = ctx.params.get(param.name)
+        if value is None or value == param.default or (isinstance(value, bool) and not value):
+            continue
+        if isinstance(value, dt.datetime):
+            value = value.strftime("%Y-%m-%dT%H:%M:%S")
+        words += [param.opts[-1] if param.opts[-1].startswith("--") else param.opts[0], shlex.quote(f"{value:g}" if isinstance(value, float) else str(value))]
+    return " ".join(words + ["-o", shlex.quote(str(ctx.params["output"]))])
+
+
+def simulate(
+    ctx: typer.Context,
+    output: Annotated[str, typer.Option("-o", "--output", help="Folder for the drive's files (created if needed).")],
+    route: Annotated[Optional[str], typer.Option("--route", help="GeoJSON with the LineString(s) to drive; without it a straight drive from --start along --heading.")] = None,
+    via: Annotated[Optional[str], typer.Option("--via", help="Comma-separated road ids of --route to drive, in order.")] = None,
+    geo: Annotated[Optional[str], typer.Option("--geo", help="Geo-objects: the truth then lists those really driven.")] = None,
+    env: Annotated[str, typer.Option("--env", help="Street environment (paper 001 Table I): urban, rural or open.")] = "urban",
+    constellations: Annotated[str, typer.Option("--constellations", help="Nominal constellations: gps, galileo or gps,galileo.")] = "gps,galileo",
+    duration: Annotated[Optional[float], typer.Option("--duration", help="Seconds to drive (default: the whole route, or 600 s straight).", min=0.0)] = None,
+    speed: Annotated[float, typer.Option("--speed", help="Vehicle speed, m/s (13.89 = 50 km/h).", min=0.1)] = 13.89,
+    rate: Annotated[float, typer.Option("--rate", help="Output rate, Hz (1, 5 or 10).")] = 1.0,
+    start: Annotated[str, typer.Option("--start", help="LAT,LON of a straight drive's start, degrees.")] = f"{PERPIGNAN[0]:.6f},{PERPIGNAN[1]:.6f}",
+    heading: Annotated[float, typer.Option("--heading", help="Heading of a straight drive, degrees from north.")] = 0.0,
+    start_utc: Annotated[dt.datetime, typer.Option("--start-utc", formats=["%Y-%m-%dT%H:%M:%S"], help="UTC time of the first epoch.")] = dt.datetime(2026, 3, 2, 8, 0, 0),
+    iono: opt.Iono = "single",
+    tc: Annotated[float, typer.Option("--tc", help="Correlation time of the pseudorange errors, s (0 = white).", min=0.0)] = 5.0,
+    cn0: Annotated[float, typer.Option("--cn0", help="C/N0 of every received satellite, dB-Hz (the thesis uses 30).")] = 30.0,
+    fault_bias: Annotated[float, typer.Option("--fault-bias", help="Bias added to the faulty satellite's pseudorange, m.")] = 0.0,
+    fault_at: Annotated[Optional[str], typer.Option("--fault-at", help="Comma-separated fault start times, s from the start.")] = None,
+    fault_prob: Annotated[float, typer.Option("--fault-prob", help="Share of the time in fault episodes (random starts).", min=0.0, max=1.0)] = 0.0,
+    fault_duration: Annotated[float, typer.Option("--fault-duration", help="Length of each fault episode, s.", min=0.0)] = 10.0,
+    fault_sv: Annotated[Optional[str], typer.Option("--fault-sv", help="Faulty satellite, e.g. G05 or E11 (default: the visible one with the largest slope).")] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of every random draw: the same seed gives the same files.")] = 0,
+    json_summary: opt.JsonSummary = False,
+    quiet: opt.Quiet = False,
+) -> None:
+    """Simulate a drive with known truth: NMEA log, GSDC derived CSV, truth trajectory, driven geo-objects.
+
+    Satellites: nominal Walker GPS 24 and Galileo 27, 5° mask; only satellites in
+    line of sight past the street's buildings are received; errors from the
+    nominal model with correlation time --tc; optional faults. Example:
+
+      tollcli simulate --route geoobjects/example-roads.geojson --via A9-N1,A9-N2
+      --geo geoobjects/example-geoobjects.geojson --env rural --seed 1 -o drive/
+    """
+    if env not in ENVIRONMENTS:
+        raise UsageError(f"--env {env!r}: one of {', '.join(ENVIRONMENTS)}")
+    if rate not in (1.0, 5.0, 10.0):
+        raise UsageError(f"--rate {rate:g}: one of 1, 5, 10")
+    names = [c.strip().lower() for c in constellations.split(",") if c.strip()]
+    if not names or any(n not in ("gps", "galileo") for n in names):
+        raise UsageError(f"--constellations {constellations!r}: gps, galileo or gps,galileo")
+    if iono not in ("single", "sbas", "iono-free"):
+        raise UsageError(f"--iono {iono!r}: single, sbas or iono-free")
+    if fault_sv and not (fault_sv[:1].upper() in "GE" and fault_sv[1:].isdigit()):
+        raise UsageError(f"--fault-sv {fault_sv!r}: like G05 or E11")
+    if route:
+        trajectory = along_route(load_route(route, via.split(",") if via else None), speed, rate, duration)
+    else:
+        lat_lon = _floats(start, "--start")
+        if len(lat_lon) != 2 or not (-90 <= lat_lon[0] <= 90 and -180 <= lat_lon[1] <= 180):
+            raise UsageError(f"--start {start!r}: LAT,LON in degrees")
+        trajectory = straight(lat_lon[0], lat_lon[1], heading, speed, 600.0 if duration is None else duration, rate)
+    faults = FaultPlan(bias_m=fault_bias, at_s=_floats(fault_at, "--fault-at") if fault_at else [], p_fault=fault_prob,
+                       duration_s=fault_duration, sv=fault_sv.upper() if fault_sv else None)  # fmt: skip
+    config = SimConfig(constellations=names, env=env, iono=iono, cn0_dbhz=cn0, tc_s=tc, faults=faults, seed=seed,
+                       start_utc=start_utc.replace(tzinfo=dt.UTC))  # fmt: skip
+    command = _command(ctx)
+    with progress("simulating", quiet) as advance:
+        manifest = write_drive(trajectory, config, output, geo=geo, command=command, progress=advance)
+    counts = manifest["counts"]
+    warn(f"{output}: {counts['epochs']} epochs, {counts['fixes']} fixes, {counts['faulty_epochs']} faulty, "
+         f"≥ 5 satellites {manifest['visible_satellites']['ge5']:.1%}", quiet)  # fmt: skip
+    if json_summary:
+        typer.echo(json.dumps({"output": output, **manifest}, sort_keys=True))

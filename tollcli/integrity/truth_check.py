@@ -1,0 +1,91 @@
+"""Integrity against the truth: position errors, the Stanford diagram's regions, missed detections.
+
+Joins an integrity epoch table (``tollcli integrity`` output: ``time_utc``,
+``lat_deg``, ``lon_deg``, ``raim_status``, ``hpl_m``, ``hal_m``, ``p_md``) with a
+truth trajectory (``time_utc``, ``lat_deg``, ``lon_deg``) on time, and counts:
+
+* ``positioning_failures``: horizontal error > HAL (whatever the RAIM said);
+* ``undetected``: positioning failures the RAIM declared valid — the rate
+  ``undetected / positioning_failures`` is what P_MD bounds (per failure, at the
+  worst-case bias; smaller biases are detected less often but cause no failure);
+* Stanford regions over epochs with a position: ``normal`` (error ≤ HPL ≤ HAL,
+  valid), ``misleading`` (HPL < error ≤ HAL, valid), ``hazardous`` (error > HAL,
+  valid), ``alarm`` (not valid, error ≤ HAL), ``alarm_failure`` (not valid, error > HAL).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from tollcli.errors import DataError
+from tollcli.geodesy import enu_rotation, geodetic2ecef
+
+VALID_STATUSES = ("valid", "excluded_valid")
+
+
+def horizontal_error_m(lat_deg, lon_deg, true_lat_deg, true_lon_deg) -> np.ndarray:
+    """Horizontal distance (m) between estimated and true positions (local east-north)."""
+    est = np.stack(geodetic2ecef(np.asarray(lat_deg, float), np.asarray(lon_deg, float), 0.0), -1)
+    tru = np.stack(geodetic2ecef(np.asarray(true_lat_deg, float), np.asarray(true_lon_deg, float), 0.0), -1)
+    enu = np.einsum("eij,ej->ei", enu_rotation(true_lat_deg, true_lon_deg), est - tru)
+    return np.hypot(enu[:, 0], enu[:, 1])
+
+
+def _times_ms(column: pd.Series, what: str) -> np.ndarray:
+    times = pd.to_datetime(column, utc=True, errors="coerce")
+    if times.isna().any():
+        raise DataError(f"{what}: some time_utc values are missing or unreadable")
+    return times.dt.tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64)
+
+
+def check_against_truth(epochs: pd.DataFrame, truth: pd.DataFrame, tolerance_s: float = 0.05) -> dict:
+    """Counts and rates of the module docstring (epochs without a matching truth time are not counted)."""
+    for name, table, cols in (("epoch table", epochs, ("time_utc", "lat_deg", "lon_deg", "raim_status", "hpl_m", "hal_m")),
+                              ("truth", truth, ("time_utc", "lat_deg", "lon_deg"))):  # fmt: skip
+        missing = [c for c in cols if c not in table.columns]
+        if missing:
+            raise DataError(f"{name}: missing columns {', '.join(missing)}")
+    t_est = _times_ms(epochs["time_utc"], "epoch table")
+    t_tru = _times_ms(truth["time_utc"], "truth")
+    order = np.argsort(t_tru, kind="stable")
+    t_sorted = t_tru[order]
+    j = np.clip(np.searchsorted(t_sorted, t_est), 1, max(len(t_sorted) - 1, 1)) if len(t_sorted) > 1 else np.zeros(len(t_est), int)
+    if len(t_sorted) > 1:
+        j = np.where(np.abs(t_sorted[j - 1] - t_est) <= np.abs(t_sorted[j] - t_est), j - 1, j)
+    matched = np.abs(t_sorted[j] - t_est) <= tolerance_s * 1000 if len(t_sorted) else np.zeros(len(t_est), bool)
+    k = order[j]
+    lat = epochs["lat_deg"].to_numpy(float)
+    have = matched & np.isfinite(lat)
+    err = np.full(len(epochs), np.nan)
+    if have.any():
+        err[have] = horizontal_error_m(lat[have], epochs["lon_deg"].to_numpy(float)[have],
+                                       truth["lat_deg"].to_numpy(float)[k[have]], truth["lon_deg"].to_numpy(float)[k[have]])  # fmt: skip
+    valid = epochs["raim_status"].astype(str).isin(VALID_STATUSES).to_numpy() & have
+    hpl = epochs["hpl_m"].to_numpy(float)
+    hal = epochs["hal_m"].to_numpy(float)
+    with np.errstate(invalid="ignore"):
+        failure = have & (err > hal)
+        regions = {
+            "normal": int(np.sum(valid & (err <= hpl))),
+            "misleading": int(np.sum(valid & (err > hpl) & (err <= hal))),
+            "hazardous": int(np.sum(valid & (err > hal))),
+            "alarm": int(np.sum(have & ~valid & (err <= hal))),
+            "alarm_failure": int(np.sum(have & ~valid & (err > hal))),
+        }
+    n_fail = int(failure.sum())
+    n_undetected = int(np.sum(failure & valid))
+    p_md = float(epochs["p_md"].iloc[0]) if "p_md" in epochs and len(epochs) else float("nan")
+    from tollcli.charging.audit import wilson
+
+    low, high = wilson(n_undetected, n_fail)
+    return {
+        "epochs": len(epochs), "matched": int(matched.sum()), "with_position": int(have.sum()),
+        "horizontal_error_m": {"median": _q(err[have], 0.5), "p95": _q(err[have], 0.95), "max": _q(err[have], 1.0)},
+        "regions": regions, "positioning_failures": n_fail, "undetected": n_undetected,
+        "undetected_rate": n_undetected / n_fail if n_fail else 0.0, "undetected_rate_ci95": [low, high], "p_md": p_md,
+    }  # fmt: skip
+
+
+def _q(values: np.ndarray, q: float) -> float | None:
+    return float(np.quantile(values, q)) if values.size else None

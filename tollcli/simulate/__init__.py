@@ -1,0 +1,1 @@
+"""Synthetic drives with known truth: constellations, streets, errors, faults and the logs they make."""

@@ -1,0 +1,209 @@
+"""A simulated drive: truth, what the receiver measures, and what it reports — as tables.
+
+Chunks of epochs flow through: trajectory → sky (satellite geometry) → street
+(line of sight) → errors (nominal, correlated, plus faults) → pseudoranges → the
+receiver's WLS position (one clock per constellation, as a multi-GNSS receiver
+estimates it), its residuals and DOPs. Each chunk gives two tables:
+
+* epochs: one row per epoch — truth (``true_*``), the receiver's fix, DOPs,
+  residual RMS and error ellipse, reported speed and course, the fault flag;
+* satellites: one row per received (line-of-sight) satellite-epoch — angles,
+  C/N0, ECEF at transmission, pseudorange, σ, nominal error, fault bias, residual.
+
+Everything random comes from one seed through independent streams (street,
+noise, faults, speed), so the same seed gives the same drive.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from tollcli.geodesy import ecef2geodetic, enu_rotation
+from tollcli.integrity.sigma_models import NominalModel
+from tollcli.integrity.wls import observation_matrix, wls_geometry
+from tollcli.integrity.pseudorange_wls import line_of_sight as line_of_sight_ecef
+from tollcli.integrity.pseudorange_wls import solve_positions
+from tollcli.simulate.constellations import nominal, stacked
+from tollcli.simulate.errors import FaultPlan, fault_epochs, gauss_markov
+from tollcli.simulate.route import Trajectory
+from tollcli.simulate.sky import sky
+from tollcli.simulate.streets import line_of_sight, make_street
+
+#: the constellations' reference epoch: satellite geometry depends on the start time through it
+GEOMETRY_EPOCH = dt.datetime(2026, 1, 1, tzinfo=dt.UTC)
+
+
+@dataclass
+class SimConfig:
+    constellations: list[str] = field(default_factory=lambda: ["gps", "galileo"])
+    env: str = "urban"
+    iono: str = "single"  # nominal error model: single | sbas | iono-free
+    cn0_dbhz: float = 30.0  # the thesis's worst case, used for every satellite
+    mask_deg: float = 5.0
+    tc_s: float = 5.0
+    faults: FaultPlan = field(default_factory=FaultPlan)
+    seed: int = 0
+    start_utc: dt.datetime = dt.datetime(2026, 3, 2, 8, 0, 0, tzinfo=dt.UTC)
+    clock_bias_m: float = 12_345.0
+    speed_sigma_mps: float = 0.05
+    course_sigma_deg: float = 0.5
+    max_per_constellation: int = 12  # receiver channels used per constellation (highest first)
+    chunk_epochs: int = 3600
+
+
+@dataclass
+class SimChunk:
+    epochs: pd.DataFrame
+    satellites: pd.DataFrame
+
+
+def _streams(seed: int) -> dict[str, np.random.Generator]:
+    names = ("street", "noise", "faults", "speed")
+    return dict(zip(names, (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(len(names)))))
+
+
+def _top_k(elev: np.ndarray, visible: np.ndarray, group: np.ndarray, k: int) -> np.ndarray:
+    """Keep, per epoch and constellation, the ``k`` highest visible satellites."""
+    keep = visible.copy()
+    for g in np.unique(group):
+        cols = np.flatnonzero(group == g)
+        score = np.where(visible[:, cols], elev[:, cols], -np.inf)
+        rank = np.argsort(np.argsort(-score, axis=1, kind="stable"), axis=1, kind="stable")
+        keep[:, cols] &= rank < k
+    return keep
+
+
+def simulate(traj: Trajectory, config: SimConfig) -> Iterator[SimChunk]:
+    """The drive, chunk by chunk."""
+    names, svid, sats = stacked(nominal(config.constellations))
+    group = np.unique(names, return_inverse=True)[1]
+    rng = _streams(config.seed)
+    length = float(traj.s_m[-1]) if traj.s_m.size else 0.0
+    street = make_street(config.env, length, rng["street"])
+    model = NominalModel(iono=config.iono, default_cn0_dbhz=config.cn0_dbhz)
+    faulty_all = fault_epochs(config.faults, traj.t_s, rng["faults"])
+    t_geo = (config.start_utc - GEOMETRY_EPOCH).total_seconds()
+    state = None
+    start = pd.Timestamp(config.start_utc)
+    for lo in range(0, traj.t_s.size, config.chunk_epochs):
+        sl = slice(lo, min(lo + config.chunk_epochs, traj.t_s.size))
+        t = traj.t_s[sl]
+        n = t.size
+        lat, lon, h = traj.lat_deg[sl], traj.lon_deg[sl], traj.height_m[sl]
+        view = sky(sats, t_geo + t, lat, lon, h)
+        elev, azim = view["elev_deg"], view["azim_deg"]
+        visible = (elev >= config.mask_deg) & line_of_sight(street, traj.s_m[sl], traj.heading_deg[sl], elev, azim)
+        used = _top_k(elev, visible, group, config.max_per_constellation)
+        cn0 = np.full(elev.shape, config.cn0_dbhz)
+        sigma = model.sigma_m(elev, cn0, names[None, :], lat[:, None], lon[:, None])
+        unit, state = gauss_markov(n, names.size, config.tc_s, float(np.median(np.diff(traj.t_s))) if traj.t_s.size > 1 else 1.0,
+                                   rng["noise"], state)  # fmt: skip
+        error = sigma * unit
+        H = observation_matrix(elev, azim, np.broadcast_to(group, elev.shape), int(group.max()) + 1)
+        geometry = wls_geometry(H, np.where(used, sigma, np.nan), used)
+        faulty = faulty_all[sl]
+        bias = np.zeros(elev.shape)
+        fault_col = _fault_column(config.faults, names, svid, geometry.slope, used)
+        rows = np.flatnonzero(faulty & (fault_col >= 0))
+        bias[rows, fault_col[rows]] = config.faults.bias_m
+        pr = view["range_m"] + config.clock_bias_m + error + bias
+        yield _chunk(lo, t, start, traj, sl, names, svid, group, view, used, cn0, sigma, error, bias, pr, faulty, fault_col, config, rng)
+
+
+def _fault_column(plan: FaultPlan, names: np.ndarray, svid: np.ndarray, slope: np.ndarray, used: np.ndarray) -> np.ndarray:
+    """Per epoch, the column of the satellite that carries the fault (−1: none visible)."""
+    if plan.sv:
+        letter = {"G": "GPS", "E": "Galileo"}.get(plan.sv[0].upper())
+        match = np.flatnonzero((names == letter) & (svid == int(plan.sv[1:])))
+        if match.size == 0:
+            raise ValueError(f"fault satellite {plan.sv!r} is not in the simulated constellations")
+        return np.where(used[:, match[0]], match[0], -1)
+    finite = np.where(used & np.isfinite(slope), slope, -np.inf)
+    col = np.argmax(finite, axis=1)
+    return np.where(np.isfinite(finite.max(axis=1, initial=-np.inf)), col, -1)
+
+
+def _chunk(lo, t, start, traj, sl, names, svid, group, view, used, cn0, sigma, error, bias, pr, faulty, fault_col, config, rng) -> SimChunk:  # noqa: PLR0913
+    n = t.size
+    n_groups = int(group.max()) + 1
+    clock_index = np.broadcast_to(group, used.shape)
+    x = solve_positions(view["sat_xyz"], np.where(used, pr, 0.0), used, np.where(used, sigma, np.nan), clock_index=clock_index)
+    lat, lon, hgt = ecef2geodetic(x[:, 0], x[:, 1], x[:, 2])
+    # residuals and DOPs at the solution
+    los, rng_m = line_of_sight_ecef(view["sat_xyz"], x)
+    clk = np.take_along_axis(x[:, 3:], clock_index, axis=1)
+    residual_pre = np.where(used, pr - (rng_m + clk), np.nan)
+    R = enu_rotation(lat, lon)
+    los_enu = np.einsum("eij,enj->eni", R, los)
+    H = np.concatenate([-los_enu, (clock_index[..., None] == np.arange(n_groups)).astype(float)], axis=-1)
+    geometry = wls_geometry(H, np.where(used, sigma, np.nan), used)
+    dx = np.einsum("eun,en->eu", geometry.A, np.nan_to_num(residual_pre))
+    residual = np.where(used, residual_pre - np.einsum("enu,eu->en", H, dx), np.nan)
+    fix = ~geometry.singular & (geometry.dof >= 0) & (geometry.n_meas >= 4)
+    dop = _dops(H, used, fix)
+    cov_en = _en_covariance(geometry, sigma, used)
+    major, minor, orient = _ellipse(cov_en)
+    rms = np.sqrt(np.nanmean(np.where(used, residual, np.nan) ** 2, axis=1)) if used.any() else np.full(n, np.nan)
+    speed = traj.speed_mps[sl] + config.speed_sigma_mps * rng["speed"].standard_normal(n)
+    course = (traj.heading_deg[sl] + config.course_sigma_deg * rng["speed"].standard_normal(n)) % 360.0
+    times = start + pd.to_timedelta(np.round(t * 1000).astype(np.int64), unit="ms")
+    nan = np.nan
+    epochs = pd.DataFrame({
+        "epoch": np.arange(lo, lo + n, dtype=np.int64),
+        "t_s": t,
+        "time_utc": times,
+        "true_lat_deg": traj.lat_deg[sl], "true_lon_deg": traj.lon_deg[sl], "true_height_m": traj.height_m[sl],
+        "true_heading_deg": traj.heading_deg[sl], "true_speed_mps": traj.speed_mps[sl], "s_m": traj.s_m[sl],
+        "fix": fix,
+        "lat_deg": np.where(fix, lat, nan), "lon_deg": np.where(fix, lon, nan), "height_m": np.where(fix, hgt, nan),
+        "n_used": used.sum(axis=1).astype(np.int16),
+        "pdop": dop[:, 0], "hdop": dop[:, 1], "vdop": dop[:, 2],
+        "rms_residual_m": np.where(fix, rms, nan),
+        "sigma_major_m": major, "sigma_minor_m": minor, "ellipse_orient_deg": orient,
+        "sigma_lat_m": np.sqrt(cov_en[:, 1, 1]), "sigma_lon_m": np.sqrt(cov_en[:, 0, 0]),
+        "speed_mps": speed, "course_deg": course,
+        "faulty": faulty & (fault_col >= 0),
+    })  # fmt: skip
+    e_idx, s_idx = np.nonzero(used)
+    satellites = pd.DataFrame({
+        "epoch": lo + e_idx,
+        "constellation": names[s_idx],
+        "svid": svid[s_idx].astype(np.int16),
+        "elev_deg": view["elev_deg"][e_idx, s_idx], "azim_deg": view["azim_deg"][e_idx, s_idx],
+        "cn0_dbhz": cn0[e_idx, s_idx],
+        "x_sv_m": view["sat_xyz"][e_idx, s_idx, 0], "y_sv_m": view["sat_xyz"][e_idx, s_idx, 1], "z_sv_m": view["sat_xyz"][e_idx, s_idx, 2],
+        "pr_m": pr[e_idx, s_idx], "sigma_m": sigma[e_idx, s_idx], "error_m": error[e_idx, s_idx], "fault_m": bias[e_idx, s_idx],
+        "residual_m": residual[e_idx, s_idx],
+    })  # fmt: skip
+    return SimChunk(epochs, satellites)
+
+
+def _dops(H: np.ndarray, used: np.ndarray, fix: np.ndarray) -> np.ndarray:
+    """(E, 3) PDOP, HDOP, VDOP from the unweighted geometry (NaN without a fix)."""
+    g = wls_geometry(H, np.where(used, 1.0, np.nan), used)
+    # unweighted covariance (HᵀH)⁻¹ = A·Aᵀ
+    cov = np.einsum("eun,evn->euv", g.A, g.A)
+    e, nn, u = cov[:, 0, 0], cov[:, 1, 1], cov[:, 2, 2]
+    out = np.stack([np.sqrt(e + nn + u), np.sqrt(e + nn), np.sqrt(u)], axis=1)
+    return np.where(fix[:, None], out, np.nan)
+
+
+def _en_covariance(geometry, sigma: np.ndarray, used: np.ndarray) -> np.ndarray:
+    """(E, 2, 2) east-north covariance of the WLS position, m²."""
+    A = geometry.A[:, :2, :]
+    var = np.where(used, sigma, 0.0) ** 2
+    return np.einsum("eun,en,evn->euv", A, var, A)
+
+
+def _ellipse(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """1σ semi-axes and orientation of the major axis (degrees from true north)."""
+    w, v = np.linalg.eigh(cov)
+    major = np.sqrt(np.maximum(w[:, 1], 0.0))
+    minor = np.sqrt(np.maximum(w[:, 0], 0.0))
+    orient = np.degrees(np.arctan2(v[:, 0, 1], v[:, 1, 1])) % 180.0
+    return major, minor, orient

@@ -1,0 +1,130 @@
+"""Where the simulated vehicle is: a trajectory at a fixed rate along a route.
+
+A route is a polyline in WGS-84: the LineString(s) of a GeoJSON file (``--route``),
+optionally the road features named by ``via`` ids chained in that order (each
+reversed when that joins it better to the previous one), or a straight line from a
+start point along a heading. The vehicle drives it at constant speed; the
+trajectory gives per epoch the time, position, arc length, heading and speed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from tollcli.charging.geoobjects import feature_geometry, metric_crs, project, read_features
+from tollcli.errors import DataError
+from tollcli.geodesy import enu_shift2geodetic
+
+PERPIGNAN = (42.0 + 41.0 / 60.0, 2.0 + 53.0 / 60.0)  # the thesis's user location [42°41', 2°53']
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Truth per epoch (arrays of length E)."""
+
+    t_s: np.ndarray  # seconds from the start
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    height_m: np.ndarray
+    s_m: np.ndarray  # arc length along the route
+    heading_deg: np.ndarray  # direction of travel, clockwise from north
+    speed_mps: np.ndarray
+
+
+def epoch_times(duration_s: float, rate_hz: float) -> np.ndarray:
+    n = int(round(duration_s * rate_hz))
+    return np.arange(n) / rate_hz
+
+
+def straight(lat_deg: float, lon_deg: float, heading_deg: float, speed_mps: float, duration_s: float,
+             rate_hz: float = 1.0, height_m: float = 50.0) -> Trajectory:  # fmt: skip
+    """A straight drive from a start point (local east-north plane: fine for tens of kilometres)."""
+    t = epoch_times(duration_s, rate_hz)
+    s = speed_mps * t
+    h = np.radians(heading_deg)
+    lat, lon = enu_shift2geodetic(lat_deg, lon_deg, s * np.sin(h), s * np.cos(h))
+    n = t.size
+    return Trajectory(t, lat, lon, np.full(n, height_m), s, np.full(n, heading_deg % 360.0), np.full(n, speed_mps))
+
+
+def stationary(lat_deg: float, lon_deg: float, heading_deg: float, speed_mps: float, duration_s: float,
+               rate_hz: float = 1.0, height_m: float = 50.0) -> Trajectory:  # fmt: skip
+    """The papers' set-up: the street runs past a fixed point of the Earth (the satellites see one place)."""
+    t = epoch_times(duration_s, rate_hz)
+    n = t.size
+    return Trajectory(t, np.full(n, lat_deg), np.full(n, lon_deg), np.full(n, height_m), speed_mps * t,
+                      np.full(n, heading_deg % 360.0), np.full(n, speed_mps))  # fmt: skip
+
+
+def load_route(path: str, via: list[str] | None = None) -> list:
+    """The route's WGS-84 LineStrings, in driving order."""
+    features = read_features(path)
+    lines, ids = [], []
+    for i, feature in enumerate(features):
+        geom, why = feature_geometry(feature)
+        if geom is None or geom.geom_type not in ("LineString", "MultiLineString"):
+            continue
+        props = feature.get("properties") or {}
+        parts = list(geom.geoms) if geom.geom_type == "MultiLineString" else [geom]
+        lines.extend(parts)
+        ids.extend([str(props.get("id", i))] * len(parts))
+    if not lines:
+        raise DataError(f"{path}: no LineString to drive along")
+    if not via:
+        return lines
+    by_id = {}
+    for gid, line in zip(ids, lines):
+        by_id.setdefault(gid, line)
+    missing = [v for v in via if v not in by_id]
+    if missing:
+        raise DataError(f"{path}: no road with id {missing[0]!r} for --via")
+    return [by_id[v] for v in via]
+
+
+def _chain(metric_lines: list) -> np.ndarray:
+    """One polyline (N, 2) through the lines in order, each reversed if its far end is nearer."""
+    coords = np.asarray(metric_lines[0].coords)[:, :2]
+    if len(metric_lines) > 1:
+        nxt = np.asarray(metric_lines[1].coords)[:, :2]
+        ends = [coords[0], coords[-1]]
+        d = [min(np.hypot(*(e - nxt[0])), np.hypot(*(e - nxt[-1]))) for e in ends]
+        if d[0] < d[1]:
+            coords = coords[::-1]
+    for line in metric_lines[1:]:
+        c = np.asarray(line.coords)[:, :2]
+        if np.hypot(*(c[-1] - coords[-1])) < np.hypot(*(c[0] - coords[-1])):
+            c = c[::-1]
+        if np.hypot(*(c[0] - coords[-1])) < 1e-6:
+            c = c[1:]
+        coords = np.vstack([coords, c])
+    return coords
+
+
+def along_route(lines_wgs84: list, speed_mps: float, rate_hz: float = 1.0, duration_s: float | None = None,
+                height_m: float = 50.0) -> Trajectory:  # fmt: skip
+    """Drive the polyline once at constant speed (or for ``duration_s``, stopping at its end)."""
+    crs = metric_crs(lines_wgs84)
+    metric = list(project(np.asarray(lines_wgs84, dtype=object), crs))
+    xy = _chain(metric)
+    seg = np.hypot(*np.diff(xy, axis=0).T)
+    keep = np.concatenate([[True], seg > 0])
+    xy = xy[keep]
+    cum = np.concatenate([[0.0], np.cumsum(seg[seg > 0])])
+    length = cum[-1]
+    if length <= 0:
+        raise DataError("the route has no length")
+    total = length / speed_mps if duration_s is None else min(duration_s, length / speed_mps)
+    t = epoch_times(total, rate_hz)
+    s = speed_mps * t
+    x = np.interp(s, cum, xy[:, 0])
+    y = np.interp(s, cum, xy[:, 1])
+    k = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg[seg > 0]) - 1)
+    d = np.diff(xy, axis=0)[k]
+    heading = np.degrees(np.arctan2(d[:, 0], d[:, 1])) % 360.0
+    pts = project(shapely.points(x, y), crs, inverse=True)
+    lon, lat = shapely.get_x(pts), shapely.get_y(pts)
+    n = t.size
+    return Trajectory(t, lat, lon, np.full(n, height_m), s, heading, np.full(n, speed_mps))
