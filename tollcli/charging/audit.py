@@ -155,6 +155,11 @@ def undercharge_cause(invoice: dict, gid: str) -> dict:
     return {"cause": cause, "n_inside": n_inside, "n_valid": n_valid, "statuses": statuses}
 
 
+def findings_of(invoices: list[dict]) -> list[dict]:
+    """The tamper/evasion findings the invoices carry, with their vehicle."""
+    return [{"vehicle": inv.get("vehicle", ""), **item} for inv in invoices for item in (inv.get("findings") or {}).get("items", [])]
+
+
 def risk_report(invoices: list[dict], fees: dict[str, Decimal]) -> dict:
     """Revenue at risk and per-charge bounds on a false charge, from invoices alone."""
     at_risk, charges = [], []

@@ -15,6 +15,8 @@ from tollcli.integrity.pseudorange_inputs import pseudorange_epochs
 from tollcli.io.sources import sniff_format
 from tollcli.integrity.from_nmea import nmea_measurements
 from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.run import run_raim
+from tollcli.enforcement.findings import FindingSettings, trip_findings
 from tollcli.integrity.sigma_models import NominalModel
 from tollcli.nmea import ReadStats, read_nmea
 from tollcli.nmea.reader import check_usable
@@ -66,6 +68,9 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     else:
         epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal)
     positions = recognise(epochs, meas, geo_objects, params, tc_s=settings.tc_s, n_th=settings.n_th)
+    finding_settings = FindingSettings.for_class(settings.vehicle_class)
+    per_epoch = run_raim(meas, RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa))
+    found = trip_findings(epochs, tables.satellites if kind == "nmea" else None, per_epoch, geo_objects, finding_settings)
     table = charges(positions, settings.n_th)
     dated = epochs["time_utc"].dropna()
     inputs = {"log": log, "geoobjects": geo, "tariff": tariff,
@@ -79,6 +84,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
                             vehicle=settings.vehicle or os.path.basename(log), vehicle_class=settings.vehicle_class,
                             inputs=inputs, parameters=parameters,
                             period=(dated.min(), dated.max()) if len(dated) else None)  # fmt: skip
+    invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
     invoice["content_sha256"] = content_sha256(invoice)
     return invoice, stats
 

@@ -9,6 +9,7 @@ import typer
 from tollcli import __version__
 from tollcli.cli.audit import audit
 from tollcli.cli.design import design
+from tollcli.cli.enforcement import enforce, findings, locate
 from tollcli.cli.epochs import epochs
 from tollcli.cli.geoobjects import app as geoobjects_app
 from tollcli.cli.integrity import integrity
@@ -56,4 +57,7 @@ app.command(epilog=EPILOG)(epochs)
 app.command(epilog=EPILOG)(integrity)
 app.command(epilog=EPILOG)(design)
 app.command(epilog=EPILOG)(simulate)
+app.command(epilog=EPILOG)(locate)
+app.command(epilog=EPILOG)(findings)
+app.command(epilog=EPILOG)(enforce)
 app.add_typer(geoobjects_app, name="geoobjects")

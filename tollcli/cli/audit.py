@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import glob
+from collections import Counter
 import json
 import os
 import sys
@@ -12,7 +13,7 @@ from typing import Annotated, Optional
 import pandas as pd
 import typer
 
-from tollcli.charging.audit import audit_with_truth, driven_from_truth, fee_table, load_invoice, risk_report
+from tollcli.charging.audit import findings_of, audit_with_truth, driven_from_truth, fee_table, load_invoice, risk_report
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
 from tollcli.cli import options as opt
@@ -89,6 +90,10 @@ def audit(
         report = {"mode": "risk", **risk_report(invoices, fees)}
         summary = (f"{report['runs']} runs: {len(report['revenue_at_risk'])} passages at risk "
                    f"({report['money_at_risk']} not charged), {len(report['charges'])} charges")  # fmt: skip
+    report["findings"] = findings_of(invoices)
+    if report["findings"]:
+        kinds = Counter(f["kind"] for f in report["findings"])
+        summary += "; findings: " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items()))
     if integrity is not None:
         report["integrity"] = integrity
         summary += f"; {integrity['positioning_failures']} positioning failures, {integrity['undetected']} undetected"

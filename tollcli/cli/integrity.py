@@ -12,25 +12,15 @@ import typer
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
 from tollcli.errors import UsageError
-from tollcli.geodesy import enu_shift2geodetic
-from tollcli.integrity.from_nmea import AngleCarry, nmea_measurements
-from tollcli.integrity.pseudorange_inputs import pseudorange_epochs
+from tollcli.integrity.log_table import iter_integrity
 from tollcli.integrity.raim import RaimParams
-from tollcli.integrity.run import run_raim
 from tollcli.integrity.sigma_models import SIGMA_MODELS, NominalModel
 from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for
-from tollcli.nmea import ReadStats, iter_nmea_tables
+from tollcli.nmea import ReadStats
 from tollcli.nmea.reader import check_partial, check_usable
 
 FORMATS = ("auto", "nmea", "gsdc-derived", "rinex")
-
-
-def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
-    """Add ``raim_lat_deg``/``raim_lon_deg``: the position the RAIM vouches for (after any exclusion)."""
-    lat, lon = enu_shift2geodetic(table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float),
-                                  table["fde_shift_e_m"].to_numpy(float), table["fde_shift_n_m"].to_numpy(float))  # fmt: skip
-    return table.assign(raim_lat_deg=lat, raim_lon_deg=lon)
 
 
 def integrity(
@@ -96,25 +86,14 @@ def integrity(
 
 
 def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats) -> None:
-    if sigma_model == "input":
-        raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")
-    carry = AngleCarry()
     with progress(f"checking {log}", quiet) as advance:
-        for chunk in iter_nmea_tables(log, strict=strict, stats=stats):
-            meas = nmea_measurements(chunk.epochs, chunk.satellites, sigma_model, sigma, nominal, carry)
-            raim = run_raim(meas, params)
-            table = chunk.epochs.rename(columns={"n_used": "n_used_receiver"})
-            table = with_raim_position(pd.concat([table.reset_index(drop=True), raim], axis=1))
-            writer.write(table)
-            counts.update(raim["raim_status"].astype(str))
-            advance(len(table))
+        for chunk in iter_integrity(log, "nmea", params, sigma_model, sigma, nominal, strict, stats):
+            writer.write(chunk.table)
+            counts.update(chunk.table["raim_status"].astype(str))
+            advance(len(chunk.table))
     check_usable(stats)
     warn(stats.summary(), quiet)
 
 
 def _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal) -> pd.DataFrame:
-    epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma, nominal)
-    raim = run_raim(meas, params)
-    return with_raim_position(pd.concat([epochs, raim], axis=1))
-
-
+    return next(iter_integrity(log, kind, params, sigma_model, sigma, nominal, nav=nav)).table

@@ -63,6 +63,10 @@ def simulate(
     fault_prob: Annotated[float, typer.Option("--fault-prob", help="Share of the time in fault episodes (random starts).", min=0.0, max=1.0)] = 0.0,
     fault_duration: Annotated[float, typer.Option("--fault-duration", help="Length of each fault episode, s.", min=0.0)] = 10.0,
     fault_sv: Annotated[Optional[str], typer.Option("--fault-sv", help="Faulty satellite, e.g. G05 or E11 (default: the visible one with the largest slope).")] = None,
+    jam_at: Annotated[Optional[str], typer.Option("--jam-at", help="Comma-separated jamming start times, s from the start.")] = None,
+    jam_duration: Annotated[float, typer.Option("--jam-duration", help="Length of each jamming episode, s.", min=0.0)] = 30.0,
+    jam_db: Annotated[float, typer.Option("--jam-db", help="C/N0 lost by every satellite while jammed, dB.", min=0.0)] = 0.0,
+    track_min: Annotated[float, typer.Option("--track-min", help="Satellites below this C/N0 are not tracked, dB-Hz.")] = 20.0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every random draw: the same seed gives the same files.")] = 0,
     json_summary: opt.JsonSummary = False,
     quiet: opt.Quiet = False,
@@ -97,7 +101,8 @@ def simulate(
     faults = FaultPlan(bias_m=fault_bias, at_s=_floats(fault_at, "--fault-at") if fault_at else [], p_fault=fault_prob,
                        duration_s=fault_duration, sv=fault_sv.upper() if fault_sv else None)  # fmt: skip
     config = SimConfig(constellations=names, env=env, iono=iono, cn0_dbhz=cn0, tc_s=tc, faults=faults, seed=seed,
-                       start_utc=start_utc.replace(tzinfo=dt.UTC))  # fmt: skip
+                       start_utc=start_utc.replace(tzinfo=dt.UTC), jam_at_s=_floats(jam_at, "--jam-at") if jam_at else [],
+                       jam_duration_s=jam_duration, jam_db=jam_db, track_min_dbhz=track_min)  # fmt: skip
     command = _command(ctx)
     with progress("simulating", quiet) as advance:
         manifest = write_drive(trajectory, config, output, geo=geo, command=command, progress=advance)

@@ -68,6 +68,8 @@ FLOAT_COLUMNS = (
     "gbs_p_md",
     "gbs_bias_m",
     "gbs_bias_sd_m",
+    "pos_disagreement_m",
+    "date_disagreement_days",
 )
 
 #: preference rank of position sources (lower wins)
@@ -286,11 +288,28 @@ class EpochAssembler:
     # ------------------------------------------------------------------ helpers
     @staticmethod
     def _position(ep: _Epoch, source: str, lat: float, lon: float) -> None:
+        if math.isnan(lat) or math.isnan(lon):
+            return
         rank = _POS_RANK[source]
-        if not math.isnan(lat) and not math.isnan(lon) and rank < ep.pos_rank:
+        if ep.pos_rank < 99 and rank != ep.pos_rank:  # two sentences place this epoch: how far apart?
+            dn = (lat - ep.values["lat_deg"]) * 111_195.0
+            de = (lon - ep.values["lon_deg"]) * 111_195.0 * math.cos(math.radians(lat))
+            gap = math.hypot(dn, de)
+            if gap > ep.values.get("pos_disagreement_m", -1.0):
+                ep.values["pos_disagreement_m"] = gap
+        if rank < ep.pos_rank:
             ep.pos_rank = rank
             ep.values["lat_deg"] = lat
             ep.values["lon_deg"] = lon
+
+    @staticmethod
+    def _date(ep: _Epoch, date: int) -> None:
+        """Set the epoch's date; a second, different date (RMC vs ZDA) is recorded as a disagreement."""
+        if date < 0:
+            return
+        if ep.date_days >= 0 and date != ep.date_days:
+            ep.values["date_disagreement_days"] = float(date - ep.date_days)
+        ep.date_days = date
 
     @staticmethod
     def _velocity(ep: _Epoch, source: str, speed_mps: float, course_deg: float) -> None:
@@ -368,8 +387,7 @@ class EpochAssembler:
         date = rmc_date_days(f[8])
         mode = f[11] if len(f) > 11 else ""
         ep = self._at(tod, line)
-        if date >= 0:
-            ep.date_days = date
+        self._date(ep, date)
         if status in ("A", "V"):
             ep.status = ep.status or status
         if mode:
@@ -511,8 +529,7 @@ class EpochAssembler:
         if f[1] and f[2] and f[3]:
             date = civil_days(int(f[1]), int(f[2]), int(f[3]))
         ep = self._at(tod, line)
-        if date >= 0:
-            ep.date_days = date
+        self._date(ep, date)
 
 
 def _need(f: list[str], n: int) -> None:

@@ -26,6 +26,9 @@ Epoch table, one row per fix time:
 ``gbs_failed_svid``    GBS most likely failed satellite (-1 none)
 ``gbs_p_md``           GBS probability of missed detection of that satellite
 ``gbs_bias_m``/``gbs_bias_sd_m``  GBS estimated bias on it and its standard deviation, m
+``pos_disagreement_m``  largest distance between the positions two sentences (GGA, GNS, RMC, GLL) give
+                       for the same epoch, m (NaN when only one gave a position)
+``date_disagreement_days``  ZDA date minus RMC date when both are in the epoch and differ (NaN otherwise)
 =====================  =============================================================
 
 Satellite table, one row per satellite and epoch (the union of GSV "in view" and
@@ -51,7 +54,7 @@ EPOCH_COLUMNS = (
     "rms_residual_m", "sigma_major_m", "sigma_minor_m", "ellipse_orient_deg",
     "sigma_lat_m", "sigma_lon_m", "sigma_alt_m",
     "gbs_err_lat_m", "gbs_err_lon_m", "gbs_err_alt_m", "gbs_failed_svid", "gbs_p_md",
-    "gbs_bias_m", "gbs_bias_sd_m",
+    "gbs_bias_m", "gbs_bias_sd_m", "pos_disagreement_m", "date_disagreement_days",
 )  # fmt: skip
 
 SATELLITE_COLUMNS = (

@@ -53,6 +53,10 @@ class SimConfig:
     speed_sigma_mps: float = 0.05
     course_sigma_deg: float = 0.5
     max_per_constellation: int = 12  # receiver channels used per constellation (highest first)
+    jam_at_s: list[float] = field(default_factory=list)  # jamming episodes: start times, s from the start
+    jam_duration_s: float = 30.0
+    jam_db: float = 0.0  # C/N0 loss of every satellite while jammed
+    track_min_dbhz: float = 20.0  # satellites below this C/N0 are lost
     chunk_epochs: int = 3600
 
 
@@ -98,8 +102,12 @@ def simulate(traj: Trajectory, config: SimConfig) -> Iterator[SimChunk]:
         view = sky(sats, t_geo + t, lat, lon, h)
         elev, azim = view["elev_deg"], view["azim_deg"]
         visible = (elev >= config.mask_deg) & line_of_sight(street, traj.s_m[sl], traj.heading_deg[sl], elev, azim)
+        jammed = np.zeros(n, bool)
+        for j0 in config.jam_at_s:  # a few episodes
+            jammed |= (t >= j0) & (t < j0 + config.jam_duration_s)
+        cn0 = np.full(elev.shape, config.cn0_dbhz) - np.where(jammed, config.jam_db, 0.0)[:, None]
+        visible &= cn0 >= config.track_min_dbhz
         used = _top_k(elev, visible, group, config.max_per_constellation)
-        cn0 = np.full(elev.shape, config.cn0_dbhz)
         sigma = model.sigma_m(elev, cn0, names[None, :], lat[:, None], lon[:, None])
         unit, state = gauss_markov(n, names.size, config.tc_s, float(np.median(np.diff(traj.t_s))) if traj.t_s.size > 1 else 1.0,
                                    rng["noise"], state)  # fmt: skip
@@ -148,7 +156,9 @@ def _chunk(lo, t, start, traj, sl, names, svid, group, view, used, cn0, sigma, e
     dop = _dops(H, used, fix)
     cov_en = _en_covariance(geometry, sigma, used)
     major, minor, orient = _ellipse(cov_en)
-    rms = np.sqrt(np.nanmean(np.where(used, residual, np.nan) ** 2, axis=1)) if used.any() else np.full(n, np.nan)
+    sq = np.where(used, residual, 0.0) ** 2
+    n_res = used.sum(axis=1)
+    rms = np.where(n_res > 0, np.sqrt(sq.sum(axis=1) / np.maximum(n_res, 1)), np.nan)
     speed = traj.speed_mps[sl] + config.speed_sigma_mps * rng["speed"].standard_normal(n)
     course = (traj.heading_deg[sl] + config.course_sigma_deg * rng["speed"].standard_normal(n)) % 360.0
     times = start + pd.to_timedelta(np.round(t * 1000).astype(np.int64), unit="ms")

@@ -1,0 +1,139 @@
+"""``tollcli locate``, ``tollcli findings`` and ``tollcli enforce``: the operator's enforcement and recovery tools."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+from collections import Counter
+from typing import Annotated, Optional
+
+import pandas as pd
+import typer
+
+from tollcli.charging.recognition import load_geoobjects
+from tollcli.cli import options as opt
+from tollcli.cli.console import warn
+from tollcli.enforcement.findings import CLASS_MAX_SPEED_MPS, FindingSettings, trip_findings
+from tollcli.enforcement.locate import COLUMNS, latest_per_vehicle, locate_in, located_rows, vehicle_from_path
+from tollcli.enforcement.roadside import RoadsideSettings, cross_check, read_gantries, read_reads
+from tollcli.errors import UsageError
+from tollcli.integrity.log_table import iter_integrity
+from tollcli.integrity.raim import RaimParams
+from tollcli.io.sources import sniff_format
+from tollcli.io.writers import TableWriter, format_for, write_text_atomic
+from tollcli.nmea import ReadStats
+from tollcli.nmea.reader import check_usable
+
+VehicleClass = Annotated[str, typer.Option("--vehicle-class", help=f"Vehicle class, sets the top speed: {', '.join(CLASS_MAX_SPEED_MPS)}.")]
+
+
+def _trip(log: str, hal: float, strict: bool) -> tuple[pd.DataFrame, pd.DataFrame | None]:
+    """The whole trip's integrity table and satellite table."""
+    kind = sniff_format(log)
+    stats = ReadStats()
+    tables, sats = [], []
+    for chunk in iter_integrity(log, kind, RaimParams(hal_m=hal), strict=strict, stats=stats):
+        tables.append(chunk.table)
+        if chunk.satellites is not None:
+            sats.append(chunk.satellites)
+    if kind == "nmea":
+        check_usable(stats)
+    table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
+    return table, (pd.concat(sats, ignore_index=True) if sats else None)
+
+
+def _vehicles(logs: list[str], vehicle: str | None) -> list[str]:
+    if vehicle and len(logs) > 1:
+        raise UsageError("--vehicle names the vehicle of a single log; with several logs the file names give the ids")
+    return [vehicle] if vehicle else [vehicle_from_path(p) for p in logs]
+
+
+def locate(
+    logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="Receiver logs (one or more vehicles).", show_default=False)],
+    vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id of a single log (default: the file name without extensions).")] = None,
+    at: Annotated[Optional[dt.datetime], typer.Option("--at", formats=["%Y-%m-%dT%H:%M:%S"], help="Where was it at this UTC time (the last position at or before it).")] = None,
+    hal: opt.Hal = 50.0,
+    output: opt.Output = "-",
+    as_json: Annotated[bool, typer.Option("--json", help="Write JSON records instead of a table (same as -o FILE.json).")] = False,
+    strict: opt.Strict = False,
+    quiet: opt.Quiet = False,
+) -> None:
+    """The last trusted position of each vehicle (RAIM valid at --hal), and the last position of any kind when it differs.
+
+    Columns: vehicle, log, which (last_trusted | last_any), time_utc, lat_deg,
+    lon_deg, raim_status, hpl_m, hal_m, speed_mps, course_deg, line.
+    """
+    at_utc = pd.Timestamp(at).tz_localize("UTC") if at else None
+    rows = []
+    for log, vid in zip(logs, _vehicles(logs, vehicle)):
+        table, _ = _trip(log, hal, strict)
+        if table.empty:
+            warn(f"{log}: no epochs", quiet)
+            continue
+        found = locate_in(table, at_utc)
+        if found["any"] is None:
+            warn(f"{log}: no position{' before ' + str(at_utc) if at_utc is not None else ''}", quiet)
+        rows += located_rows(vid, log, found)
+    rows = latest_per_vehicle(rows)
+    frame = pd.DataFrame(rows, columns=list(COLUMNS))
+    if as_json or output.endswith(".json"):
+        records = [{k: (v.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z" if isinstance(v, pd.Timestamp) else v) for k, v in r.items()} for r in rows]
+        write_text_atomic(output, json.dumps(records, indent=1) + "\n")
+    else:
+        with TableWriter(output, format_for(output)) as writer:
+            writer.write(frame)
+            writer.commit()
+    trusted = sum(r["which"] == "last_trusted" for r in rows)
+    warn(f"{len(logs)} logs: {trusted} vehicles with a trusted position, {len(rows) - trusted} later untrusted positions", quiet)
+
+
+def findings(
+    log: opt.LogArg,
+    geo: Annotated[Optional[str], typer.Option("--geo", help="Geo-objects: a gap lists those it could have crossed.")] = None,
+    vehicle_class: VehicleClass = "car",
+    max_speed: Annotated[Optional[float], typer.Option("--max-speed", help="Top speed, m/s (overrides --vehicle-class).", min=1.0)] = None,
+    gap_min: Annotated[float, typer.Option("--gap-min", help="A gap lasts at least this long, s.", min=1.0)] = 60.0,
+    gap_min_distance: Annotated[float, typer.Option("--gap-min-distance", help="…and ends at least this far away, m.", min=0.0)] = 500.0,
+    hal: opt.Hal = 50.0,
+    output: opt.Output = "-",
+    strict: opt.Strict = False,
+    quiet: opt.Quiet = False,
+) -> None:
+    """Tamper and evasion findings of one trip (gaps, jamming signs, spoofing signs), with times, positions and evidence.
+
+    Writes JSON: the settings used and one record per finding (kind, category,
+    start_utc, end_utc, lat_deg, lon_deg, end_lat_deg, end_lon_deg, evidence).
+    """
+    overrides = {"gap_min_s": gap_min, "gap_min_m": gap_min_distance}
+    settings = FindingSettings.for_class(vehicle_class, **overrides)
+    if max_speed is not None:
+        settings = FindingSettings(max_speed_mps=max_speed, **overrides)
+    table, sats = _trip(log, hal, strict)
+    items = trip_findings(table, sats, table, load_geoobjects(geo) if geo else None, settings) if not table.empty else []
+    doc = {"log": log, "settings": settings.__dict__, "findings": items}
+    write_text_atomic(output, json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    kinds = Counter(f["kind"] for f in items)
+    warn(f"{log}: {len(items)} findings" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)
+
+
+def enforce(
+    log: opt.LogArg,
+    reads: Annotated[str, typer.Option("--reads", help="Tag reads CSV: tag_id, gantry_id, time_utc.")],
+    gantries: Annotated[str, typer.Option("--gantries", help="Gantries GeoJSON: Point or LineString features with an id.")],
+    tag: Annotated[Optional[str], typer.Option("--tag", help="The vehicle's tag id (default: every read in the file).")] = None,
+    time_tol: Annotated[float, typer.Option("--time-tol", help="A read and a fix match within this many seconds.", min=0.0)] = 30.0,
+    distance_tol: Annotated[float, typer.Option("--distance-tol", help="A read this far from the trip is a finding, m.", min=0.0)] = 1000.0,
+    pass_dist: Annotated[float, typer.Option("--pass-dist", help="The trip passes a gantry within this distance, m.", min=0.0)] = 50.0,
+    output: opt.Output = "-",
+    strict: opt.Strict = False,
+    quiet: opt.Quiet = False,
+) -> None:
+    """Cross-check RFID/DSRC gantry reads with the GNSS trip: reads where the trip was elsewhere or silent, gantries passed without a read."""
+    table, _ = _trip(log, 50.0, strict)
+    ids, geoms, crs = read_gantries(gantries)
+    items = cross_check(table, read_reads(reads), ids, geoms, crs, tag, RoadsideSettings(time_tol, distance_tol, pass_dist))
+    doc = {"log": log, "tag": tag, "settings": {"time_tol_s": time_tol, "distance_tol_m": distance_tol, "pass_dist_m": pass_dist},
+           "findings": items}  # fmt: skip
+    write_text_atomic(output, json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    kinds = Counter(f["kind"] for f in items)
+    warn(f"{log}: {len(items)} roadside findings" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)

@@ -1,0 +1,1 @@
+"""Enforcement and recovery: where a vehicle is, signs of tampering and evasion, roadside cross-checks."""

@@ -1,0 +1,337 @@
+"""Tamper and evasion findings for one trip, each with times, positions and the evidence behind it.
+
+Categories and kinds (thresholds are :class:`FindingSettings` fields, recorded with the findings):
+
+evasion
+  ``gap``  the log stops and starts again far away (≥ ``gap_min_s`` and ≥ ``gap_min_m``): the
+  geo-objects on the straight line between the two fixes, and those inside the reachable ellipse
+  (foci the two fixes, major axis ``max_speed_mps`` × duration), are listed as possibly driven,
+  not charged.
+jamming
+  ``cn0_collapse``  the median and the 80th percentile C/N0 of the tracked satellites both fall
+  ≥ ``cn0_drop_db`` below their median over the previous ``baseline_s`` (all satellites together);
+  ``satellite_collapse``  satellites tracked fall to ≤ half of that baseline (and by ≥ 3);
+  ``fix_lost_at_speed``  the log goes on without a fix for ≥ ``fix_loss_min_s`` right after moving
+  at ≥ ``fix_loss_speed_mps``.
+spoofing
+  ``position_jump``  consecutive fixes ≤ 5 s apart imply a speed above the vehicle's ``max_speed_mps``;
+  ``time_jump``  time runs backwards, or jumps ≥ ``time_jump_s`` forward while a moving vehicle stays put;
+  ``overspeed``  reported speed above ``max_speed_mps`` for ≥ 3 epochs;
+  ``cn0_uniform``  ≥ 5 satellites with C/N0 spread < ``uniform_std_db`` and median ≥ ``uniform_min_dbhz``
+  for ≥ ``uniform_min_s`` (a simulator's signature);
+  ``raim_persistent_alarm``  the RAIM's test fails in ≥ 80 % of ≥ ``raim_window_s`` s with good
+  geometry (HDOP ≤ 2, ≥ 6 satellites);
+  ``position_disagreement``  two sentences of one epoch place it ≥ ``disagree_m`` apart (GGA vs RMC…);
+  ``date_disagreement``  ZDA and RMC give different dates;
+  ``doppler_mismatch``  the reported (Doppler) speed and the speed from successive fixes differ by more
+  than max(``doppler_tol_mps``, 30 %) over ``doppler_window_s`` s, for ≥ ``doppler_window_s`` s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import pandas as pd
+import shapely
+from shapely import affinity
+
+from tollcli.enforcement.trip import cn0_summary, distance_m, epoch_seconds, fixes, runs, trailing_median
+
+CATEGORY = {
+    "gap": "evasion", "cn0_collapse": "jamming", "satellite_collapse": "jamming", "fix_lost_at_speed": "jamming",
+    "position_jump": "spoofing", "time_jump": "spoofing", "overspeed": "spoofing", "cn0_uniform": "spoofing",
+    "raim_persistent_alarm": "spoofing", "position_disagreement": "spoofing", "date_disagreement": "spoofing",
+    "doppler_mismatch": "spoofing",
+}  # fmt: skip
+#: top speed by vehicle class, m/s (a vehicle faster than this is not that vehicle, or not where it says)
+CLASS_MAX_SPEED_MPS = {"car": 250 / 3.6, "van": 180 / 3.6, "truck": 130 / 3.6, "bus": 130 / 3.6, "motorcycle": 300 / 3.6}
+
+
+@dataclass(frozen=True)
+class FindingSettings:
+    max_speed_mps: float = 250 / 3.6
+    gap_min_s: float = 60.0
+    gap_min_m: float = 500.0
+    baseline_s: float = 30.0
+    cn0_drop_db: float = 8.0
+    fix_loss_min_s: float = 10.0
+    fix_loss_speed_mps: float = 8.0
+    time_jump_s: float = 300.0
+    uniform_std_db: float = 1.0
+    uniform_min_dbhz: float = 45.0
+    uniform_min_s: float = 10.0
+    raim_window_s: float = 30.0
+    disagree_m: float = 50.0
+    doppler_tol_mps: float = 3.0
+    doppler_window_s: float = 10.0
+
+    @classmethod
+    def for_class(cls, vehicle_class: str, **overrides) -> "FindingSettings":
+        return cls(max_speed_mps=CLASS_MAX_SPEED_MPS.get(vehicle_class, CLASS_MAX_SPEED_MPS["car"]), **overrides)
+
+
+def _iso(t_s: float) -> str:
+    return pd.Timestamp(t_s, unit="s", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+
+
+def _finding(kind: str, t0: float, t1: float, lat0, lon0, lat1=None, lon1=None, **evidence) -> dict:
+    r = lambda v: None if v is None or not np.isfinite(v) else round(float(v), 7)  # noqa: E731
+    clean = {k: (round(float(v), 3) if isinstance(v, (float, np.floating)) else (int(v) if isinstance(v, np.integer) else v))
+             for k, v in evidence.items()}  # fmt: skip
+    return {"kind": kind, "category": CATEGORY[kind], "start_utc": _iso(t0), "end_utc": _iso(t1),
+            "lat_deg": r(lat0), "lon_deg": r(lon0), "end_lat_deg": r(lat1), "end_lon_deg": r(lon1), "evidence": clean}  # fmt: skip
+
+
+def trip_findings(epochs: pd.DataFrame, satellites: pd.DataFrame | None = None, raim: pd.DataFrame | None = None,
+                  geo=None, settings: FindingSettings = FindingSettings()) -> list[dict]:  # fmt: skip
+    """All findings of one trip, in time order. ``raim``: per-epoch RAIM columns (same rows as ``epochs``)."""
+    epochs = epochs.reset_index(drop=True)
+    if epochs.empty:
+        return []
+    fill = {c: np.nan for c in ("speed_mps", "hdop") if c not in epochs}  # pseudorange inputs have no NMEA extras
+    fill.update({c: -1 for c in ("line",) if c not in epochs})
+    if "epoch" not in epochs:
+        fill["epoch"] = np.arange(len(epochs))
+    epochs = epochs.assign(**fill) if fill else epochs
+    t = epoch_seconds(epochs)
+    fx = fixes(epochs, t)
+    out: list[dict] = []
+    out += _gaps(fx, geo, settings)
+    out += _jumps(fx, settings)
+    out += _time_jumps(epochs, t, settings)
+    out += _speed_checks(epochs, t, fx, settings)
+    out += _cn0_checks(epochs, satellites, t, fx, settings)
+    out += _fix_loss(epochs, t, fx, settings)
+    out += _disagreements(epochs, t)
+    if raim is not None:
+        out += _raim_alarm(epochs, raim.reset_index(drop=True), t, settings)
+    out.sort(key=lambda f: (f["start_utc"], f["kind"]))
+    return out
+
+
+def _where(epochs: pd.DataFrame, row: int) -> tuple[float, float]:
+    return float(epochs["lat_deg"].iat[row]), float(epochs["lon_deg"].iat[row])
+
+
+def _gaps(fx, geo, s: FindingSettings) -> list[dict]:
+    hit = np.flatnonzero((fx.dt_s >= s.gap_min_s) & (fx.step_m >= s.gap_min_m))
+    out = []
+    for i in hit:  # one per gap (a few per trip), not per epoch
+        line_ids, reach_ids = _crossable(geo, fx.lat_deg[i], fx.lon_deg[i], fx.lat_deg[i + 1], fx.lon_deg[i + 1],
+                                         s.max_speed_mps * fx.dt_s[i])  # fmt: skip
+        out.append(_finding("gap", fx.t_s[i], fx.t_s[i + 1], fx.lat_deg[i], fx.lon_deg[i], fx.lat_deg[i + 1], fx.lon_deg[i + 1],
+                            duration_s=fx.dt_s[i], distance_m=fx.step_m[i], implied_speed_mps=fx.step_m[i] / fx.dt_s[i],
+                            geoobjects_on_line=line_ids, geoobjects_reachable=reach_ids,
+                            note="possibly driven, not charged"))  # fmt: skip
+    return out
+
+
+def _crossable(geo, lat0, lon0, lat1, lon1, reach_m: float) -> tuple[list[str], list[str]]:
+    """Geo-objects crossed by the straight line, and those inside the reachable ellipse (not on the line)."""
+    if geo is None:
+        return [], []
+    from pyproj import Transformer
+
+    tr = Transformer.from_crs("EPSG:4326", geo.crs, always_xy=True)
+    (x0, x1), (y0, y1) = tr.transform([lon0, lon1], [lat0, lat1])
+    line = shapely.LineString([(x0, y0), (x1, y1)])
+    on_line = sorted(str(geo.ids[i]) for i in geo.tree.query(line, predicate="intersects"))
+    c = line.length / 2.0
+    a = max(reach_m / 2.0, c)
+    b = np.sqrt(max(a * a - c * c, 0.0))
+    ellipse = affinity.scale(shapely.Point(0, 0).buffer(1.0, quad_segs=32), a, max(b, 1.0))
+    ellipse = affinity.rotate(ellipse, np.degrees(np.arctan2(y1 - y0, x1 - x0)), origin=(0, 0))
+    ellipse = affinity.translate(ellipse, (x0 + x1) / 2, (y0 + y1) / 2)
+    reach = sorted(str(geo.ids[i]) for i in geo.tree.query(ellipse, predicate="intersects"))
+    return on_line, [g for g in reach if g not in on_line]
+
+
+def _jumps(fx, s: FindingSettings) -> list[dict]:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed = fx.step_m / fx.dt_s
+    hit = np.flatnonzero((fx.dt_s > 0) & (fx.dt_s <= 5.0) & (speed > s.max_speed_mps) & (fx.step_m > 50.0))
+    return [_finding("position_jump", fx.t_s[i], fx.t_s[i + 1], fx.lat_deg[i], fx.lon_deg[i], fx.lat_deg[i + 1], fx.lon_deg[i + 1],
+                     distance_m=fx.step_m[i], dt_s=fx.dt_s[i], implied_speed_mps=speed[i], max_speed_mps=s.max_speed_mps)
+            for i in hit]  # fmt: skip
+
+
+def _time_jumps(epochs: pd.DataFrame, t: np.ndarray, s: FindingSettings) -> list[dict]:
+    out = []
+    dt = np.diff(t)
+    back = np.flatnonzero(dt < -0.5)
+    for i in back:
+        lat, lon = _where(epochs, i + 1)
+        out.append(_finding("time_jump", t[i], t[i + 1], lat, lon, step_s=dt[i], line=int(epochs["line"].iat[i + 1]),
+                            direction="backwards"))  # fmt: skip
+    speed = epochs["speed_mps"].to_numpy(float)
+    lat, lon = epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float)
+    moved = distance_m(lat[:-1], lon[:-1], lat[1:], lon[1:])
+    fast = (speed[:-1] > 5.0) & (speed[1:] > 5.0)
+    with np.errstate(invalid="ignore"):
+        stay = moved < 5.0 * np.maximum(speed[:-1], 1.0)  # no further than a few seconds of driving
+    for i in np.flatnonzero((dt >= s.time_jump_s) & fast & stay):
+        out.append(_finding("time_jump", t[i], t[i + 1], lat[i], lon[i], lat[i + 1], lon[i + 1], step_s=dt[i], distance_m=moved[i],
+                            speed_mps=speed[i], direction="forward while moving in place"))  # fmt: skip
+    return out
+
+
+def _speed_checks(epochs: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings) -> list[dict]:
+    out = []
+    speed = epochs["speed_mps"].to_numpy(float)
+    for a, b in runs(speed > s.max_speed_mps):
+        if b - a + 1 >= 3:
+            lat, lon = _where(epochs, a)
+            out.append(_finding("overspeed", t[a], t[b], lat, lon, max_reported_mps=np.nanmax(speed[a : b + 1]),
+                                max_speed_mps=s.max_speed_mps, epochs=b - a + 1))  # fmt: skip
+    # Doppler (reported) speed against the speed from successive fixes, over a window
+    if fx.rows.size < 3:
+        return out
+    close = (fx.dt_s > 0) & (fx.dt_s <= 2.0)
+    pos_speed = np.where(close, fx.step_m / np.where(close, fx.dt_s, 1.0), np.nan)
+    rep = speed[fx.rows[1:]]
+    ok = np.isfinite(pos_speed) & np.isfinite(rep)
+    n = max(int(s.doppler_window_s), 2)
+    c_ok = np.concatenate([[0], np.cumsum(ok)])
+    c_p = np.concatenate([[0.0], np.cumsum(np.where(ok, pos_speed, 0.0))])
+    c_r = np.concatenate([[0.0], np.cumsum(np.where(ok, rep, 0.0))])
+    idx = np.arange(n, ok.size + 1)
+    if idx.size == 0:
+        return out
+    cnt = c_ok[idx] - c_ok[idx - n]
+    full = cnt >= n - 1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mp = (c_p[idx] - c_p[idx - n]) / cnt
+        mr = (c_r[idx] - c_r[idx - n]) / cnt
+    bad = full & (np.abs(mp - mr) > np.maximum(s.doppler_tol_mps, 0.3 * np.maximum(mp, mr)))
+    flag = np.zeros(ok.size, bool)
+    flag[idx[bad] - 1] = True  # the window's last step
+    for a, b in runs(flag):
+        if b - a + 1 >= n:
+            r0, r1 = fx.rows[a + 1], fx.rows[b + 1]
+            seg = slice(a, b + 1)
+            out.append(_finding("doppler_mismatch", t[r0], t[r1], fx.lat_deg[a + 1], fx.lon_deg[a + 1], fx.lat_deg[b + 1], fx.lon_deg[b + 1],
+                                reported_speed_mps=np.nanmean(rep[seg]), position_speed_mps=np.nanmean(pos_speed[seg]),
+                                window_s=s.doppler_window_s))  # fmt: skip
+    return out
+
+
+def _cn0_checks(epochs: pd.DataFrame, satellites, t: np.ndarray, fx, s: FindingSettings) -> list[dict]:
+    out = []
+    summary = cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
+    n = summary["n_tracked"].to_numpy(float)
+    med, p80, std = (summary[c].to_numpy(float) for c in ("cn0_median", "cn0_p80", "cn0_std"))
+    if not np.isfinite(med).any():
+        return out
+    base_med = trailing_median(med, t, s.baseline_s)
+    base_p80 = trailing_median(p80, t, s.baseline_s)
+    base_n = trailing_median(n, t, s.baseline_s)
+    with np.errstate(invalid="ignore"):
+        dropped = (base_med - med >= s.cn0_drop_db) & (base_p80 - p80 >= s.cn0_drop_db)
+        # a satellite count collapse: the count falls to half (or to none) of its recent median
+        collapsed = (base_n >= 4) & (n <= base_n / 2) & (base_n - n >= 3)
+    for kind, flag in (("cn0_collapse", dropped), ("satellite_collapse", collapsed)):
+        for a, b in _held(flag, med if kind == "cn0_collapse" else n, base_med if kind == "cn0_collapse" else base_n,
+                          s.cn0_drop_db / 2 if kind == "cn0_collapse" else None):
+            if b - a + 1 >= 2 or kind == "satellite_collapse":
+                lat, lon = _where(epochs, a)
+                out.append(_finding(kind, t[a], t[b], lat, lon, baseline_cn0_dbhz=base_med[a], cn0_dbhz=np.nanmin(med[a : b + 1]) if np.isfinite(med[a : b + 1]).any() else None,
+                                    baseline_tracked=base_n[a], tracked=int(np.min(n[a : b + 1])), epochs=b - a + 1))  # fmt: skip
+    with np.errstate(invalid="ignore"):
+        uniform = (n >= 5) & (std < s.uniform_std_db) & (med >= s.uniform_min_dbhz)
+    for a, b in runs(uniform):
+        if t[b] - t[a] >= s.uniform_min_s:
+            lat, lon = _where(epochs, a)
+            out.append(_finding("cn0_uniform", t[a], t[b], lat, lon, cn0_median_dbhz=np.nanmedian(med[a : b + 1]),
+                                cn0_spread_db=np.nanmax(std[a : b + 1]), satellites=int(np.median(n[a : b + 1]))))  # fmt: skip
+    return out
+
+
+def _held(flag: np.ndarray, value: np.ndarray, baseline: np.ndarray, margin: float | None) -> list[tuple[int, int]]:
+    """Runs of ``flag``, each extended while ``value`` stays below the baseline it started from.
+
+    The trailing baseline soon learns a long episode; holding the onset's baseline keeps
+    the finding open until the signal recovers (C/N0 within ``margin`` dB of it; a count
+    back above half of it). Runs that the extension joins are merged.
+    """
+    out: list[tuple[int, int]] = []
+    for a, b in runs(flag):
+        if out and a <= out[-1][1]:
+            continue
+        ref = baseline[a]
+        with np.errstate(invalid="ignore"):
+            low = (value[a:] <= ref - margin) | ~np.isfinite(value[a:]) if margin is not None else value[a:] <= ref / 2
+        end = a + (int(np.argmin(low)) - 1 if not low.all() else low.size - 1)
+        out.append((a, max(b, end)))
+    return out
+
+
+def _fix_loss(epochs: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings) -> list[dict]:
+    out = []
+    has_fix = np.zeros(len(epochs), bool)
+    has_fix[fx.rows] = True
+    speed = epochs["speed_mps"].to_numpy(float)
+    for a, b in runs(~has_fix):
+        if a == 0:
+            continue  # the log starts without a fix: a cold start, not a loss
+        last = fx.rows[fx.rows < a]
+        if last.size == 0:
+            continue
+        before = speed[last[-1]]
+        end_t = t[b + 1] if b + 1 < len(t) else t[b]
+        if end_t - t[last[-1]] >= s.fix_loss_min_s and np.isfinite(before) and before >= s.fix_loss_speed_mps:
+            lat, lon = _where(epochs, last[-1])
+            out.append(_finding("fix_lost_at_speed", t[last[-1]], end_t, lat, lon, speed_before_mps=before,
+                                duration_s=end_t - t[last[-1]], epochs_without_fix=b - a + 1))  # fmt: skip
+    return out
+
+
+def _disagreements(epochs: pd.DataFrame, t: np.ndarray) -> list[dict]:
+    out = []
+    if "pos_disagreement_m" in epochs:
+        gap = epochs["pos_disagreement_m"].to_numpy(float)
+        with np.errstate(invalid="ignore"):
+            flag = gap >= FindingSettings.disagree_m
+        for a, b in runs(flag):
+            lat, lon = _where(epochs, a)
+            out.append(_finding("position_disagreement", t[a], t[b], lat, lon, max_disagreement_m=np.nanmax(gap[a : b + 1]), epochs=b - a + 1))
+    if "date_disagreement_days" in epochs:
+        days = epochs["date_disagreement_days"].to_numpy(float)
+        for a, b in runs(np.isfinite(days) & (days != 0)):
+            lat, lon = _where(epochs, a)
+            out.append(_finding("date_disagreement", t[a], t[b], lat, lon, zda_minus_rmc_days=days[a], epochs=b - a + 1))
+    return out
+
+
+def _raim_alarm(epochs: pd.DataFrame, raim: pd.DataFrame, t: np.ndarray, s: FindingSettings) -> list[dict]:
+    status = raim["raim_status"].astype(str).to_numpy()
+    monitored = np.isin(status, ["valid", "fault_detected", "excluded_valid"])
+    alarm = status == "fault_detected"
+    hdop = epochs["hdop"].to_numpy(float)
+    n_used = raim["n_used"].to_numpy(float)
+    good = monitored & (hdop <= 2.0) & (n_used >= 6)
+    n = max(int(s.raim_window_s), 2)
+    c_good = np.concatenate([[0], np.cumsum(good)])
+    c_alarm = np.concatenate([[0], np.cumsum(alarm & good)])
+    idx = np.arange(n, good.size + 1)
+    if idx.size == 0:
+        return []
+    g = c_good[idx] - c_good[idx - n]
+    share = np.where(g > 0, (c_alarm[idx] - c_alarm[idx - n]) / np.maximum(g, 1), 0.0)
+    hot = idx[(g >= 0.8 * n) & (share >= 0.8)]
+    mark = np.zeros(good.size + 1)
+    np.add.at(mark, hot - n, 1)  # every epoch of a hot window
+    np.add.at(mark, hot, -1)
+    flag = np.cumsum(mark)[:-1] > 0
+    out = []
+    for a, b in runs(flag):
+        lat, lon = _where(epochs, a)
+        out.append(_finding("raim_persistent_alarm", t[a], t[b], lat, lon, alarm_share=float(np.mean(alarm[a : b + 1])),
+                            median_test_stat=float(np.nanmedian(raim["test_stat"].to_numpy(float)[a : b + 1])),
+                            median_threshold=float(np.nanmedian(raim["threshold"].to_numpy(float)[a : b + 1])),
+                            median_hdop=float(np.nanmedian(hdop[a : b + 1]))))  # fmt: skip
+    return out
+
+
+def settings_dict(settings: FindingSettings) -> dict:
+    return asdict(settings)

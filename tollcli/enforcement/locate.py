@@ -1,0 +1,77 @@
+"""Where is the vehicle: its last trusted position (and the last of any kind), or the position at a time."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pandas as pd
+
+#: what a located position reports
+COLUMNS = ("vehicle", "log", "which", "time_utc", "lat_deg", "lon_deg", "raim_status", "hpl_m", "hal_m",
+           "speed_mps", "course_deg", "line")  # fmt: skip
+TRUSTED = ("valid", "excluded_valid")
+
+
+def vehicle_from_path(path: str) -> str:
+    """The vehicle id a log's file name gives: its name without folders and extensions (``TRK-042.nmea.gz`` → ``TRK-042``)."""
+    name = os.path.basename(path)
+    while True:
+        stem, ext = os.path.splitext(name)
+        if not ext or len(ext) > 8:
+            return name
+        name = stem
+
+
+def locate_in(table: pd.DataFrame, at_utc: pd.Timestamp | None = None) -> dict[str, pd.Series | None]:
+    """The last trusted row and the last row with a position (at or before ``at_utc`` when given)."""
+    t = table
+    if at_utc is not None and "time_utc" in t:
+        t = t[t["time_utc"].notna() & (t["time_utc"] <= at_utc)]
+    lat = t["raim_lat_deg"] if "raim_lat_deg" in t else t["lat_deg"]
+    has_pos = np.isfinite(t["lat_deg"].to_numpy(float)) & np.isfinite(lat.to_numpy(float))
+    trusted = has_pos & t["raim_status"].astype(str).isin(TRUSTED).to_numpy()
+    last_any = t[has_pos].iloc[-1] if has_pos.any() else None
+    last_trusted = t[trusted].iloc[-1] if trusted.any() else None
+    return {"trusted": last_trusted, "any": last_any}
+
+
+def located_rows(vehicle: str, log: str, found: dict[str, pd.Series | None]) -> list[dict]:
+    """Rows of the locate table: the trusted position, and the last of any kind when it is a different epoch."""
+    rows = []
+    for which in ("trusted", "any"):
+        row = found[which]
+        if row is None:
+            continue
+        if which == "any" and found["trusted"] is not None and row.name == found["trusted"].name:
+            continue
+        use_raim = which == "trusted" and "raim_lat_deg" in row
+        rows.append({
+            "vehicle": vehicle, "log": log, "which": "last_trusted" if which == "trusted" else "last_any",
+            "time_utc": row.get("time_utc"),
+            "lat_deg": float(row["raim_lat_deg"] if use_raim else row["lat_deg"]),
+            "lon_deg": float(row["raim_lon_deg"] if use_raim else row["lon_deg"]),
+            "raim_status": str(row.get("raim_status", "")), "hpl_m": _f(row.get("hpl_m")), "hal_m": _f(row.get("hal_m")),
+            "speed_mps": _f(row.get("speed_mps")), "course_deg": _f(row.get("course_deg")),
+            "line": int(row["line"]) if "line" in row and pd.notna(row["line"]) else None,
+        })  # fmt: skip
+    return rows
+
+
+def _f(v):
+    return None if v is None or pd.isna(v) else float(v)
+
+
+def latest_per_vehicle(rows: list[dict]) -> list[dict]:
+    """Across several logs of one vehicle, keep the rows of the latest trusted and latest any."""
+    best: dict[tuple[str, str], dict] = {}
+    for r in rows:
+        key = (r["vehicle"], r["which"])
+        t = r["time_utc"]
+        if key not in best or (pd.notna(t) and (pd.isna(best[key]["time_utc"]) or t > best[key]["time_utc"])):
+            best[key] = r
+    out = [best[k] for k in sorted(best)]
+    # drop a last_any that is older than (or the same as) the vehicle's last trusted position
+    trusted = {v: r for (v, w), r in best.items() if w == "last_trusted"}
+    return [r for r in out if not (r["which"] == "last_any" and r["vehicle"] in trusted
+                                   and pd.notna(r["time_utc"]) and r["time_utc"] <= trusted[r["vehicle"]]["time_utc"])]  # fmt: skip

@@ -1,0 +1,49 @@
+"""A receiver log → epoch tables with the RAIM columns, chunk by chunk (shared by ``integrity``, ``locate``, ``findings``)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import pandas as pd
+
+from tollcli.errors import UsageError
+from tollcli.geodesy import enu_shift2geodetic
+from tollcli.integrity.from_nmea import AngleCarry, nmea_measurements
+from tollcli.integrity.pseudorange_inputs import pseudorange_epochs
+from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.run import run_raim
+from tollcli.integrity.sigma_models import NominalModel
+from tollcli.nmea import ReadStats, iter_nmea_tables
+
+
+@dataclass
+class IntegrityChunk:
+    table: pd.DataFrame  # epochs + RAIM columns (+ raim_lat_deg/raim_lon_deg)
+    satellites: pd.DataFrame | None  # the NMEA satellite table of the same epochs (None for pseudorange inputs)
+
+
+def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
+    """Add ``raim_lat_deg``/``raim_lon_deg``: the position the RAIM vouches for (after any exclusion)."""
+    lat, lon = enu_shift2geodetic(table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float),
+                                  table["fde_shift_e_m"].to_numpy(float), table["fde_shift_n_m"].to_numpy(float))  # fmt: skip
+    return table.assign(raim_lat_deg=lat, raim_lon_deg=lon)
+
+
+def iter_integrity(log: str, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
+                   nominal: NominalModel | None = None, strict: bool = False, stats: ReadStats | None = None,
+                   nav: str | None = None) -> Iterator[IntegrityChunk]:  # fmt: skip
+    """Integrity tables of ``log`` (``kind``: nmea, gsdc-derived, rinex); NMEA is streamed in chunks."""
+    nominal = nominal or NominalModel()
+    if kind != "nmea":
+        epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal)
+        yield IntegrityChunk(with_raim_position(pd.concat([epochs, run_raim(meas, params)], axis=1)), None)
+        return
+    if sigma_model == "input":
+        raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")
+    carry = AngleCarry()
+    for chunk in iter_nmea_tables(log, strict=strict, stats=stats if stats is not None else ReadStats()):
+        meas = nmea_measurements(chunk.epochs, chunk.satellites, sigma_model, sigma_m, nominal, carry)
+        raim = run_raim(meas, params)
+        table = chunk.epochs.rename(columns={"n_used": "n_used_receiver"})
+        yield IntegrityChunk(with_raim_position(pd.concat([table.reset_index(drop=True), raim], axis=1)), chunk.satellites)
