@@ -84,7 +84,7 @@ def test_cli_process_then_audit_the_parallel_road_drive(tmp_path):
         "geometry": {"type": "LineString", "coordinates": [[lon, lat], [lon + 0.02, lat + 0.016]]}}]}))  # fmt: skip
     proc = run_cli("audit", str(invoice), "--truth", str(trajectory), "--geo", GEO, "-o", "-", "-q")
     assert json.loads(proc.stdout)["missed_recognitions"] == 0  # driven on the free road: nothing was owed
-    assert run_cli("audit", str(tmp_path / "none.json")).returncode == 1
+    assert run_cli("audit", str(tmp_path / "none.json")).returncode == 2  # a missing file is a usage error
 
 
 def test_interrupted_write_leaves_the_old_invoice(tmp_path, monkeypatch):

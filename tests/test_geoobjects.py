@@ -133,4 +133,4 @@ def test_cli_build_then_check(tmp_path):
     proc = run_cli("geoobjects", "check", str(out), "--hal-min", "35", "--json")
     assert proc.returncode == 1 and json.loads(proc.stdout.decode().splitlines()[0])[0]["feature"] == "A9-1"
     bad = run_cli("geoobjects", "build", str(tmp_path / "missing.geojson"))
-    assert bad.returncode == 1 and b"Traceback" not in bad.stderr
+    assert bad.returncode == 2 and b"Traceback" not in bad.stderr

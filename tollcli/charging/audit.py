@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from tollcli.errors import DataError
+from tollcli.errors import DataError, UsageError
 from tollcli.io.sources import read_json
 
 Z95 = 1.959963984540054
@@ -58,7 +58,7 @@ def driven_from_truth(path: str, geo) -> set[str]:
     try:
         text = open(path, encoding="utf-8").read()
     except FileNotFoundError:
-        raise DataError(f"{path}: no such file") from None
+        raise UsageError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: unreadable ({exc})") from None
     stripped = text.strip()

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
-from tollcli.errors import DataError
+from tollcli.errors import DataError, UsageError
 
 DAYS = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")
 
@@ -155,7 +155,7 @@ def load_tariff(path: str) -> Tariff:
         with open(path, "rb") as fh:
             doc = tomllib.load(fh, parse_float=Decimal)
     except FileNotFoundError:
-        raise DataError(f"{path}: no such file") from None
+        raise UsageError(f"{path}: no such file") from None
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: not a TOML tariff ({exc})") from None
     currency = doc.get("currency")

@@ -10,7 +10,9 @@ evasion
 jamming
   ``cn0_collapse``  the median and the 80th percentile C/N0 of the tracked satellites both fall
   ≥ ``cn0_drop_db`` below their median over the previous ``baseline_s`` (all satellites together);
-  ``satellite_collapse``  satellites tracked fall to ≤ half of that baseline (and by ≥ 3);
+  ``satellite_collapse``  satellites tracked fall to ≤ half of that baseline (and by ≥ 3) for ≥ 2 epochs,
+  and the fix goes with them (lost, or fewer than 4 satellites used; a receiver still fixing on ≥ 4
+  satellites has a short satellite report, not a collapse);
   ``fix_lost_at_speed``  the log goes on without a fix for ≥ ``fix_loss_min_s`` right after moving
   at ≥ ``fix_loss_speed_mps``.
 spoofing
@@ -220,6 +222,11 @@ def _cn0_checks(epochs: pd.DataFrame, satellites, t: np.ndarray, fx, s: FindingS
     out = []
     summary = cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
     n = summary["n_tracked"].to_numpy(float)
+    # an epoch with a fix but no satellite report is the receiver's GSV cadence (or a time-only
+    # sentence), not a loss of satellites: unknown, not zero
+    has_fix = np.zeros(len(epochs), bool)
+    has_fix[fx.rows] = True
+    n = np.where((n == 0) & has_fix, np.nan, n)
     med, p80, std = (summary[c].to_numpy(float) for c in ("cn0_median", "cn0_p80", "cn0_std"))
     if not np.isfinite(med).any():
         return out
@@ -230,10 +237,15 @@ def _cn0_checks(epochs: pd.DataFrame, satellites, t: np.ndarray, fx, s: FindingS
         dropped = (base_med - med >= s.cn0_drop_db) & (base_p80 - p80 >= s.cn0_drop_db)
         # a satellite count collapse: the count falls to half (or to none) of its recent median
         collapsed = (base_n >= 4) & (n <= base_n / 2) & (base_n - n >= 3)
+        # a receiver that keeps ≥ 4 satellites in its fix has not lost them: its satellite report is short
+        col = "n_used_receiver" if "n_used_receiver" in epochs else "n_used"  # the receiver's own count (GSA/GGA)
+        used = epochs[col].to_numpy(float) if col in epochs else np.full(len(epochs), np.nan)
+        collapsed &= ~(has_fix & (used >= 4))
+    collapsed = collapsed & _at_least(collapsed, 2)
     for kind, flag in (("cn0_collapse", dropped), ("satellite_collapse", collapsed)):
         for a, b in _held(flag, med if kind == "cn0_collapse" else n, base_med if kind == "cn0_collapse" else base_n,
                           s.cn0_drop_db / 2 if kind == "cn0_collapse" else None):
-            if b - a + 1 >= 2 or kind == "satellite_collapse":
+            if b - a + 1 >= 2:
                 lat, lon = _where(epochs, a)
                 out.append(_finding(kind, t[a], t[b], lat, lon, baseline_cn0_dbhz=base_med[a], cn0_dbhz=np.nanmin(med[a : b + 1]) if np.isfinite(med[a : b + 1]).any() else None,
                                     baseline_tracked=base_n[a], tracked=int(np.min(n[a : b + 1])), epochs=b - a + 1))  # fmt: skip
@@ -245,6 +257,15 @@ def _cn0_checks(epochs: pd.DataFrame, satellites, t: np.ndarray, fx, s: FindingS
             out.append(_finding("cn0_uniform", t[a], t[b], lat, lon, cn0_median_dbhz=np.nanmedian(med[a : b + 1]),
                                 cn0_spread_db=np.nanmax(std[a : b + 1]), satellites=int(np.median(n[a : b + 1]))))  # fmt: skip
     return out
+
+
+def _at_least(flag: np.ndarray, n: int) -> np.ndarray:
+    """Keep only the runs of ``flag`` that last at least ``n`` epochs."""
+    keep = np.zeros(flag.size, bool)
+    for a, b in runs(flag):
+        if b - a + 1 >= n:
+            keep[a : b + 1] = True
+    return keep
 
 
 def _held(flag: np.ndarray, value: np.ndarray, baseline: np.ndarray, margin: float | None) -> list[tuple[int, int]]:
