@@ -177,6 +177,10 @@ def test_locate_last_trusted_and_later_untrusted(tmp_path):
     t2 = by[("TRK-2", "last_trusted")]
     assert t2["time_utc"] < by[("TRK-2", "last_any")]["time_utc"]
     assert by[("TRK-2", "last_any")]["raim_status"] == "fault_detected"
+    # the log's own header names the vehicle
+    (tmp_path / "x.nmea").write_text("# vehicle: BUS-7\n" + (SAMPLES / "straight-drive.nmea").read_text())
+    result = run_cli("locate", str(tmp_path / "x.nmea"), "-q", "-o", "-")
+    assert result.stdout.decode().splitlines()[1].startswith("BUS-7,")
     # --at: where was TRK-1 at 08:01:00
     result = run_cli("locate", str(tmp_path / "TRK-1.nmea"), "--at", "2026-03-02T08:01:00", "-q", "-o", "-")
     table = pd.read_csv(pd.io.common.StringIO(result.stdout.decode()))
@@ -216,3 +220,75 @@ def test_findings_on_every_gpsd_log_are_the_judged_ones():
         if kinds:
             got[log.name] = kinds
     assert got == GPSD_FINDINGS
+
+
+def _shift_times(epochs):
+    late = epochs["t_s"] >= 150.0
+    epochs.loc[late, "time_utc"] = epochs.loc[late, "time_utc"] - pd.Timedelta(seconds=40)
+    return epochs
+
+
+def _speed(value_mps, t0, t1):
+    def edit(epochs):
+        epochs.loc[(epochs["t_s"] >= t0) & (epochs["t_s"] < t1), "speed_mps"] = value_mps
+        return epochs
+
+    return edit
+
+
+def _rewrite(path, t0: str, t1: str, change) -> None:
+    """Apply ``change(line)`` to the NMEA lines whose time field lies in [t0, t1] (hhmmss strings)."""
+    lines = []
+    for line in path.read_text().splitlines():
+        fields = line.split(",")
+        if line.startswith("$GNRMC") and t0 <= fields[1][:6] <= t1:
+            lines.extend(change(line))
+        else:
+            lines.append(line)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _rmc_elsewhere(line):
+    from tollcli.nmea.compose import with_checksum
+
+    fields = line[1 : line.index("*")].split(",")
+    fields[3] = f"{float(fields[3]) + 0.06:.7f}"  # 0.06 arc-minutes north: 111 m
+    return [with_checksum(",".join(fields))]
+
+
+def _zda_next_day(line):
+    from tollcli.nmea.compose import with_checksum
+
+    fields = line[1 : line.index("*")].split(",")
+    return [line, with_checksum(f"GNZDA,{fields[1]},03,03,2026,00,00")]  # RMC says 02 March
+
+
+@pytest.mark.parametrize(
+    ("kind", "trip", "rewrite"),
+    [
+        ("overspeed", dict(edit=_speed(90.0, 100, 106)), None),
+        ("doppler_mismatch", dict(edit=_speed(7.0, 100, 140)), None),
+        ("time_jump", dict(edit=_shift_times), None),
+        ("cn0_uniform", dict(cn0_dbhz=48.0), None),
+        ("raim_persistent_alarm", dict(faults=FaultPlan(bias_m=150.0, at_s=[100.0], duration_s=60.0)), None),
+        ("position_disagreement", {}, ("080140", "080144", _rmc_elsewhere)),
+        ("date_disagreement", {}, ("080200", "080202", _zda_next_day)),
+    ],
+)
+def test_each_spoofing_sign_on_a_constructed_trip(tmp_path, kind, trip, rewrite):
+    log = tmp_path / "trip.nmea"
+    _write(log, *_trip(300, **trip))
+    if rewrite:
+        _rewrite(log, *rewrite)
+    found = [f for f in _findings(str(log)) if f["kind"] == kind]
+    assert found, f"no {kind}"
+    assert all(f["category"] == "spoofing" for f in found)
+    if kind == "position_disagreement":
+        assert found[0]["evidence"]["max_disagreement_m"] == pytest.approx(111, abs=2)
+        assert found[0]["start_utc"].endswith("08:01:40.000Z") and found[0]["end_utc"].endswith("08:01:44.000Z")
+    if kind == "date_disagreement":
+        assert found[0]["evidence"]["zda_minus_rmc_days"] == 1
+    if kind == "time_jump":
+        assert found[0]["evidence"]["step_s"] == pytest.approx(-39.0)
+    if kind == "overspeed":
+        assert found[0]["evidence"]["max_reported_mps"] == pytest.approx(90.0, abs=0.01)

@@ -14,7 +14,7 @@ from tollcli.charging.recognition import load_geoobjects
 from tollcli.cli import options as opt
 from tollcli.cli.console import warn
 from tollcli.enforcement.findings import CLASS_MAX_SPEED_MPS, FindingSettings, trip_findings
-from tollcli.enforcement.locate import COLUMNS, latest_per_vehicle, locate_in, located_rows, vehicle_from_path
+from tollcli.enforcement.locate import COLUMNS, latest_per_vehicle, locate_in, located_rows, vehicle_from_log, vehicle_from_path
 from tollcli.enforcement.roadside import RoadsideSettings, cross_check, read_gantries, read_reads
 from tollcli.errors import UsageError
 from tollcli.integrity.log_table import iter_integrity
@@ -45,12 +45,12 @@ def _trip(log: str, hal: float, strict: bool) -> tuple[pd.DataFrame, pd.DataFram
 def _vehicles(logs: list[str], vehicle: str | None) -> list[str]:
     if vehicle and len(logs) > 1:
         raise UsageError("--vehicle names the vehicle of a single log; with several logs the file names give the ids")
-    return [vehicle] if vehicle else [vehicle_from_path(p) for p in logs]
+    return [vehicle] if vehicle else [vehicle_from_log(p) or vehicle_from_path(p) for p in logs]
 
 
 def locate(
     logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="Receiver logs (one or more vehicles).", show_default=False)],
-    vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id of a single log (default: the file name without extensions).")] = None,
+    vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id of a single log (default: a '# vehicle: ID' header line in the log, else the file name without extensions).")] = None,
     at: Annotated[Optional[dt.datetime], typer.Option("--at", formats=["%Y-%m-%dT%H:%M:%S"], help="Where was it at this UTC time (the last position at or before it).")] = None,
     hal: opt.Hal = 50.0,
     output: opt.Output = "-",

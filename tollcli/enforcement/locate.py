@@ -1,8 +1,13 @@
-"""Where is the vehicle: its last trusted position (and the last of any kind), or the position at a time."""
+"""Where is the vehicle: its last trusted position (and the last of any kind), or the position at a time.
+
+The vehicle id: ``--vehicle`` for a single log, else a ``# vehicle: ID`` line in the log's
+comment header, else the file name without folders and extensions.
+"""
 
 from __future__ import annotations
 
 import os
+import re
 
 import numpy as np
 import pandas as pd
@@ -21,6 +26,24 @@ def vehicle_from_path(path: str) -> str:
         if not ext or len(ext) > 8:
             return name
         name = stem
+
+
+_HEADER_VEHICLE = re.compile(rb"^#\s*vehicle(?:[ _-]?id)?\s*[:=]\s*(\S+)", re.IGNORECASE | re.MULTILINE)
+
+
+def vehicle_from_log(path: str) -> str | None:
+    """A vehicle id written in the log's comment header (``# vehicle: TRK-042``), if any (first 4 KiB)."""
+    if path == "-":
+        return None
+    from tollcli.io.sources import open_binary
+
+    try:
+        with open_binary(path) as fh:
+            head = fh.read(4096)
+    except Exception:  # noqa: BLE001 - the reader will report the file properly
+        return None
+    match = _HEADER_VEHICLE.search(head)
+    return match.group(1).decode("utf-8", "replace") if match else None
 
 
 def locate_in(table: pd.DataFrame, at_utc: pd.Timestamp | None = None) -> dict[str, pd.Series | None]:
