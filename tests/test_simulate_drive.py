@@ -131,3 +131,35 @@ def test_undetected_misleading_positions_stay_below_p_md(tmp_path):
     assert report["positioning_failures"] >= 500
     assert report["undetected_rate_ci95"][1] < p_md
     assert report["regions"]["alarm_failure"] > 0  # the RAIM did see the failures
+
+
+def test_satellites_from_a_rinex_navigation_file(tmp_path):
+    """--nav: the broadcast orbits replace the nominal constellations; the same satellites rise as in the RINEX round trip."""
+    import sys
+
+    sys.path.insert(0, str(REPO / "tests"))
+    from rinex_synth import make_rinex
+
+    _, nav, rows = make_rinex(tmp_path, n_epochs=1)
+    out = tmp_path / "sim"
+    result = run_cli("simulate", "--nav", str(nav), "--start-utc", "2024-05-06T08:00:00", "--start", "42.6987,2.8956",
+                     "--env", "open", "--duration", "30", "--tc", "0", "-q", "-o", str(out))  # fmt: skip
+    assert result.returncode == 0, result.stderr.decode()
+    tables = read_nmea(str(out / "drive.nmea"))
+    first = tables.satellites[(tables.satellites["epoch"] == 0) & (tables.satellites["elev_deg"] >= 10.5)]
+    letters = first["constellation"].map({"GPS": "G", "Galileo": "E"}) + first["svid"].astype(str).str.zfill(2)
+    expected = {sv for epoch, sv, *_ in rows if epoch == 0}  # the synthetic observation file's 10° mask
+    assert set(letters) <= expected and len(set(letters)) >= len(expected) - 2
+    integ = tmp_path / "i.csv"
+    assert run_cli("integrity", str(out / "drive-derived.csv"), "--sigma-model", "input", "-q", "-o", str(integ)).returncode == 0
+    table, truth = pd.read_csv(integ), pd.read_csv(out / "truth.csv")
+    assert np.median(horizontal_error_m(table["lat_deg"], table["lon_deg"], truth["lat_deg"], truth["lon_deg"])) < 10.0
+
+
+def test_ten_hertz_output(tmp_path):
+    result = run_cli("simulate", "--rate", "10", "--duration", "5", "--env", "rural", "-q", "-o", str(tmp_path))
+    assert result.returncode == 0, result.stderr.decode()
+    epochs = read_nmea(str(tmp_path / "drive.nmea")).epochs
+    assert len(epochs) == 50
+    assert np.allclose(np.diff(epochs["tod_s"].to_numpy()), 0.1)
+    assert run_cli("simulate", "--rate", "2", "-o", str(tmp_path / "x")).returncode == 2

@@ -55,6 +55,7 @@ def simulate(
     start: Annotated[str, typer.Option("--start", help="LAT,LON of a straight drive's start, degrees.")] = f"{PERPIGNAN[0]:.6f},{PERPIGNAN[1]:.6f}",
     heading: Annotated[float, typer.Option("--heading", help="Heading of a straight drive, degrees from north.")] = 0.0,
     start_utc: Annotated[dt.datetime, typer.Option("--start-utc", formats=["%Y-%m-%dT%H:%M:%S"], help="UTC time of the first epoch.")] = dt.datetime(2026, 3, 2, 8, 0, 0),
+    nav: Annotated[Optional[str], typer.Option("--nav", help="RINEX navigation file: satellites from its broadcast ephemerides instead of the nominal constellations.")] = None,
     iono: opt.Iono = "single",
     tc: Annotated[float, typer.Option("--tc", help="Correlation time of the pseudorange errors, s (0 = white).", min=0.0)] = 5.0,
     cn0: Annotated[float, typer.Option("--cn0", help="C/N0 of every received satellite, dB-Hz (the thesis uses 30).")] = 30.0,
@@ -102,7 +103,7 @@ def simulate(
                        duration_s=fault_duration, sv=fault_sv.upper() if fault_sv else None)  # fmt: skip
     config = SimConfig(constellations=names, env=env, iono=iono, cn0_dbhz=cn0, tc_s=tc, faults=faults, seed=seed,
                        start_utc=start_utc.replace(tzinfo=dt.UTC), jam_at_s=_floats(jam_at, "--jam-at") if jam_at else [],
-                       jam_duration_s=jam_duration, jam_db=jam_db, track_min_dbhz=track_min)  # fmt: skip
+                       jam_duration_s=jam_duration, jam_db=jam_db, track_min_dbhz=track_min, nav_path=nav)  # fmt: skip
     command = _command(ctx)
     with progress("simulating", quiet) as advance:
         manifest = write_drive(trajectory, config, output, geo=geo, command=command, progress=advance)

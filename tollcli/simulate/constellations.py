@@ -40,6 +40,9 @@ class Constellation:
     raan_deg: np.ndarray  # right ascension of the ascending node at t = 0
     arg_lat_deg: np.ndarray  # argument of latitude at t = 0
 
+    def ecef(self, t_s, per_satellite: bool = False) -> np.ndarray:
+        return sat_ecef(self, t_s, per_satellite)
+
 
 def walker(name: str, total: int, planes: int, phasing: int, incl_deg: float, a_m: float,
            raan0_deg: float = 0.0, u0_deg: float = 0.0) -> Constellation:  # fmt: skip

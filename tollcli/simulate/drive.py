@@ -58,6 +58,7 @@ class SimConfig:
     jam_db: float = 0.0  # C/N0 loss of every satellite while jammed
     track_min_dbhz: float = 20.0  # satellites below this C/N0 are lost
     chunk_epochs: int = 3600
+    nav_path: str | None = None  # RINEX navigation file: broadcast orbits instead of the nominal constellations
 
 
 @dataclass
@@ -84,14 +85,21 @@ def _top_k(elev: np.ndarray, visible: np.ndarray, group: np.ndarray, k: int) -> 
 
 def simulate(traj: Trajectory, config: SimConfig) -> Iterator[SimChunk]:
     """The drive, chunk by chunk."""
-    names, svid, sats = stacked(nominal(config.constellations))
+    if config.nav_path:
+        from tollcli.simulate.broadcast_orbits import gps_seconds_of, load_orbits
+
+        sats = load_orbits(config.nav_path, config.constellations)
+        names, svid = sats.names, sats.svid
+        t_geo = gps_seconds_of(pd.Timestamp(config.start_utc))
+    else:
+        names, svid, sats = stacked(nominal(config.constellations))
+        t_geo = (config.start_utc - GEOMETRY_EPOCH).total_seconds()
     group = np.unique(names, return_inverse=True)[1]
     rng = _streams(config.seed)
     length = float(traj.s_m[-1]) if traj.s_m.size else 0.0
     street = make_street(config.env, length, rng["street"])
     model = NominalModel(iono=config.iono, default_cn0_dbhz=config.cn0_dbhz)
     faulty_all = fault_epochs(config.faults, traj.t_s, rng["faults"])
-    t_geo = (config.start_utc - GEOMETRY_EPOCH).total_seconds()
     state = None
     start = pd.Timestamp(config.start_utc)
     for lo in range(0, traj.t_s.size, config.chunk_epochs):
