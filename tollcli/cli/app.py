@@ -14,6 +14,7 @@ from tollcli.cli.epochs import epochs
 from tollcli.cli.geoobjects import app as geoobjects_app
 from tollcli.cli.integrity import integrity
 from tollcli.cli.process import process
+from tollcli.cli.report import plot, report
 from tollcli.cli.simulate import simulate
 from tollcli.cli.verify import verify
 
@@ -60,4 +61,6 @@ app.command(epilog=EPILOG)(simulate)
 app.command(epilog=EPILOG)(locate)
 app.command(epilog=EPILOG)(findings)
 app.command(epilog=EPILOG)(enforce)
+app.command(epilog=EPILOG)(plot)
+app.command(epilog=EPILOG)(report)
 app.add_typer(geoobjects_app, name="geoobjects")

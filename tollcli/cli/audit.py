@@ -17,7 +17,7 @@ from tollcli.charging.audit import findings_of, audit_with_truth, driven_from_tr
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
 from tollcli.cli import options as opt
-from tollcli.cli.console import warn
+from tollcli.cli.console import audit_tables, show, warn
 from tollcli.errors import UsageError
 from tollcli.integrity.truth_check import check_against_truth
 from tollcli.io.sources import read_table
@@ -102,7 +102,9 @@ def audit(
 
 def _emit(report: dict, summary: str, output: str, quiet: bool) -> None:
     text = json.dumps(report, indent=2, sort_keys=True, default=str) + "\n"
-    if output == "-" and sys.stdout.isatty():
+    to_stdout = output == "-" and sys.stdout.isatty()
+    show(audit_tables(report), quiet if not to_stdout else False, to_stdout=to_stdout)
+    if to_stdout:
         typer.echo(summary)
     else:
         write_text_atomic(output, text)

@@ -29,3 +29,103 @@ def progress(description: str, quiet: bool):
                   TimeElapsedColumn(), console=err, transient=True) as bar:
         task = bar.add_task(description, total=None)
         yield lambda n: bar.advance(task, n)
+
+
+STATUS_STYLES = {"valid": "green", "excluded_valid": "green", "fault_detected": "red", "unavailable": "yellow",
+                 "unmonitored": "dim", "insufficient": "dim"}  # fmt: skip
+
+
+def invoice_tables(invoice: dict):
+    """Rich renderables for an invoice: the charged passages with the total, and the statuses behind them."""
+    from rich.table import Table
+
+    table = Table(title=f"Invoice {invoice.get('vehicle', '')} ({invoice.get('vehicle_class', '')})")
+    for col in ("geo-object", "entry (UTC)", "exit (UTC)", "positions", "band", f"fee {invoice['currency']}"):
+        table.add_column(col, justify="right" if col.startswith(("positions", "fee")) else "left")
+    for line in invoice["lines"]:
+        table.add_row(line["geoobject"], line["entry_utc"], line["exit_utc"], str(line["n_valid_independent"]), line["band"], line["fee"])
+    for line in invoice.get("not_charged", []):
+        table.add_row(f"[red]{line['geoobject']}[/red]", line["entry_utc"], line["exit_utc"], str(line["n_valid_independent"]), "not charged", "", style="dim")
+    table.add_row("[bold]TOTAL[/bold]", "", "", "", "", f"[bold]{invoice['total']}[/bold]")
+    counts: dict[str, int] = {}
+    for line in invoice["lines"] + invoice.get("not_charged", []):
+        for k, v in line.get("statuses", {}).items():
+            counts[k] = counts.get(k, 0) + int(v)
+    statuses = Table(title="Positions inside geo-objects, by RAIM status")
+    statuses.add_column("status")
+    statuses.add_column("epochs", justify="right")
+    for k, v in sorted(counts.items()):
+        statuses.add_row(f"[{STATUS_STYLES.get(k, 'white')}]{k}[/]", str(v))
+    out = [table, statuses]
+    items = (invoice.get("findings") or {}).get("items", [])
+    if items:
+        found = Table(title="Findings")
+        for col in ("kind", "category", "start (UTC)", "end (UTC)"):
+            found.add_column(col)
+        for f in items:
+            found.add_row(f"[yellow]{f['kind']}[/yellow]", f["category"], f["start_utc"], f["end_utc"])
+        out.append(found)
+    return out
+
+
+def audit_tables(report: dict):
+    """Rich renderables for an audit report (truth or risk mode)."""
+    from rich.table import Table
+
+    out = []
+    if report.get("mode") == "truth":
+        t = Table(title=f"Audit against the truth ({report['runs']} runs)")
+        for col in ("geo-object", "driven", "charged", "undercharges", "overcharges", "rate", "95 % interval"):
+            t.add_column(col, justify="left" if col == "geo-object" else "right")
+        for o in report["geoobjects"]:
+            bad = o["undercharges"] or o["overcharges"]
+            t.add_row(o["geoobject"], "yes" if o["driven"] else "no", str(o["charged"]),
+                      f"[red]{o['undercharges']}[/red]" if o["undercharges"] else "0",
+                      f"[red]{o['overcharges']}[/red]" if o["overcharges"] else "0",
+                      f"{o['rate']:.3f}", f"{o['rate_ci95'][0]:.3f}–{o['rate_ci95'][1]:.3f}", style=None if bad else "green")  # fmt: skip
+        out.append(t)
+        causes = [(r["vehicle"], c) for r in report["invoices"] for c in r.get("undercharge_causes", [])]
+        if causes:
+            c = Table(title="Undercharges and their causes")
+            for col in ("vehicle", "geo-object", "cause"):
+                c.add_column(col)
+            for vehicle, cause in causes:
+                c.add_row(vehicle, cause["geoobject"], cause["cause"])
+            out.append(c)
+    elif report.get("mode") == "risk":
+        t = Table(title=f"Revenue at risk ({report['runs']} runs): {report['money_at_risk']} not charged")
+        for col in ("vehicle", "geo-object", "entry (UTC)", "inside", "valid", "why", "fee"):
+            t.add_column(col)
+        for r in report["revenue_at_risk"]:
+            t.add_row(r["vehicle"], r["geoobject"], r["entry_utc"], str(r["n_inside"]), str(r["n_valid"]),
+                      ", ".join(f"{k} {v}" for k, v in r["why"].items()), r["fee"] or "")  # fmt: skip
+        out.append(t)
+    if report.get("integrity"):
+        i = report["integrity"]
+        t = Table(title="Integrity against the truth (Stanford regions)")
+        t.add_column("region")
+        t.add_column("epochs", justify="right")
+        for k, v in i["regions"].items():
+            t.add_row(f"[red]{k}[/red]" if k in ("misleading", "hazardous") and v else k, str(v))
+        t.add_row("positioning failures", str(i["positioning_failures"]))
+        t.add_row("undetected", f"[red]{i['undetected']}[/red]" if i["undetected"] else "0")
+        out.append(t)
+    if report.get("findings"):
+        f = Table(title="Findings")
+        for col in ("vehicle", "kind", "category", "start (UTC)", "end (UTC)"):
+            f.add_column(col)
+        for item in report["findings"]:
+            f.add_row(item["vehicle"], f"[yellow]{item['kind']}[/yellow]", item["category"], item["start_utc"], item["end_utc"])
+        out.append(f)
+    return out
+
+
+def show(renderables, quiet: bool, to_stdout: bool = False) -> None:
+    """Print rich tables on an interactive terminal only (stdout when it is the output, else stderr)."""
+    if quiet:
+        return
+    console = Console(no_color=bool(os.environ.get("NO_COLOR"))) if to_stdout else err
+    if not console.is_terminal:
+        return
+    for r in renderables:
+        console.print(r)

@@ -28,6 +28,35 @@ FILES = (
 )
 
 
+_DRIVE = "samples/sim/urban-fault/drive.nmea"
+_GEO = "--geo geoobjects/example-geoobjects.geojson"
+EXAMPLES = {
+    "tollcli": ["tollcli process samples/straight-drive.nmea " + _GEO + " --tariff geoobjects/example-tariff.toml -o invoice.json",
+                "tollcli audit invoice.json --truth samples/sim/urban-fault/truth.csv " + _GEO],
+    "tollcli-process": ["tollcli process " + _DRIVE + " " + _GEO + " --tariff geoobjects/example-tariff.toml -o invoice.json",
+                        "zcat day.nmea.gz | tollcli process - " + _GEO + " --tariff geoobjects/example-tariff.toml --raim classic -o -"],
+    "tollcli-audit": ["tollcli audit invoice.json --truth samples/sim/urban-fault/truth.csv " + _GEO,
+                      "tollcli audit runs/ --tariff geoobjects/example-tariff.toml " + _GEO + " -o risk.json",
+                      "tollcli audit --epochs integrity.csv --truth samples/sim/urban-fault/truth.csv"],
+    "tollcli-verify": ["tollcli verify invoice.json"],
+    "tollcli-epochs": ["tollcli epochs samples/straight-drive.nmea -o epochs.parquet --satellites sats.csv",
+                       "cat log.nmea | tollcli epochs - -o - | head"],
+    "tollcli-integrity": ["tollcli integrity " + _DRIVE + " --raim etc --hal 40 -o integrity.csv",
+                          "tollcli integrity derived.csv --format gsdc-derived --sigma-model input --fde -o integrity.parquet"],
+    "tollcli-design": ["tollcli design --dof 4 --p-fa 5e-3 --p-md 5e-5 --json", "tollcli design --dof 1 --p-md 5e-5 --hal-over-slope 7"],
+    "tollcli-simulate": ["tollcli simulate --route geoobjects/example-roads.geojson --via A9-N1,A9-N2 " + _GEO + " --env urban --seed 1 -o drive/",
+                         "tollcli simulate --env rural --duration 3600 --fault-bias 60 --fault-prob 0.1 --seed 7 -o faulty/"],
+    "tollcli-locate": ["tollcli locate trucks/*.nmea.gz -o where.csv", "tollcli locate TRK-042.nmea --at 2026-03-02T08:01:00 --json -o -"],
+    "tollcli-findings": ["tollcli findings " + _DRIVE + " " + _GEO + " --vehicle-class truck -o findings.json"],
+    "tollcli-enforce": ["tollcli enforce trip.nmea --reads reads.csv --gantries gantries.geojson --tag TAG-1 -o roadside.json"],
+    "tollcli-plot": ["tollcli plot invoice.json --truth samples/sim/urban-fault/truth.csv -o figures/"],
+    "tollcli-report": ["tollcli report invoice.json --truth samples/sim/urban-fault/truth.csv -o report.html"],
+    "tollcli-geoobjects": ["tollcli geoobjects build geoobjects/example-roads.geojson -o geo.geojson"],
+    "tollcli-geoobjects-build": ["tollcli geoobjects build geoobjects/example-roads.geojson -o geo.geojson"],
+    "tollcli-geoobjects-check": ["tollcli geoobjects check geoobjects/example-geoobjects.geojson --json"],
+}  # fmt: skip
+
+
 def _esc(text: str) -> str:
     return (text or "").replace("\\", "\\\\").replace("-", "\\-").replace("\n.", "\n\\&.").replace("'", "\\(aq")
 
@@ -58,6 +87,10 @@ def _page(name: str, cmd, summary: str, subcommands: list[tuple[str, str]] | Non
     if params:
         out.append(".SH OPTIONS")
         out += [_param(p).rstrip("\n") for p in params]
+    if EXAMPLES.get(name):
+        out.append(".SH EXAMPLES")
+        for example in EXAMPLES[name]:
+            out += [".PP", ".nf", _esc(example), ".fi"]
     out.append(".SH EXIT STATUS")
     for code, meaning in EXIT_STATUS:
         out += [".TP", f"\\fB{code}\\fR", _esc(meaning)]

@@ -10,7 +10,7 @@ import typer
 from tollcli.charging.invoice import invoice_csv, invoice_json
 from tollcli.charging.pipeline import ChargeSettings, charge_log
 from tollcli.cli import options as opt
-from tollcli.cli.console import warn
+from tollcli.cli.console import invoice_tables, show, warn
 from tollcli.errors import UsageError
 from tollcli.io.writers import write_text_atomic
 from tollcli.nmea.reader import check_partial
@@ -52,23 +52,11 @@ def process(
                               date=date.date().isoformat() if date else None)  # fmt: skip
     invoice, stats = charge_log(log, geo, tariff, settings, nav)
     if output == "-" and sys.stdout.isatty():
-        _table(invoice)
+        show(invoice_tables(invoice), False, to_stdout=True)
     else:
         write_text_atomic(output, invoice_csv(invoice) if output.lower().endswith(".csv") else invoice_json(invoice))
+        show(invoice_tables(invoice), quiet)
     warn(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged, "
          f"total {invoice['total']} {invoice['currency']}", quiet)  # fmt: skip
     if stats is not None:
         check_partial(stats, max_bad)
-
-
-def _table(invoice: dict) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(title=f"Invoice {invoice['vehicle']} ({invoice['vehicle_class']})")
-    for col in ("geo-object", "entry (UTC)", "exit (UTC)", "positions", "band", f"fee {invoice['currency']}"):
-        table.add_column(col)
-    for line in invoice["lines"]:
-        table.add_row(line["geoobject"], line["entry_utc"], line["exit_utc"], str(line["n_valid_independent"]), line["band"], line["fee"])
-    table.add_row("TOTAL", "", "", "", "", invoice["total"])
-    Console().print(table)

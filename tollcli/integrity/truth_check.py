@@ -39,21 +39,18 @@ def _times_ms(column: pd.Series, what: str) -> np.ndarray:
     return times.dt.tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64)
 
 
-def check_against_truth(epochs: pd.DataFrame, truth: pd.DataFrame, tolerance_s: float = 0.05) -> dict:
-    """Counts and rates of the module docstring (epochs without a matching truth time are not counted)."""
-    for name, table, cols in (("epoch table", epochs, ("time_utc", "lat_deg", "lon_deg", "raim_status", "hpl_m", "hal_m")),
-                              ("truth", truth, ("time_utc", "lat_deg", "lon_deg"))):  # fmt: skip
-        missing = [c for c in cols if c not in table.columns]
-        if missing:
-            raise DataError(f"{name}: missing columns {', '.join(missing)}")
+def errors_against_truth(epochs: pd.DataFrame, truth: pd.DataFrame, tolerance_s: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """Per epoch: the horizontal error against the truth at the nearest time (NaN without one) and whether a truth time matched."""
     t_est = _times_ms(epochs["time_utc"], "epoch table")
     t_tru = _times_ms(truth["time_utc"], "truth")
     order = np.argsort(t_tru, kind="stable")
     t_sorted = t_tru[order]
+    if len(t_sorted) == 0:
+        return np.full(len(epochs), np.nan), np.zeros(len(epochs), bool)
     j = np.clip(np.searchsorted(t_sorted, t_est), 1, max(len(t_sorted) - 1, 1)) if len(t_sorted) > 1 else np.zeros(len(t_est), int)
     if len(t_sorted) > 1:
         j = np.where(np.abs(t_sorted[j - 1] - t_est) <= np.abs(t_sorted[j] - t_est), j - 1, j)
-    matched = np.abs(t_sorted[j] - t_est) <= tolerance_s * 1000 if len(t_sorted) else np.zeros(len(t_est), bool)
+    matched = np.abs(t_sorted[j] - t_est) <= tolerance_s * 1000
     k = order[j]
     lat = epochs["lat_deg"].to_numpy(float)
     have = matched & np.isfinite(lat)
@@ -61,6 +58,18 @@ def check_against_truth(epochs: pd.DataFrame, truth: pd.DataFrame, tolerance_s: 
     if have.any():
         err[have] = horizontal_error_m(lat[have], epochs["lon_deg"].to_numpy(float)[have],
                                        truth["lat_deg"].to_numpy(float)[k[have]], truth["lon_deg"].to_numpy(float)[k[have]])  # fmt: skip
+    return err, matched
+
+
+def check_against_truth(epochs: pd.DataFrame, truth: pd.DataFrame, tolerance_s: float = 0.05) -> dict:
+    """Counts and rates of the module docstring (epochs without a matching truth time are not counted)."""
+    for name, table, cols in (("epoch table", epochs, ("time_utc", "lat_deg", "lon_deg", "raim_status", "hpl_m", "hal_m")),
+                              ("truth", truth, ("time_utc", "lat_deg", "lon_deg"))):  # fmt: skip
+        missing = [c for c in cols if c not in table.columns]
+        if missing:
+            raise DataError(f"{name}: missing columns {', '.join(missing)}")
+    err, matched = errors_against_truth(epochs, truth, tolerance_s)
+    have = matched & np.isfinite(err)
     valid = epochs["raim_status"].astype(str).isin(VALID_STATUSES).to_numpy() & have
     hpl = epochs["hpl_m"].to_numpy(float)
     hal = epochs["hal_m"].to_numpy(float)

@@ -1,0 +1,1 @@
+"""For people: figures (matplotlib) and a self-contained HTML audit page of a charging run."""
