@@ -44,7 +44,7 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame, geo: GeoObject
     for row in charges.itertuples(index=False):
         i = index[row.geoobject]
         mine = by_passage[(row.geoobject, row.passage)]
-        statuses = mine["raim_status"].value_counts().sort_index()
+        statuses = mine["verdict" if "verdict" in mine else "raim_status"].value_counts().sort_index()
         base = {
             "geoobject": row.geoobject, "name": geo.names[i], "road_class": geo.road_class[i], "hal_m": float(geo.hal_m[i]),
             "entry_utc": _iso(row.entry_utc), "exit_utc": _iso(row.exit_utc), "n_inside": int(row.n_inside),

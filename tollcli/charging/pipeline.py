@@ -7,6 +7,8 @@ import hashlib
 import os
 from dataclasses import asdict, dataclass
 
+import numpy as np
+
 from tollcli.charging.invoice import build_invoice, file_sha256, invoice_json
 from tollcli.charging.recognition import charges, load_geoobjects, recognise
 from tollcli.charging.tariffs import load_tariff
@@ -38,6 +40,7 @@ class ChargeSettings:
     n_th: int = 1
     strict: bool = False
     date: str | None = None  # YYYY-MM-DD for logs without dates
+    policy: str | None = None  # which checks a position must pass (None: the strictest the inputs support)
 
 
 def content_sha256(invoice: dict) -> str:
@@ -46,7 +49,8 @@ def content_sha256(invoice: dict) -> str:
     return hashlib.sha256(invoice_json(body).encode("utf-8")).hexdigest()
 
 
-def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | None = None) -> tuple[dict, ReadStats | None]:
+def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | None = None,
+               roads: str | None = None) -> tuple[dict, ReadStats | None]:  # fmt: skip
     """The invoice for one log (with its content hash) and the reader's statistics (NMEA)."""
     try:
         params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde)
@@ -67,9 +71,11 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         meas = nmea_measurements(epochs, tables.satellites, model, settings.sigma_m, nominal)
     else:
         epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal)
-    positions = recognise(epochs, meas, geo_objects, params, tc_s=settings.tc_s, n_th=settings.n_th)
-    finding_settings = FindingSettings.for_class(settings.vehicle_class)
     per_epoch = run_raim(meas, RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa))
+    policy, why, matched = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
+    positions = recognise(epochs, meas, geo_objects, params, tc_s=settings.tc_s, n_th=settings.n_th,
+                          epoch_why=why, matched_road=matched)  # fmt: skip
+    finding_settings = FindingSettings.for_class(settings.vehicle_class)
     found = trip_findings(epochs, tables.satellites if kind == "nmea" else None, per_epoch, geo_objects, finding_settings)
     table = charges(positions, settings.n_th)
     dated = epochs["time_utc"].dropna()
@@ -79,7 +85,9 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         inputs["log_sha256"] = file_sha256(log)
     if nav is not None:
         inputs.update(nav=nav, nav_sha256=file_sha256(nav))
-    parameters = {**asdict(settings), "valid_statuses": ["valid", "excluded_valid"]}
+    if roads is not None:
+        inputs.update(roads=roads, roads_sha256=file_sha256(roads))
+    parameters = {**asdict(settings), "valid_statuses": ["valid", "excluded_valid"], "policy_used": policy}
     invoice = build_invoice(table, positions, geo_objects, tariff_doc,
                             vehicle=settings.vehicle or os.path.basename(log), vehicle_class=settings.vehicle_class,
                             inputs=inputs, parameters=parameters,
@@ -87,6 +95,27 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
     invoice["content_sha256"] = content_sha256(invoice)
     return invoice, stats
+
+
+def _policy_checks(epochs, settings: ChargeSettings, roads: str | None):
+    """The policy in force, each epoch's failed check ('' when none) and matched road (None without roads)."""
+    from tollcli.integrity.map_matching import load_roads
+    from tollcli.integrity.verdict import POLICIES, default_policy, epoch_checks, failed_check
+
+    has_speed = "speed_mps" in epochs and bool(np.isfinite(epochs["speed_mps"].to_numpy(float)).mean() > 0.5)
+    policy = settings.policy or default_policy(has_speed, roads is not None)
+    if policy not in POLICIES:
+        raise UsageError(f"--policy {policy}: one of {', '.join(POLICIES)}")
+    needs = POLICIES[policy]
+    if "mm" in needs and roads is None:
+        raise UsageError(f"--policy {policy} needs the road network (--roads)")
+    if "speed" in needs and not has_speed:
+        raise UsageError(f"--policy {policy}: the log has no speed over ground (RMC/VTG) to check")
+    if not needs:
+        return policy, None, None
+    checks = epoch_checks(epochs, load_roads(roads) if "mm" in needs else None)
+    matched = checks["matched_road"].astype(str).to_numpy(dtype=object) if "mm" in needs else None
+    return policy, failed_check(checks, policy), matched
 
 
 def settings_from_invoice(invoice: dict) -> ChargeSettings:

@@ -107,26 +107,40 @@ def utc_seconds(time_utc: pd.Series) -> np.ndarray:
 
 
 def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams,
-              tc_s: float = 5.0, n_th: int = 1, passage_gap_s: float = PASSAGE_GAP_S) -> pd.DataFrame:  # fmt: skip
+              tc_s: float = 5.0, n_th: int = 1, passage_gap_s: float = PASSAGE_GAP_S,
+              epoch_why: np.ndarray | None = None, matched_road: np.ndarray | None = None) -> pd.DataFrame:  # fmt: skip
     """One row per (epoch, geo-object) position inside, with its RAIM verdict under that HAL.
 
     Columns: ``epoch_row``, ``geoobject``, ``time_utc``, ``passage`` (per geo-object),
     ``raim_status``, ``test_stat``, ``threshold``, ``p_fa``, ``test_stat_source``,
-    ``valid`` (counts for the geo-object), ``independent`` (kept by T_c thinning).
+    ``valid`` (counts for the geo-object), ``independent`` (kept by T_c thinning), ``verdict``
+    (the RAIM status, or for a RAIM-valid position the policy's failed check: ``epoch_why`` per
+    epoch row, '' when it passes; with ``matched_road`` a position counts only for the geo-object of
+    the road it is matched to, else ``mm_other_road``).
     """
     rows, obj, x, y = candidate_pairs(epochs, geo)
     if rows.size == 0:
         return pd.DataFrame(columns=["epoch_row", "geoobject", "time_utc", "passage", "raim_status", "test_stat",
-                                     "threshold", "p_fa", "test_stat_source", "valid", "independent"])  # fmt: skip
+                                     "threshold", "p_fa", "test_stat_source", "valid", "independent", "verdict"])  # fmt: skip
     raim = run_raim(_subset(meas, rows), params, hal_m=geo.hal_m[obj])
     status = raim["raim_status"].to_numpy(dtype=object)
     shifted_inside = shapely.contains_xy(geo.polygons[obj], x[rows] + raim["fde_shift_e_m"].to_numpy(),
                                          y[rows] + raim["fde_shift_n_m"].to_numpy())  # fmt: skip
     valid = np.isin(status, VALID_STATUSES) & shifted_inside
+    verdict = status.copy()
+    if epoch_why is not None:
+        why = np.asarray(epoch_why, dtype=object)[rows]
+        fails = valid & (why != "")
+        verdict[fails] = why[fails]
+        valid &= ~fails
+    if matched_road is not None:
+        other = valid & (np.asarray(matched_road, dtype=object)[rows] != geo.ids[obj])
+        verdict[other] = "mm_other_road"
+        valid &= ~other
     t_s = utc_seconds(epochs["time_utc"])[rows]
     # passages: consecutive inside fixes of one geo-object less than passage_gap_s apart
     by_obj = np.lexsort((t_s, obj))
-    rows, obj, t_s, valid, status = rows[by_obj], obj[by_obj], t_s[by_obj], valid[by_obj], status[by_obj]
+    rows, obj, t_s, valid, status, verdict = rows[by_obj], obj[by_obj], t_s[by_obj], valid[by_obj], status[by_obj], verdict[by_obj]
     raim = raim.iloc[by_obj].reset_index(drop=True)
     new = np.ones(rows.size, dtype=bool)
     new[1:] = (obj[1:] != obj[:-1]) | (np.diff(t_s) > passage_gap_s)
@@ -136,7 +150,7 @@ def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params:
         "epoch_row": rows, "geoobject": geo.ids[obj], "time_utc": epochs["time_utc"].iloc[rows].to_numpy(), "passage": passage,
         "raim_status": status, "test_stat": raim["test_stat"].to_numpy(), "threshold": raim["threshold"].to_numpy(),
         "p_fa": raim["p_fa"].to_numpy(), "test_stat_source": raim["test_stat_source"].to_numpy(dtype=object),
-        "valid": valid, "independent": independent,
+        "valid": valid, "independent": independent, "verdict": verdict,
     })  # fmt: skip
 
 

@@ -17,7 +17,7 @@ from tollcli.charging.pipeline import charge_log, content_sha256, settings_from_
 from tollcli.errors import DataError
 from tollcli.io.sources import read_json
 
-INPUTS = (("log", "log"), ("geoobjects", "geo-objects"), ("tariff", "tariff"), ("nav", "navigation file"))
+INPUTS = (("log", "log"), ("geoobjects", "geo-objects"), ("tariff", "tariff"), ("nav", "navigation file"), ("roads", "road network"))
 
 
 class VerifyFailed(DataError):
@@ -45,7 +45,8 @@ def verify_invoice(path: str) -> dict:
         if recorded != actual:
             raise VerifyFailed(f"{path}: {label} {file} changed since the invoice was made "
                                f"(sha256 {actual[:12]}… ≠ recorded {str(recorded)[:12]}…)")  # fmt: skip
-    again, _ = charge_log(inputs["log"], inputs["geoobjects"], inputs["tariff"], settings_from_invoice(invoice), inputs.get("nav"))
+    again, _ = charge_log(inputs["log"], inputs["geoobjects"], inputs["tariff"], settings_from_invoice(invoice), inputs.get("nav"),
+                          inputs.get("roads"))  # fmt: skip
     with open(path, encoding="utf-8") as fh:
         original = fh.read()
     fresh = invoice_json(again)

@@ -40,6 +40,8 @@ def integrity(
     quiet: opt.Quiet = False,
     as_json: opt.JsonSummary = False,
     max_bad: opt.MaxBad = None,
+    checks: Annotated[bool, typer.Option("--checks", help="Add the speed check, the Kalman HIT and (with --roads) map matching and its fuzzy integrity; reads the whole log first.")] = False,
+    roads: Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings) to match onto; implies --checks.")] = None,
 ) -> None:
     """Check every epoch with the WLSR RAIM and write the epoch table with its verdict.
 
@@ -67,7 +69,13 @@ def integrity(
     writer = TableWriter(output, format_for(output))
     stats = ReadStats()
     with writer:
-        if kind == "nmea":
+        if checks or roads:
+            table = pd.concat([c.table for c in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav)],
+                              ignore_index=True)  # fmt: skip
+            table = with_checks(table, roads)
+            counts.update(table["raim_status"].astype(str))
+            writer.write(table)
+        elif kind == "nmea":
             _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats)
         else:
             table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal)
@@ -83,6 +91,31 @@ def integrity(
         warn(f"{log}: {summary['epochs']} epochs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())), quiet)
     if kind == "nmea":
         check_partial(stats, max_bad)
+
+
+def with_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
+    """The speed, map-matching and HIT columns added to a whole trip's integrity table."""
+    import numpy as np
+
+    from tollcli.geodesy import enu_rotation, geodetic2ecef
+    from tollcli.integrity.kalman_hit import hit
+    from tollcli.integrity.map_matching import load_roads
+    from tollcli.integrity.verdict import epoch_checks
+    from tollcli.enforcement.trip import epoch_seconds
+
+    if table.empty:
+        return table
+    if "speed_mps" not in table:
+        table = table.assign(speed_mps=np.nan)
+    extra = epoch_checks(table, load_roads(roads) if roads else None)
+    lat, lon = table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float)
+    ok = np.isfinite(lat) & np.isfinite(lon)
+    lat0, lon0 = (lat[ok][0], lon[ok][0]) if ok.any() else (0.0, 0.0)
+    d = np.stack(geodetic2ecef(np.where(ok, lat, lat0), np.where(ok, lon, lon0), 0.0), -1) - np.stack(geodetic2ecef(lat0, lon0, 0.0), -1)
+    enu = np.einsum("ij,ej->ei", enu_rotation(lat0, lon0), d)
+    sigma = table["sigma_major_m"].to_numpy(float) if "sigma_major_m" in table else None
+    k = hit(np.where(ok, enu[:, 0], np.nan), np.where(ok, enu[:, 1], np.nan), table["speed_mps"].to_numpy(float), epoch_seconds(table), sigma)
+    return pd.concat([table.reset_index(drop=True), extra, k[["hit_m"]]], axis=1)
 
 
 def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats) -> None:

@@ -68,6 +68,9 @@ def simulate(
     jam_duration: Annotated[float, typer.Option("--jam-duration", help="Length of each jamming episode, s.", min=0.0)] = 30.0,
     jam_db: Annotated[float, typer.Option("--jam-db", help="C/N0 lost by every satellite while jammed, dB.", min=0.0)] = 0.0,
     track_min: Annotated[float, typer.Option("--track-min", help="Satellites below this C/N0 are not tracked, dB-Hz.")] = 20.0,
+    lateral_bias: Annotated[float, typer.Option("--lateral-bias", help="A receiver-level position offset to the right of travel, m (negative: left); invisible to RAIM.")] = 0.0,
+    lateral_bias_at: Annotated[Optional[str], typer.Option("--lateral-bias-at", help="Comma-separated start times of the offset, s.")] = None,
+    lateral_bias_duration: Annotated[float, typer.Option("--lateral-bias-duration", help="How long each offset lasts, s.", min=0.0)] = 60.0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every random draw: the same seed gives the same files.")] = 0,
     json_summary: opt.JsonSummary = False,
     quiet: opt.Quiet = False,
@@ -103,7 +106,9 @@ def simulate(
                        duration_s=fault_duration, sv=fault_sv.upper() if fault_sv else None)  # fmt: skip
     config = SimConfig(constellations=names, env=env, iono=iono, cn0_dbhz=cn0, tc_s=tc, faults=faults, seed=seed,
                        start_utc=start_utc.replace(tzinfo=dt.UTC), jam_at_s=_floats(jam_at, "--jam-at") if jam_at else [],
-                       jam_duration_s=jam_duration, jam_db=jam_db, track_min_dbhz=track_min, nav_path=nav)  # fmt: skip
+                       jam_duration_s=jam_duration, jam_db=jam_db, track_min_dbhz=track_min, nav_path=nav,
+                       lateral_bias_m=lateral_bias, lateral_bias_at_s=_floats(lateral_bias_at, "--lateral-bias-at") if lateral_bias_at else [],
+                       lateral_bias_duration_s=lateral_bias_duration)  # fmt: skip
     command = _command(ctx)
     with progress("simulating", quiet) as advance:
         manifest = write_drive(trajectory, config, output, geo=geo, command=command, progress=advance)

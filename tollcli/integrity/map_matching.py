@@ -3,7 +3,7 @@
 Roads: the LineStrings of a roads GeoJSON (``id``, ``tolled``, optional ``direction``: ``forward`` for
 one-way in drawing order). Per epoch, in the network's metric CRS:
 
-1. candidates: every road within ``search_m`` of the fix (one spatial-index query for all epochs);
+1. candidates: every road within ``search_m`` (100 m) of the fix (one spatial-index query for all epochs);
 2. point-to-curve with heading: distance to the road and Δθ between the road's direction at the
    projected point and the GPS course (two-way roads: the nearer of the two directions, so Δθ ∈
    [0°, 90°]; one-way: [0°, 180°]); cost = distance + ``heading_weight_m_per_deg``·Δθ (heading only
@@ -44,7 +44,7 @@ class Roads:
 
 @dataclass(frozen=True)
 class MatchParams:
-    search_m: float = 60.0
+    search_m: float = 100.0
     heading_weight_m_per_deg: float = 0.5
     min_speed_mps: float = 2.0
     connect_tol_m: float = 1.0
@@ -86,8 +86,13 @@ def delta_heading_deg(course_deg, road_deg, oneway) -> np.ndarray:
     return np.where(oneway, d, np.minimum(d, 180.0 - d))
 
 
-def match(epochs: pd.DataFrame, roads: Roads, params: MatchParams = MatchParams()) -> pd.DataFrame:
-    """The matched road and the matching geometry per epoch (columns of the module docstring)."""
+def match(epochs: pd.DataFrame, roads: Roads, params: MatchParams = MatchParams(), trusted: np.ndarray | None = None) -> pd.DataFrame:
+    """The matched road and the matching geometry per epoch (columns of the module docstring).
+
+    ``trusted`` (per epoch, e.g. RAIM-valid): only trusted fixes may move the match to another road;
+    an untrusted fix keeps the current road when it is within reach (else it is unmatched), so a
+    detected fault cannot drag the match onto a road the vehicle is not on.
+    """
     from pyproj import Transformer
 
     from tollcli.enforcement.trip import epoch_seconds
@@ -115,7 +120,10 @@ def match(epochs: pd.DataFrame, roads: Roads, params: MatchParams = MatchParams(
     best_pair = np.full(n, -1)
     best[e[order][first]] = ri[order][first]
     best_pair[e[order][first]] = order[first]
-    chosen = _topology(best, e, ri, epoch_seconds(epochs), roads, params)
+    decide = best if trusted is None else np.where(np.asarray(trusted, bool), best, -1)
+    chosen = _topology(decide, e, ri, epoch_seconds(epochs), roads, params)
+    if trusted is not None:
+        chosen = _carry_current(chosen, np.asarray(trusted, bool), e, ri)
     # the chosen pair's geometry (a lookup per (epoch, road))
     key = e.astype(np.int64) * (len(roads.ids) + 1) + ri
     lookup = pd.Series(np.arange(e.size), index=key)
@@ -134,6 +142,19 @@ def match(epochs: pd.DataFrame, roads: Roads, params: MatchParams = MatchParams(
     proj = shapely.line_interpolate_point(roads.lines[np.maximum(chosen, 0)], np.nan_to_num(out["along_m"].to_numpy()))
     out["matched_x_m"] = np.where(ok, shapely.get_x(proj), np.nan)
     out["matched_y_m"] = np.where(ok, shapely.get_y(proj), np.nan)
+    return out
+
+
+def _carry_current(chosen: np.ndarray, trusted: np.ndarray, e: np.ndarray, ri: np.ndarray) -> np.ndarray:
+    """Untrusted epochs take the last trusted match when that road is among their candidates."""
+    filled = pd.Series(np.where(trusted & (chosen >= 0), chosen, np.nan)).ffill().to_numpy()
+    rows = np.flatnonzero(~trusted & np.isfinite(filled))
+    out = chosen.copy()
+    out[~trusted] = -1
+    if rows.size and e.size:
+        road = filled[rows].astype(np.int64)
+        ok = pd.MultiIndex.from_arrays([rows, road]).isin(pd.MultiIndex.from_arrays([e, ri]))
+        out[rows[ok]] = road[ok]
     return out
 
 

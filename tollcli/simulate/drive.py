@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from tollcli.geodesy import ecef2geodetic, enu_rotation
+from tollcli.geodesy import ecef2geodetic, enu_rotation, enu_shift2geodetic
 from tollcli.integrity.sigma_models import NominalModel
 from tollcli.integrity.wls import observation_matrix, wls_geometry
 from tollcli.integrity.pseudorange_wls import line_of_sight as line_of_sight_ecef
@@ -59,6 +59,9 @@ class SimConfig:
     track_min_dbhz: float = 20.0  # satellites below this C/N0 are lost
     chunk_epochs: int = 3600
     nav_path: str | None = None  # RINEX navigation file: broadcast orbits instead of the nominal constellations
+    lateral_bias_m: float = 0.0  # a receiver-level position offset to the right of travel (invisible to RAIM) …
+    lateral_bias_at_s: list[float] = field(default_factory=list)  # … from these times …
+    lateral_bias_duration_s: float = 60.0  # … for this long
 
 
 @dataclass
@@ -150,6 +153,13 @@ def _chunk(lo, t, start, traj, sl, names, svid, group, view, used, cn0, sigma, e
     clock_index = np.broadcast_to(group, used.shape)
     x = solve_positions(view["sat_xyz"], np.where(used, pr, 0.0), used, np.where(used, sigma, np.nan), clock_index=clock_index)
     lat, lon, hgt = ecef2geodetic(x[:, 0], x[:, 1], x[:, 2])
+    if config.lateral_bias_m and config.lateral_bias_at_s:
+        on = np.zeros(n, bool)
+        for b0 in config.lateral_bias_at_s:  # a few episodes
+            on |= (t >= b0) & (t < b0 + config.lateral_bias_duration_s)
+        right = np.radians(traj.heading_deg[sl] + 90.0)
+        shift = np.where(on, config.lateral_bias_m, 0.0)
+        lat, lon = enu_shift2geodetic(lat, lon, shift * np.sin(right), shift * np.cos(right))
     # residuals and DOPs at the solution
     los, rng_m = line_of_sight_ecef(view["sat_xyz"], x)
     clk = np.take_along_axis(x[:, 3:], clock_index, axis=1)

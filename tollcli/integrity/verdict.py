@@ -1,0 +1,108 @@
+"""One verdict per epoch from the three checks — RAIM, speed, map matching — under a named policy.
+
+Map-matching integrity per epoch (Binjammaz 2015 §4.2.3) over the last ``mm_window`` intervals:
+ΔD = |D_map − D_GPS| (metres: the distance between consecutive matched points against the distance
+between consecutive raw fixes, summed over the window), ΔS = |D_map/T − average Doppler speed|
+(km/h), Δθ from the matching; the Sugeno scale of :mod:`tollcli.integrity.fuzzy_mm`; ``mm_status``
+``ok`` (scale ≥ 71), ``alarm``, or ``unmatched`` (no road within reach).
+
+Policies (``--policy``): which checks a position must pass to count in charging.
+
+=============  ==========================================================================
+``raim``       the RAIM verdict only
+``raim+speed`` and the speed check (``ok``)
+``raim+mm``    and map-matching integrity ``ok`` with the position matched to the geo-object's road
+``all``        all three (the default when the log has speeds and a road network is given)
+=============  ==========================================================================
+
+The default is the strictest the inputs support: ``all`` with speeds and roads, ``raim+mm``
+with roads only, ``raim+speed`` with speeds only, else ``raim``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from tollcli.integrity.fuzzy_mm import alarm, integrity_scale
+from tollcli.integrity.map_matching import MatchParams, Roads, match
+from tollcli.integrity.speed import SpeedParams, speed_integrity, trapezoid_average
+
+POLICIES = {"raim": (), "raim+speed": ("speed",), "raim+mm": ("mm",), "all": ("speed", "mm")}
+
+
+def default_policy(has_speed: bool, has_roads: bool) -> str:
+    if has_speed and has_roads:
+        return "all"
+    return "raim+mm" if has_roads else ("raim+speed" if has_speed else "raim")
+
+
+def mm_integrity(epochs: pd.DataFrame, matched: pd.DataFrame, window: int = 5, ramp: float = 0.0) -> pd.DataFrame:
+    """ΔD, ΔS, the fuzzy scale, its level and the status per epoch (columns of the module docstring)."""
+    from pyproj import Transformer  # noqa: F401 - the matcher projected already; raw fixes are re-projected below
+
+    from tollcli.enforcement.trip import distance_m, epoch_seconds
+
+    n = len(epochs)
+    lat, lon = epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float)
+    step_gps = np.r_[np.nan, distance_m(lat[:-1], lon[:-1], lat[1:], lon[1:])] if n else np.zeros(0)
+    mx, my = matched["matched_x_m"].to_numpy(float), matched["matched_y_m"].to_numpy(float)
+    step_map = np.r_[np.nan, np.hypot(np.diff(mx), np.diff(my))] if n else np.zeros(0)
+    c_g = np.concatenate([[0.0], np.cumsum(np.nan_to_num(step_gps))])
+    c_m = np.concatenate([[0.0], np.cumsum(np.nan_to_num(step_map))])
+    c_ok = np.concatenate([[0], np.cumsum(np.isfinite(step_gps) & np.isfinite(step_map))])
+    t = epoch_seconds(epochs)
+    d_gps = np.full(n, np.nan)
+    d_map = np.full(n, np.nan)
+    span = np.full(n, np.nan)
+    if n > window:
+        end = np.arange(window, n)
+        full = (c_ok[end + 1] - c_ok[end + 1 - window]) == window
+        d_gps[end] = np.where(full, c_g[end + 1] - c_g[end + 1 - window], np.nan)
+        d_map[end] = np.where(full, c_m[end + 1] - c_m[end + 1 - window], np.nan)
+        span[end] = t[end] - t[end - window]
+    speed = epochs["speed_mps"].to_numpy(float) if "speed_mps" in epochs else np.full(n, np.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        delta_d = np.abs(d_map - d_gps)
+        delta_s_kmh = np.abs(d_map / span - trapezoid_average(speed, window)) * 3.6
+    scale, level, rule = integrity_scale(matched["delta_theta_deg"].to_numpy(float), delta_d, delta_s_kmh, ramp)
+    unmatched = matched["matched_road"].astype(str).to_numpy() == ""
+    status = np.where(unmatched, "unmatched", np.where(alarm(scale), "alarm", "ok"))
+    return pd.DataFrame({"delta_d_m": delta_d, "delta_s_kmh": delta_s_kmh, "mm_integrity": scale,
+                         "mm_level": pd.array(level, dtype="string"), "mm_rule": rule,
+                         "mm_status": pd.array(status, dtype="string")})  # fmt: skip
+
+
+def epoch_checks(epochs: pd.DataFrame, roads: Roads | None, speed_params: SpeedParams = SpeedParams(),
+                 match_params: MatchParams = MatchParams(), mm_window: int = 5) -> pd.DataFrame:  # fmt: skip
+    """The speed and map-matching columns for every epoch (map matching only with ``roads``)."""
+    out = speed_integrity(epochs, speed_params)
+    if roads is not None:
+        trusted = epochs["raim_status"].astype(str).isin(["valid", "excluded_valid"]).to_numpy() if "raim_status" in epochs else None
+        matched = match(epochs, roads, match_params, trusted)
+        out = pd.concat([out, matched, mm_integrity(epochs, matched, mm_window)], axis=1)
+    return out
+
+
+def passes(checks: pd.DataFrame, policy: str) -> np.ndarray:
+    """Per epoch: the non-RAIM checks the policy asks for all pass (the road identity is checked per geo-object)."""
+    if policy not in POLICIES:
+        raise ValueError(f"policy {policy!r}: one of {', '.join(POLICIES)}")
+    ok = np.ones(len(checks), dtype=bool)
+    if "speed" in POLICIES[policy]:
+        ok &= checks["speed_status"].astype(str).to_numpy() == "ok"
+    if "mm" in POLICIES[policy]:
+        ok &= checks["mm_status"].astype(str).to_numpy() == "ok"
+    return ok
+
+
+def failed_check(checks: pd.DataFrame, policy: str) -> np.ndarray:
+    """Per epoch, the first non-RAIM check that fails under the policy ('' when all pass)."""
+    why = np.full(len(checks), "", dtype=object)
+    if "mm" in POLICIES[policy]:
+        s = checks["mm_status"].astype(str).to_numpy()
+        why = np.where(s != "ok", "mm_" + s, why)
+    if "speed" in POLICIES[policy]:
+        s = checks["speed_status"].astype(str).to_numpy()
+        why = np.where(s != "ok", "speed_" + s, why)
+    return why
