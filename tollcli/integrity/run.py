@@ -5,7 +5,8 @@ Columns added to the epoch table (names as in the papers, units in the names):
 ``test_stat`` (WSSE), ``test_stat_source`` (grs, gst_approx, pseudorange, none),
 ``threshold``, ``lambda_det``, ``hpl_m``, ``hal_m``, ``p_fa``, ``p_md``,
 ``raim_status``, ``excluded_sv``, ``fde_shift_e_m``/``fde_shift_n_m`` (how far the
-position moves when the excluded measurement is dropped).
+position moves when the excluded measurement is dropped), ``hpl_sbas_m`` (paper 004's
+K_H·d_major from the per-satellite σ's: an accuracy bound, not a RAIM output).
 """
 
 from __future__ import annotations
@@ -14,13 +15,14 @@ import numpy as np
 import pandas as pd
 
 from tollcli.integrity.fde import exclude
+from tollcli.integrity.kalman_hit import hpl_sbas_m
 from tollcli.integrity.measurements import Measurements
 from tollcli.integrity.raim import RaimParams, detect, status_names
 from tollcli.integrity.wls import residuals_from_prefit, wls_geometry, wsse
 
 RAIM_COLUMNS = (
     "raim_mode", "n_used", "dof", "slope_max_m", "test_stat", "test_stat_source", "threshold", "lambda_det",
-    "hpl_m", "hal_m", "p_fa", "p_md", "raim_status", "excluded_sv", "fde_shift_e_m", "fde_shift_n_m",
+    "hpl_m", "hal_m", "p_fa", "p_md", "raim_status", "excluded_sv", "fde_shift_e_m", "fde_shift_n_m", "hpl_sbas_m",
 )  # fmt: skip
 
 
@@ -64,5 +66,6 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None) -> pd.DataFrame
             "excluded_sv": pd.array(excluded_sv, dtype="string"),
             "fde_shift_e_m": shift[:, 0],
             "fde_shift_n_m": shift[:, 1],
+            "hpl_sbas_m": hpl_sbas_m(geometry, meas.sigma_m),
         }
     )
