@@ -8,6 +8,7 @@ import os
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import pandas as pd
 
 from tollcli.charging.invoice import build_invoice, file_sha256, invoice_json
 from tollcli.charging.recognition import charges, load_geoobjects, recognise
@@ -50,8 +51,11 @@ def content_sha256(invoice: dict) -> str:
 
 
 def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | None = None,
-               roads: str | None = None) -> tuple[dict, ReadStats | None]:  # fmt: skip
-    """The invoice for one log (with its content hash) and the reader's statistics (NMEA)."""
+               roads: str | None = None, epoch_table: list | None = None) -> tuple[dict, ReadStats | None]:  # fmt: skip
+    """The invoice for one log (with its content hash) and the reader's statistics (NMEA).
+
+    ``epoch_table``: a list that receives the per-epoch table (epochs + RAIM columns) for batch outputs.
+    """
     try:
         params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde)
     except ValueError as exc:
@@ -94,6 +98,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
                             period=(dated.min(), dated.max()) if len(dated) else None)  # fmt: skip
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
     invoice["content_sha256"] = content_sha256(invoice)
+    if epoch_table is not None:
+        epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), per_epoch], axis=1))
     return invoice, stats
 
 

@@ -8,6 +8,7 @@ import typer
 
 from tollcli import __version__
 from tollcli.cli.audit import audit
+from tollcli.cli.batch import batch
 from tollcli.cli.design import design
 from tollcli.cli.enforcement import enforce, findings, locate
 from tollcli.cli.epochs import epochs
@@ -63,4 +64,5 @@ app.command(epilog=EPILOG)(findings)
 app.command(epilog=EPILOG)(enforce)
 app.command(epilog=EPILOG)(plot)
 app.command(epilog=EPILOG)(report)
+app.command(epilog=EPILOG)(batch)
 app.add_typer(geoobjects_app, name="geoobjects")

@@ -1,0 +1,56 @@
+"""``tollcli batch``: many logs → invoices, epoch tables, a partitioned dataset and a summary."""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Annotated, Optional
+
+import typer
+
+from tollcli.batch.run import expand_inputs, run_batch
+from tollcli.charging.pipeline import ChargeSettings
+from tollcli.cli import options as opt
+from tollcli.cli.console import progress, warn
+from tollcli.errors import EXIT_DATA, EXIT_PARTIAL
+
+
+def batch(
+    inputs: Annotated[list[str], typer.Argument(metavar="INPUTS...", help="Logs: paths, globs, folders, or @FILE listing one path per line.", show_default=False)],
+    geo: Annotated[str, typer.Option("--geo", help="Geo-objects (GeoJSON from 'tollcli geoobjects build').")],
+    tariff: Annotated[str, typer.Option("--tariff", help="Tariff (TOML).")],
+    output: Annotated[str, typer.Option("-o", "--output", help="Output folder (invoices/, epochs/, failed/, summary.json).")],
+    workers: Annotated[int, typer.Option("--workers", help="Local worker processes (default: the CPU count).", min=1)] = max(os.cpu_count() or 1, 1),
+    scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Address of a Dask distributed scheduler to run on instead (tcp://host:8786).")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Process logs again even when their invoice is up to date.")] = False,
+    vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class in the tariff.")] = "car",
+    roads: Annotated[Optional[str], typer.Option("--roads", help="Road network for map-matching integrity.")] = None,
+    policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all.")] = None,
+    raim: opt.RaimMode = "etc",
+    p_md: opt.PMd = 5e-5,
+    p_fa: opt.PFa = 5e-3,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
+    quiet: opt.Quiet = False,
+) -> None:
+    """Charge many logs: one invoice and one epoch table per log, a Parquet dataset partitioned by date and vehicle, a summary.
+
+    Resumable: a log whose invoice records its current SHA-256 is skipped (--force
+    redoes it). A bad log is reported in failed/ and the summary and never stops
+    the others (exit 3 when some failed, 1 when all did). Outputs do not depend on
+    the worker count or the scheduler.
+    """
+    logs = expand_inputs(inputs)
+    settings = ChargeSettings(vehicle_class=vehicle_class, raim=raim, p_md=p_md, p_fa=p_fa, policy=policy)
+    with progress(f"batch of {len(logs)} logs", quiet) as advance:
+        summary = run_batch(logs, geo, tariff, settings, output, workers=workers, scheduler=scheduler, force=force,
+                            roads=roads, progress=advance)  # fmt: skip
+    line = (f"{output}: {summary['logs']} logs: {summary['done']} done, {summary['skipped']} up to date, {summary['failed']} failed; "
+            + ", ".join(f"{v} {k}" for k, v in summary["totals"].items()))  # fmt: skip
+    if as_json:
+        typer.echo(json.dumps({k: v for k, v in summary.items() if k != "outcomes"}, sort_keys=True))
+    warn(line, quiet)
+    for o in summary["outcomes"]:
+        if o["status"] == "failed":
+            warn(f"  failed: {o['error']}", quiet)
+    if summary["failed"]:
+        raise typer.Exit(EXIT_DATA if summary["failed"] == summary["logs"] else EXIT_PARTIAL)
