@@ -103,7 +103,7 @@ def run_one(job: Job) -> dict:
     ep_dir = os.path.join(job.outdir, "epochs", f"date={date}", f"vehicle={vehicle}")
     os.makedirs(ep_dir, exist_ok=True)
     with TableWriter(os.path.join(ep_dir, name + ".parquet"), "parquet") as writer:
-        writer.write(table.assign(vehicle=vehicle))
+        writer.write(table)  # vehicle and date come from the partition path (a column too would clash with it)
         writer.commit()
     os.makedirs(os.path.dirname(inv_path), exist_ok=True)
     write_text_atomic(inv_path, invoice_json(invoice))  # last: its presence marks the log done
