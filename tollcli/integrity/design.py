@@ -96,6 +96,12 @@ class EtcThresholdTable:
         return out
 
 
+@lru_cache(maxsize=16)
+def etc_threshold_table(p_md: float) -> EtcThresholdTable:
+    """The shared look-up table for ``p_md`` (a process builds each one once: its rows cost ~40 ms apiece)."""
+    return EtcThresholdTable(p_md)
+
+
 def false_alarm_probability(threshold, dof) -> np.ndarray:
     """P_FA = 1 − CDF_χ²_k(Th): the chance a fault-free position is rejected."""
     dof = np.asarray(dof, dtype=float)

@@ -52,7 +52,7 @@ class RaimParams:
         if self.exact_threshold:
             return design.etc_threshold(self.p_md, dof, lambda_det)
         if self._table is None:
-            self._table = design.EtcThresholdTable(self.p_md)
+            self._table = design.etc_threshold_table(self.p_md)
         return self._table(dof, lambda_det)
 
 
