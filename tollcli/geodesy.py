@@ -60,3 +60,11 @@ def enu_shift2geodetic(lat_deg, lon_deg, east_m, north_m):
     n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
     m = n * (1.0 - WGS84_E2) / (1.0 - WGS84_E2 * np.sin(lat) ** 2)
     return lat_deg + np.degrees(north_m / m), lon_deg + np.degrees(east_m / (n * np.cos(lat)))
+
+
+def great_circle_distance_m(lat1_deg, lon1_deg, lat2_deg, lon2_deg):
+    """Great-circle distance (haversine on the WGS-84 equatorial radius), metres."""
+    p1, p2 = np.radians(lat1_deg), np.radians(lat2_deg)
+    dp, dl = p2 - p1, np.radians(np.asarray(lon2_deg) - np.asarray(lon1_deg))
+    h = np.sin(dp / 2) ** 2 + np.cos(p1) * np.cos(p2) * np.sin(dl / 2) ** 2
+    return 2 * WGS84_A_M * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))

@@ -52,17 +52,6 @@ def root(
     """GNSS road-user charging log processor."""
 
 
-app.command(epilog=EPILOG)(process)
-app.command(epilog=EPILOG)(audit)
-app.command(epilog=EPILOG)(verify)
-app.command(epilog=EPILOG)(epochs)
-app.command(epilog=EPILOG)(integrity)
-app.command(epilog=EPILOG)(design)
-app.command(epilog=EPILOG)(simulate)
-app.command(epilog=EPILOG)(locate)
-app.command(epilog=EPILOG)(findings)
-app.command(epilog=EPILOG)(enforce)
-app.command(epilog=EPILOG)(plot)
-app.command(epilog=EPILOG)(report)
-app.command(epilog=EPILOG)(batch)
+for command in (process, audit, verify, epochs, integrity, design, simulate, locate, findings, enforce, plot, report, batch):
+    app.command(epilog=EPILOG)(command)
 app.add_typer(geoobjects_app, name="geoobjects")

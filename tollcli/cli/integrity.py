@@ -101,7 +101,7 @@ def with_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
     from tollcli.integrity.kalman_hit import hit
     from tollcli.integrity.map_matching import load_roads
     from tollcli.integrity.verdict import epoch_checks
-    from tollcli.enforcement.trip import epoch_seconds
+    from tollcli.times import epoch_seconds
 
     if table.empty:
         return table

@@ -38,7 +38,9 @@ import pandas as pd
 import shapely
 from shapely import affinity
 
-from tollcli.enforcement.trip import cn0_summary, distance_m, epoch_seconds, fixes, runs, trailing_median
+from tollcli.enforcement.trip import cn0_summary, fixes, runs, trailing_median
+from tollcli.geodesy import great_circle_distance_m
+from tollcli.times import epoch_seconds, iso_from_seconds
 
 CATEGORY = {
     "gap": "evasion", "cn0_collapse": "jamming", "satellite_collapse": "jamming", "fix_lost_at_speed": "jamming",
@@ -73,15 +75,11 @@ class FindingSettings:
         return cls(max_speed_mps=CLASS_MAX_SPEED_MPS.get(vehicle_class, CLASS_MAX_SPEED_MPS["car"]), **overrides)
 
 
-def _iso(t_s: float) -> str:
-    return pd.Timestamp(t_s, unit="s", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
-
-
 def _finding(kind: str, t0: float, t1: float, lat0, lon0, lat1=None, lon1=None, **evidence) -> dict:
     r = lambda v: None if v is None or not np.isfinite(v) else round(float(v), 7)  # noqa: E731
     clean = {k: (round(float(v), 3) if isinstance(v, (float, np.floating)) else (int(v) if isinstance(v, np.integer) else v))
              for k, v in evidence.items()}  # fmt: skip
-    return {"kind": kind, "category": CATEGORY[kind], "start_utc": _iso(t0), "end_utc": _iso(t1),
+    return {"kind": kind, "category": CATEGORY[kind], "start_utc": iso_from_seconds(t0), "end_utc": iso_from_seconds(t1),
             "lat_deg": r(lat0), "lon_deg": r(lon0), "end_lat_deg": r(lat1), "end_lon_deg": r(lon1), "evidence": clean}  # fmt: skip
 
 
@@ -168,7 +166,7 @@ def _time_jumps(epochs: pd.DataFrame, t: np.ndarray, s: FindingSettings) -> list
                             direction="backwards"))  # fmt: skip
     speed = epochs["speed_mps"].to_numpy(float)
     lat, lon = epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float)
-    moved = distance_m(lat[:-1], lon[:-1], lat[1:], lon[1:])
+    moved = great_circle_distance_m(lat[:-1], lon[:-1], lat[1:], lon[1:])
     fast = (speed[:-1] > 5.0) & (speed[1:] > 5.0)
     with np.errstate(invalid="ignore"):
         stay = moved < 5.0 * np.maximum(speed[:-1], 1.0)  # no further than a few seconds of driving

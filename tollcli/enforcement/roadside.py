@@ -20,7 +20,8 @@ import pandas as pd
 import shapely
 
 from tollcli.charging.geoobjects import feature_geometry, metric_crs, project, read_features
-from tollcli.enforcement.trip import distance_m, epoch_seconds, fixes
+from tollcli.enforcement.trip import fixes
+from tollcli.times import epoch_seconds, iso_from_seconds, nearest_index
 from tollcli.errors import DataError
 
 
@@ -80,26 +81,21 @@ def cross_check(epochs: pd.DataFrame, reads: pd.DataFrame, gantry_ids: list[str]
     read_t = reads["time_utc"].dt.tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64) / 1000.0
     # each read: the nearest fix in time
     if fx.t_s.size:
-        order = np.argsort(fx.t_s, kind="stable")
-        ts = fx.t_s[order]
-        j = np.clip(np.searchsorted(ts, read_t), 1, max(ts.size - 1, 1)) if ts.size > 1 else np.zeros(read_t.size, int)
-        if ts.size > 1:
-            j = np.where(np.abs(ts[j - 1] - read_t) <= np.abs(ts[j] - read_t), j - 1, j)
-        k = order[j]
-        near = np.abs(fx.t_s[k] - read_t) <= settings.time_tol_s
+        k, gap = nearest_index(fx.t_s, read_t)
+        near = gap <= settings.time_tol_s
     else:
         k = np.zeros(read_t.size, int)
         near = np.zeros(read_t.size, bool)
     g_idx = reads["gantry_id"].map(index).to_numpy(int)
     for r in range(len(reads)):  # one per tag read (a handful per trip)
         gantry = gantries[g_idx[r]]
-        base = {"tag_id": reads["tag_id"].iat[r], "gantry_id": reads["gantry_id"].iat[r], "read_utc": _iso(read_t[r])}
+        base = {"tag_id": reads["tag_id"].iat[r], "gantry_id": reads["gantry_id"].iat[r], "read_utc": iso_from_seconds(read_t[r])}
         if not near[r]:
             out.append({"kind": "read_without_trip", **base, "nearest_fix_s": float(np.min(np.abs(fx.t_s - read_t[r]))) if fx.t_s.size else None})
             continue
         d = float(shapely.distance(shapely.Point(x[k[r]], y[k[r]]), gantry))
         if d >= settings.distance_tol_m:
-            out.append({"kind": "read_far_from_trip", **base, "trip_utc": _iso(fx.t_s[k[r]]), "trip_lat_deg": round(float(fx.lat_deg[k[r]]), 7),
+            out.append({"kind": "read_far_from_trip", **base, "trip_utc": iso_from_seconds(fx.t_s[k[r]]), "trip_lat_deg": round(float(fx.lat_deg[k[r]]), 7),
                         "trip_lon_deg": round(float(fx.lon_deg[k[r]]), 7), "distance_m": round(d, 1)})  # fmt: skip
     # passages: fixes within pass_dist of a gantry, grouped into passes; each needs a read of that gantry
     pts = shapely.points(x, y)
@@ -112,14 +108,8 @@ def cross_check(epochs: pd.DataFrame, reads: pd.DataFrame, gantry_ids: list[str]
             mid = float(np.median(block))
             mine = read_t[g_idx == g] if len(reads) else np.zeros(0)
             if not np.any(np.abs(mine - mid) <= settings.time_tol_s + (block[-1] - block[0]) / 2):
-                out.append({"kind": "missed_read", "tag_id": tag, "gantry_id": gantry_ids[g], "pass_utc": _iso(mid),
+                out.append({"kind": "missed_read", "tag_id": tag, "gantry_id": gantry_ids[g], "pass_utc": iso_from_seconds(mid),
                             "fixes_near": int(block.size)})  # fmt: skip
     out.sort(key=lambda f: f.get("read_utc") or f.get("pass_utc"))
     return out
 
-
-def _iso(t_s: float) -> str:
-    return pd.Timestamp(t_s, unit="s", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
-
-
-__all__ = ["RoadsideSettings", "cross_check", "read_gantries", "read_reads", "distance_m"]

@@ -1,4 +1,4 @@
-"""Per-epoch quantities of a trip that the enforcement checks share: times, steps between fixes, C/N0 summaries."""
+"""Per-epoch quantities of a trip that the enforcement checks share: steps between fixes, C/N0 summaries, runs."""
 
 from __future__ import annotations
 
@@ -7,24 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from tollcli.geodesy import WGS84_A_M
-
-
-def epoch_seconds(epochs: pd.DataFrame) -> np.ndarray:
-    """Seconds since 1970 from ``time_utc`` where dated, else the time of day unwrapped over midnights."""
-    if "time_utc" in epochs and epochs["time_utc"].notna().all() and len(epochs):
-        return epochs["time_utc"].dt.tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64) / 1000.0
-    tod = epochs["tod_s"].to_numpy(float)
-    wraps = np.concatenate([[0], np.cumsum(np.diff(tod) < -43_200.0)]) if tod.size else np.zeros(0)
-    return tod + 86_400.0 * wraps
-
-
-def distance_m(lat1, lon1, lat2, lon2) -> np.ndarray:
-    """Great-circle distance (haversine on the WGS-84 equatorial radius), metres."""
-    p1, p2 = np.radians(lat1), np.radians(lat2)
-    dp, dl = p2 - p1, np.radians(np.asarray(lon2) - np.asarray(lon1))
-    h = np.sin(dp / 2) ** 2 + np.cos(p1) * np.cos(p2) * np.sin(dl / 2) ** 2
-    return 2 * WGS84_A_M * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
+from tollcli.geodesy import great_circle_distance_m
 
 
 @dataclass
@@ -45,7 +28,7 @@ def fixes(epochs: pd.DataFrame, t_s: np.ndarray) -> Fixes:
     valid = epochs["fix_valid"].to_numpy(bool) if "fix_valid" in epochs else np.ones(len(epochs), bool)
     rows = np.flatnonzero(valid & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(t_s))
     la, lo, t = lat[rows], lon[rows], t_s[rows]
-    return Fixes(rows, t, la, lo, np.diff(t), distance_m(la[:-1], lo[:-1], la[1:], lo[1:]))
+    return Fixes(rows, t, la, lo, np.diff(t), great_circle_distance_m(la[:-1], lo[:-1], la[1:], lo[1:]))
 
 
 def cn0_summary(satellites: pd.DataFrame | None, n_epochs: int, first_epoch: int) -> pd.DataFrame:

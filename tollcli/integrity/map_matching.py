@@ -95,7 +95,7 @@ def match(epochs: pd.DataFrame, roads: Roads, params: MatchParams = MatchParams(
     """
     from pyproj import Transformer
 
-    from tollcli.enforcement.trip import epoch_seconds
+    from tollcli.times import epoch_seconds
 
     n = len(epochs)
     lon, lat = epochs["lon_deg"].to_numpy(float), epochs["lat_deg"].to_numpy(float)

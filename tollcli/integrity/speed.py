@@ -80,7 +80,8 @@ def detrended_standard_error(v: np.ndarray, n: int) -> np.ndarray:
 
 def speed_integrity(epochs: pd.DataFrame, params: SpeedParams = SpeedParams()) -> pd.DataFrame:
     """Per-epoch speed-integrity columns for an epoch table (``speed_mps``, ``lat_deg``/``lon_deg``, time)."""
-    from tollcli.enforcement.trip import distance_m, epoch_seconds
+    from tollcli.geodesy import great_circle_distance_m
+    from tollcli.times import epoch_seconds
 
     n = params.window_intervals
     v = epochs["speed_mps"].to_numpy(float) if "speed_mps" in epochs else np.full(len(epochs), np.nan)
@@ -97,7 +98,7 @@ def speed_integrity(epochs: pd.DataFrame, params: SpeedParams = SpeedParams()) -
     ok_start = start >= 0
     s0 = np.where(ok_start, start, 0)
     span = np.where(ok_start, t - t[s0], np.nan)
-    chord = np.where(ok_start, distance_m(lat[s0], lon[s0], lat, lon), np.nan)
+    chord = np.where(ok_start, great_circle_distance_m(lat[s0], lon[s0], lat, lon), np.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
         pos_speed = chord / span
         sigma_h = epochs["sigma_major_m"].to_numpy(float) if "sigma_major_m" in epochs else np.full(len(epochs), np.nan)

@@ -20,6 +20,7 @@ import pandas as pd
 
 from tollcli.errors import DataError
 from tollcli.geodesy import enu_rotation, geodetic2ecef
+from tollcli.times import nearest_index
 
 VALID_STATUSES = ("valid", "excluded_valid")
 
@@ -43,15 +44,10 @@ def errors_against_truth(epochs: pd.DataFrame, truth: pd.DataFrame, tolerance_s:
     """Per epoch: the horizontal error against the truth at the nearest time (NaN without one) and whether a truth time matched."""
     t_est = _times_ms(epochs["time_utc"], "epoch table")
     t_tru = _times_ms(truth["time_utc"], "truth")
-    order = np.argsort(t_tru, kind="stable")
-    t_sorted = t_tru[order]
-    if len(t_sorted) == 0:
+    if len(t_tru) == 0:
         return np.full(len(epochs), np.nan), np.zeros(len(epochs), bool)
-    j = np.clip(np.searchsorted(t_sorted, t_est), 1, max(len(t_sorted) - 1, 1)) if len(t_sorted) > 1 else np.zeros(len(t_est), int)
-    if len(t_sorted) > 1:
-        j = np.where(np.abs(t_sorted[j - 1] - t_est) <= np.abs(t_sorted[j] - t_est), j - 1, j)
-    matched = np.abs(t_sorted[j] - t_est) <= tolerance_s * 1000
-    k = order[j]
+    k, gap_ms = nearest_index(t_tru, t_est)
+    matched = gap_ms <= tolerance_s * 1000
     lat = epochs["lat_deg"].to_numpy(float)
     have = matched & np.isfinite(lat)
     err = np.full(len(epochs), np.nan)

@@ -39,13 +39,12 @@ def default_policy(has_speed: bool, has_roads: bool) -> str:
 
 def mm_integrity(epochs: pd.DataFrame, matched: pd.DataFrame, window: int = 5, ramp: float = 0.0) -> pd.DataFrame:
     """ΔD, ΔS, the fuzzy scale, its level and the status per epoch (columns of the module docstring)."""
-    from pyproj import Transformer  # noqa: F401 - the matcher projected already; raw fixes are re-projected below
-
-    from tollcli.enforcement.trip import distance_m, epoch_seconds
+    from tollcli.geodesy import great_circle_distance_m
+    from tollcli.times import epoch_seconds
 
     n = len(epochs)
     lat, lon = epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float)
-    step_gps = np.r_[np.nan, distance_m(lat[:-1], lon[:-1], lat[1:], lon[1:])] if n else np.zeros(0)
+    step_gps = np.r_[np.nan, great_circle_distance_m(lat[:-1], lon[:-1], lat[1:], lon[1:])] if n else np.zeros(0)
     mx, my = matched["matched_x_m"].to_numpy(float), matched["matched_y_m"].to_numpy(float)
     step_map = np.r_[np.nan, np.hypot(np.diff(mx), np.diff(my))] if n else np.zeros(0)
     c_g = np.concatenate([[0.0], np.cumsum(np.nan_to_num(step_gps))])
@@ -82,18 +81,6 @@ def epoch_checks(epochs: pd.DataFrame, roads: Roads | None, speed_params: SpeedP
         matched = match(epochs, roads, match_params, trusted)
         out = pd.concat([out, matched, mm_integrity(epochs, matched, mm_window)], axis=1)
     return out
-
-
-def passes(checks: pd.DataFrame, policy: str) -> np.ndarray:
-    """Per epoch: the non-RAIM checks the policy asks for all pass (the road identity is checked per geo-object)."""
-    if policy not in POLICIES:
-        raise ValueError(f"policy {policy!r}: one of {', '.join(POLICIES)}")
-    ok = np.ones(len(checks), dtype=bool)
-    if "speed" in POLICIES[policy]:
-        ok &= checks["speed_status"].astype(str).to_numpy() == "ok"
-    if "mm" in POLICIES[policy]:
-        ok &= checks["mm_status"].astype(str).to_numpy() == "ok"
-    return ok
 
 
 def failed_check(checks: pd.DataFrame, policy: str) -> np.ndarray:

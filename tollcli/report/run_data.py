@@ -51,7 +51,7 @@ def load_run(invoice_path: str, truth_path: str | None = None) -> RunData:
     if epochs.empty:
         raise DataError(f"{log}: no epochs")
     from tollcli.charging.recognition import candidate_pairs
-    from tollcli.enforcement.trip import epoch_seconds
+    from tollcli.times import epoch_seconds
 
     t = epoch_seconds(epochs)
     epochs["t_s"] = t - np.nanmin(t)

@@ -48,16 +48,18 @@ class Run:
     test_stat: np.ndarray
     horiz_error_m: np.ndarray
 
+    def _geometry(self) -> SimpleNamespace:
+        """What :func:`detect` reads of a geometry."""
+        return SimpleNamespace(dof=self.dof, slope_max_m=self.slope_max_m, singular=self.singular, n_meas=self.n_meas)
+
     def status(self, params: RaimParams) -> np.ndarray:
-        geometry = SimpleNamespace(dof=self.dof, slope_max_m=self.slope_max_m, singular=self.singular, n_meas=self.n_meas)
-        return detect(geometry, self.test_stat, params).status
+        return detect(self._geometry(), self.test_stat, params).status
 
     def valid(self, params: RaimParams) -> np.ndarray:
         return self.status(params) == VALID
 
     def hpl_classic_m(self, params: RaimParams) -> np.ndarray:
-        geometry = SimpleNamespace(dof=self.dof, slope_max_m=self.slope_max_m, singular=self.singular, n_meas=self.n_meas)
-        return detect(geometry, self.test_stat, RaimParams("classic", params.hal_m, params.p_md, params.p_fa)).hpl_m
+        return detect(self._geometry(), self.test_stat, RaimParams("classic", params.hal_m, params.p_md, params.p_fa)).hpl_m
 
 
 def simulate_runs(env: str, hours: float, receivers: list[str], seed: int = 0, tc_s: float = 5.0,

@@ -66,11 +66,11 @@ class Side:
 
     def height_at(self, s_m: np.ndarray) -> np.ndarray:
         """Height of the building at arc length ``s_m`` (0 in a gap or beyond the ends)."""
+        if self.start_m.size == 0:
+            return np.zeros(np.shape(s_m))
         i = np.searchsorted(self.start_m, s_m, side="right") - 1
-        ok = i >= 0
         j = np.maximum(i, 0)
-        inside = ok & (s_m < self.end_m[j]) if self.start_m.size else np.zeros(np.shape(s_m), bool)
-        return np.where(inside, self.height_m[j] if self.start_m.size else 0.0, 0.0)
+        return np.where((i >= 0) & (s_m < self.end_m[j]), self.height_m[j], 0.0)
 
 
 def buildings(env: Environment, start_m: float, end_m: float, rng: np.random.Generator) -> Side:

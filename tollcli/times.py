@@ -1,0 +1,36 @@
+"""Small time helpers shared by the stages: epoch seconds, nearest-time lookup, ISO text."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+
+def epoch_seconds(epochs: pd.DataFrame) -> np.ndarray:
+    """Seconds since 1970 from ``time_utc`` where dated, else the time of day unwrapped over midnights."""
+    if "time_utc" in epochs and epochs["time_utc"].notna().all() and len(epochs):
+        return epochs["time_utc"].dt.tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64) / 1000.0
+    tod = epochs["tod_s"].to_numpy(float)
+    wraps = np.concatenate([[0], np.cumsum(np.diff(tod) < -43_200.0)]) if tod.size else np.zeros(0)
+    return tod + 86_400.0 * wraps
+
+
+def nearest_index(times: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each query, the index into ``times`` (any order) of the nearest time and the absolute difference.
+
+    ``times`` must not be empty.
+    """
+    times, queries = np.asarray(times), np.asarray(queries)
+    order = np.argsort(times, kind="stable")
+    ts = times[order]
+    if ts.size == 1:
+        j = np.zeros(queries.shape, dtype=np.int64)
+    else:
+        j = np.clip(np.searchsorted(ts, queries), 1, ts.size - 1)
+        j = np.where(np.abs(ts[j - 1] - queries) <= np.abs(ts[j] - queries), j - 1, j)
+    return order[j], np.abs(ts[j] - queries)
+
+
+def iso_from_seconds(t_s: float) -> str:
+    """Seconds since 1970 → ``YYYY-MM-DDTHH:MM:SS.mmmZ``."""
+    return pd.Timestamp(t_s, unit="s", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
