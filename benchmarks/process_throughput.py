@@ -5,7 +5,11 @@ epochs. The network: the motorway under the drive cut into 250 m tolled segments
 plus parallel tolled roads 200 m apart, all cut the same way, to 10 000
 geo-objects (built by ``build_geoobjects``; HAL 50 m). Reported, each in a fresh
 process: wall time and peak RSS of ``tollcli process``, and of ``tollcli epochs``
-(the reader alone, the baseline) on the same log.
+(the reader alone, the baseline) on the same log. ``process`` runs twice: first
+with an empty cache directory (it parses the geo-object GeoJSON and compiles it),
+then again (it reads the compiled copy: what every later log of a fleet sees).
+``--memory-hours 1 10 100`` adds the peak RSS of ``process`` over those drive
+lengths (same network), with the ratio of the longest to the shortest.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import subprocess
 import sys
 import tempfile
@@ -48,12 +53,12 @@ def roads(n_objects: int, length_m: float, seg_m: float = 250.0) -> dict:
     return {"type": "FeatureCollection", "features": feats}
 
 
-def timed(cmd: list[str]) -> tuple[float, float]:
+def timed(cmd: list[str], env: dict | None = None) -> tuple[float, float]:
     """Wall time (s) and peak RSS (MB) of a command in a fresh process."""
     code = ("import resource, subprocess, sys, time\n"
             "t = time.perf_counter(); subprocess.run(sys.argv[1:], check=True, stdout=subprocess.DEVNULL)\n"
             "print(time.perf_counter() - t, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n")  # fmt: skip
-    out = subprocess.run([sys.executable, "-c", code, *cmd], capture_output=True, text=True, check=True).stdout.split()
+    out = subprocess.run([sys.executable, "-c", code, *cmd], capture_output=True, text=True, check=True, env=env).stdout.split()
     return float(out[0]), int(out[1]) / 1024.0
 
 
@@ -61,6 +66,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--hours", type=float, default=10.0)
     parser.add_argument("--objects", type=int, default=10_000)
+    parser.add_argument("--memory-hours", type=float, nargs="*", default=[], help="drive lengths for the memory test, h")
     args = parser.parse_args()
     n_epochs = int(args.hours * 3600)
     tollcli = [sys.executable, "-m", "tollcli"]
@@ -77,13 +83,32 @@ def main() -> None:
         geo_file.write_text(json.dumps(geo))
         print(f"drive: {n_epochs} epochs ({log.stat().st_size / 1e6:.0f} MB NMEA); network: {len(geo['features'])} geo-objects "
               f"(built in {t_build:.1f} s)")  # fmt: skip
-        t_read, m_read = timed([*tollcli, "epochs", str(log), "-o", str(Path(tmp) / "e.parquet"), "-q"])
-        t_proc, m_proc = timed([*tollcli, "process", str(log), "--geo", str(geo_file), "--tariff", str(tariff),
-                                "-o", str(Path(tmp) / "invoice.json"), "-q"])  # fmt: skip
+        env = dict(os.environ, TOLLCLI_CACHE_DIR=str(Path(tmp) / "cache"))
+        t_read, m_read = timed([*tollcli, "epochs", str(log), "-o", str(Path(tmp) / "e.parquet"), "-q"], env)
+        process = [*tollcli, "process", str(log), "--geo", str(geo_file), "--tariff", str(tariff), "-q"]
+        t_cold, m_cold = timed([*process, "-o", str(Path(tmp) / "invoice-cold.json")], env)
+        t_proc, m_proc = min(timed([*process, "-o", str(Path(tmp) / "invoice.json")], env) for _ in range(3))
         invoice = json.loads((Path(tmp) / "invoice.json").read_text())
-        print(f"tollcli epochs  (reader, baseline): {t_read:7.1f} s  {n_epochs / t_read:9,.0f} epochs/s  peak RSS {m_read:7.0f} MB")
-        print(f"tollcli process (read+RAIM+charge): {t_proc:7.1f} s  {n_epochs / t_proc:9,.0f} epochs/s  peak RSS {m_proc:7.0f} MB")
-        print(f"ratio process / reader time: {t_proc / t_read:.2f}; invoice: {len(invoice['lines'])} lines, total {invoice['total']}")
+        same = (Path(tmp) / "invoice.json").read_bytes() == (Path(tmp) / "invoice-cold.json").read_bytes()
+        print(f"tollcli epochs  (reader, baseline):           {t_read:6.2f} s  {n_epochs / t_read:9,.0f} epochs/s  peak RSS {m_read:6.0f} MB")
+        print(f"tollcli process, first run (compiles geo):    {t_cold:6.2f} s  {n_epochs / t_cold:9,.0f} epochs/s  peak RSS {m_cold:6.0f} MB")
+        print(f"tollcli process, geo-objects compiled:        {t_proc:6.2f} s  {n_epochs / t_proc:9,.0f} epochs/s  peak RSS {m_proc:6.0f} MB")
+        print(f"ratio process / reader time: {t_proc / t_read:.2f}; invoice: {len(invoice['lines'])} lines, total {invoice['total']}; "
+              f"cold and warm invoices {'byte-identical' if same else 'DIFFER'}")  # fmt: skip
+        memory = []
+        for hours in sorted(args.memory_hours):
+            n = int(hours * 3600)
+            path = Path(tmp) / f"drive-{hours:g}h.nmea"
+            with open(path, "w") as fh:
+                for line in straight_drive(n):
+                    fh.write(line + "\n")
+            t, m = timed([*tollcli, "process", str(path), "--geo", str(geo_file), "--tariff", str(tariff), "-q",
+                          "-o", str(Path(tmp) / f"invoice-{hours:g}h.json")], env)  # fmt: skip
+            memory.append((hours, m))
+            print(f"process, {hours:6g} h drive ({n:,} epochs): {t:7.1f} s, peak RSS {m:7.0f} MB")
+            path.unlink()
+        if len(memory) > 1:
+            print(f"peak RSS ratio {memory[-1][0]:g} h / {memory[0][0]:g} h: {memory[-1][1] / memory[0][1]:.2f}")
 
 
 if __name__ == "__main__":

@@ -5,11 +5,14 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+# compiled geo-objects and threshold tables go to a fresh folder, never the user's cache
+os.environ.setdefault("TOLLCLI_CACHE_DIR", tempfile.mkdtemp(prefix="tollcli-test-cache-"))
 SHARED_DATA = REPO.parent / "shared" / "data"
 SAMPLES = REPO / "samples"
 

@@ -34,3 +34,10 @@ def nearest_index(times: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, n
 def iso_from_seconds(t_s: float) -> str:
     """Seconds since 1970 → ``YYYY-MM-DDTHH:MM:SS.mmmZ``."""
     return pd.Timestamp(t_s, unit="s", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+
+
+def iso_utc(values) -> np.ndarray:
+    """Many timestamps (tz-aware or UTC-naive; Series, array or index) → ``YYYY-MM-DDTHH:MM:SS.mmmZ`` strings."""
+    index = pd.DatetimeIndex(pd.to_datetime(values, utc=True)).tz_convert(None)
+    text = np.datetime_as_string(index.to_numpy().astype("datetime64[ms]"), unit="ms")
+    return np.char.add(text.astype(str), "Z").astype(object)

@@ -17,6 +17,7 @@ import pandas as pd
 from tollcli import __version__
 from tollcli.charging.recognition import GeoObjects
 from tollcli.charging.tariffs import Tariff
+from tollcli.times import iso_utc
 
 
 def file_sha256(path: str) -> str:
@@ -37,33 +38,32 @@ def _num(value):
 
 def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame, geo: GeoObjects, tariff: Tariff, *,
                   vehicle: str, vehicle_class: str, inputs: dict[str, str], parameters: dict, period) -> dict:  # fmt: skip
-    """The invoice document (a dict of JSON-ready values)."""
+    """The invoice document (a dict of JSON-ready values).
+
+    Per passage: its statuses counted and its independent valid positions listed as
+    evidence, each found by one grouping over all positions (no table per passage).
+    """
     index = {gid: i for i, gid in enumerate(geo.ids)}
-    by_passage = dict(iter(positions.groupby(["geoobject", "passage"], sort=False))) if len(positions) else {}
+    statuses = _statuses(positions)
+    evidence = _evidence(positions)
+    entry = iso_utc(charges["entry_utc"]) if len(charges) else []
+    exit_ = iso_utc(charges["exit_utc"]) if len(charges) else []
     lines, not_charged, total = [], [], Decimal(0)
-    for row in charges.itertuples(index=False):
-        i = index[row.geoobject]
-        mine = by_passage[(row.geoobject, row.passage)]
-        statuses = mine["verdict" if "verdict" in mine else "raim_status"].value_counts().sort_index()
+    columns = ("geoobject", "passage", "n_inside", "n_valid", "n_independent", "charged", "entry_utc")
+    for k, (gid, passage, n_inside, n_valid, n_indep, charged, entry_utc) in enumerate(zip(*(charges[c] for c in columns))):
+        i = index[gid]
         base = {
-            "geoobject": row.geoobject, "name": geo.names[i], "road_class": geo.road_class[i], "hal_m": float(geo.hal_m[i]),
-            "entry_utc": _iso(row.entry_utc), "exit_utc": _iso(row.exit_utc), "n_inside": int(row.n_inside),
-            "n_valid": int(row.n_valid), "n_valid_independent": int(row.n_independent),
-            "statuses": {str(k): int(v) for k, v in statuses.items()},
+            "geoobject": gid, "name": geo.names[i], "road_class": geo.road_class[i], "hal_m": float(geo.hal_m[i]),
+            "entry_utc": entry[k], "exit_utc": exit_[k], "n_inside": int(n_inside),
+            "n_valid": int(n_valid), "n_valid_independent": int(n_indep),
+            "statuses": statuses[(gid, passage)],
         }  # fmt: skip
-        if not row.charged:
+        if not charged:
             not_charged.append(base)
             continue
-        fee, band = tariff.fee(row.geoobject, geo.road_class[i], vehicle_class, pd.Timestamp(row.entry_utc).to_pydatetime())
+        fee, band = tariff.fee(gid, geo.road_class[i], vehicle_class, pd.Timestamp(entry_utc).to_pydatetime())
         total += fee
-        kept = mine[mine["independent"]]
-        evidence = [
-            {"epoch": int(e.epoch_row), "time_utc": _iso(e.time_utc), "raim_status": e.raim_status,
-             "test_stat": _num(e.test_stat), "threshold": _num(e.threshold), "p_fa": _num(e.p_fa),
-             "test_stat_source": e.test_stat_source}
-            for e in kept.itertuples(index=False)
-        ]  # fmt: skip
-        lines.append({**base, "fee": str(fee), "band": band, "evidence": evidence})
+        lines.append({**base, "fee": str(fee), "band": band, "evidence": evidence.get((gid, passage), [])})
     return {
         "tool": f"tollcli {__version__}",
         "vehicle": vehicle,
@@ -78,8 +78,75 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame, geo: GeoObject
     }
 
 
+def _statuses(positions: pd.DataFrame) -> dict[tuple, dict[str, int]]:
+    """(geo-object, passage) → {status: positions} (the policy's verdict where there is one)."""
+    if positions.empty:
+        return {}
+    column = "verdict" if "verdict" in positions else "raim_status"
+    counts = positions.groupby(["geoobject", "passage", column], sort=True).size()
+    out: dict[tuple, dict[str, int]] = {}
+    for (gid, passage, status), n in zip(counts.index, counts.to_numpy().tolist()):
+        out.setdefault((gid, passage), {})[str(status)] = n
+    return out
+
+
+def _evidence(positions: pd.DataFrame) -> dict[tuple, list[dict]]:
+    """(geo-object, passage) → its independent valid positions, in the positions' order."""
+    if positions.empty:
+        return {}
+    kept = positions[positions["independent"].to_numpy(bool)]
+    times = iso_utc(kept["time_utc"]) if len(kept) else []
+    out: dict[tuple, list[dict]] = {}
+    numbers = [[None if v != v else v for v in kept[c].to_numpy(float).tolist()] for c in ("test_stat", "threshold", "p_fa")]
+    for gid, passage, epoch, when, status, stat, threshold, p_fa, source in zip(
+        kept["geoobject"], kept["passage"].tolist(), kept["epoch_row"].tolist(), times, kept["raim_status"],
+        *numbers, kept["test_stat_source"],
+    ):  # fmt: skip
+        out.setdefault((gid, passage), []).append(
+            {"epoch": epoch, "time_utc": when, "raim_status": status, "test_stat": stat, "threshold": threshold,
+             "p_fa": p_fa, "test_stat_source": source}  # fmt: skip
+        )
+    return out
+
+
 def invoice_json(invoice: dict) -> str:
+    """The invoice's canonical text: JSON, keys sorted, two-space indent (a sealed invoice's is kept)."""
+    if isinstance(invoice, SealedInvoice) and invoice.text is not None:
+        return invoice.text
     return json.dumps(invoice, indent=2, sort_keys=True, ensure_ascii=False) + "\n"
+
+
+class SealedInvoice(dict):
+    """An invoice with its ``content_sha256`` and its canonical text, encoded once (JSON with an indent is slow).
+
+    Setting or removing a top-level key drops the kept text; do not change nested values.
+    """
+
+    text: str | None = None
+
+    def __setitem__(self, key, value):
+        self.text = None
+        super().__setitem__(key, value)
+
+    def __delitem__(self, key):
+        self.text = None
+        super().__delitem__(key)
+
+
+def seal(invoice: dict) -> SealedInvoice:
+    """The invoice with ``content_sha256`` = SHA-256 of its canonical text without that key.
+
+    The sealed text is the body's text with the hash line put first, where sorting puts
+    ``content_sha256`` (checked; otherwise it is encoded again).
+    """
+    body = {k: v for k, v in invoice.items() if k != "content_sha256"}
+    text = invoice_json(body)
+    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
+    sealed = SealedInvoice(body)
+    dict.__setitem__(sealed, "content_sha256", digest)
+    if body and min(body) > "content_sha256" and text.startswith('{\n  "'):
+        sealed.text = '{\n  "content_sha256": ' + json.dumps(digest) + ",\n" + text[2:]
+    return sealed
 
 
 def invoice_csv(invoice: dict) -> str:

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pandas as pd
 
-from tollcli.charging.invoice import build_invoice, file_sha256, invoice_json
+from tollcli.charging.invoice import build_invoice, file_sha256, invoice_json, seal
 from tollcli.charging.recognition import charges, load_geoobjects, recognise
 from tollcli.charging.tariffs import load_tariff
 from tollcli.errors import UsageError
@@ -97,7 +97,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
                             inputs=inputs, parameters=parameters,
                             period=(dated.min(), dated.max()) if len(dated) else None)  # fmt: skip
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
-    invoice["content_sha256"] = content_sha256(invoice)
+    invoice = seal(invoice)
     if epoch_table is not None:
         epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), per_epoch], axis=1))
     return invoice, stats

@@ -15,13 +15,10 @@ exact), and the geo-object is charged when N_valid,in ≥ ``n_th``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import pandas as pd
 import shapely
 
-from tollcli.charging.geoobjects import feature_geometry, project, read_features
 from tollcli.errors import DataError
 from tollcli.integrity.measurements import Measurements
 from tollcli.integrity.raim import RaimParams
@@ -31,52 +28,7 @@ VALID_STATUSES = ("valid", "excluded_valid")
 PASSAGE_GAP_S = 120.0
 
 
-@dataclass
-class GeoObjects:
-    ids: np.ndarray
-    names: np.ndarray
-    road_class: np.ndarray
-    hal_m: np.ndarray
-    polygons: np.ndarray  # metric CRS
-    crs: str
-    tree: shapely.STRtree
-
-
-def load_geoobjects(path: str) -> GeoObjects:
-    """A geo-object file (as written by ``tollcli geoobjects build``) ready for recognition."""
-    features = read_features(path)
-    if not features:
-        raise DataError(f"{path}: no geo-objects")
-    ids, names, classes, hals, polys, crss = [], [], [], [], [], set()
-    for i, feature in enumerate(features):
-        props = feature.get("properties") if isinstance(feature, dict) else None
-        props = props if isinstance(props, dict) else {}
-        fid = props.get("id")
-        if fid in (None, ""):
-            raise DataError(f"{path}: feature #{i} has no id")
-        geom, why = feature_geometry(feature)
-        try:
-            hal = float(props.get("hal_m"))
-        except (TypeError, ValueError):
-            hal = float("nan")
-        if geom is None or geom.geom_type not in ("Polygon", "MultiPolygon") or geom.is_empty or not hal > 0 or not geom.is_valid:
-            raise DataError(f"{path}: feature {fid}: needs a valid non-empty polygon and hal_m > 0 ({why or 'run tollcli geoobjects check'})")
-        ids.append(str(fid))
-        names.append(str(props.get("name", "")))
-        classes.append(str(props.get("road_class", "")))
-        hals.append(hal)
-        polys.append(geom)
-        crss.add(props.get("crs_metric"))
-    if len(set(ids)) != len(ids):
-        raise DataError(f"{path}: duplicate geo-object ids")
-    crs = crss.pop() if len(crss) == 1 and None not in crss else None
-    if crs is None:
-        from tollcli.charging.geoobjects import metric_crs
-
-        crs = metric_crs(polys)
-    metric = project(polys, crs)
-    return GeoObjects(np.array(ids, dtype=object), np.array(names, dtype=object), np.array(classes, dtype=object),
-                      np.array(hals), metric, crs, shapely.STRtree(metric))  # fmt: skip
+from tollcli.charging.geoobject_store import GeoObjects, load_geoobjects  # noqa: E402,F401  (re-exported)
 
 
 def _subset(meas: Measurements, rows: np.ndarray) -> Measurements:

@@ -7,34 +7,22 @@ from typing import Annotated
 import typer
 
 from tollcli import __version__
-from tollcli.cli.audit import audit
-from tollcli.cli.batch import batch
-from tollcli.cli.design import design
-from tollcli.cli.enforcement import enforce, findings, locate
-from tollcli.cli.epochs import epochs
-from tollcli.cli.geoobjects import app as geoobjects_app
-from tollcli.cli.integrity import integrity
-from tollcli.cli.process import process
-from tollcli.cli.report import plot, report
-from tollcli.cli.simulate import simulate
-from tollcli.cli.verify import verify
+
+#: command name → (module, function); a module is imported only when its command is built
+COMMANDS = {
+    "process": ("tollcli.cli.process", "process"), "audit": ("tollcli.cli.audit", "audit"),
+    "verify": ("tollcli.cli.verify", "verify"), "epochs": ("tollcli.cli.epochs", "epochs"),
+    "integrity": ("tollcli.cli.integrity", "integrity"), "design": ("tollcli.cli.design", "design"),
+    "simulate": ("tollcli.cli.simulate", "simulate"), "locate": ("tollcli.cli.enforcement", "locate"),
+    "findings": ("tollcli.cli.enforcement", "findings"), "enforce": ("tollcli.cli.enforcement", "enforce"),
+    "plot": ("tollcli.cli.report", "plot"), "report": ("tollcli.cli.report", "report"),
+    "batch": ("tollcli.cli.batch", "batch"), "geoobjects": ("tollcli.cli.geoobjects", "app"),
+}  # fmt: skip
 
 EPILOG = (
     "Exit codes: 0 ok; 1 data error (input unusable, a bad line under --strict, or verify found a difference); "
     "2 usage error (bad option, missing file, directory); 3 partial (outputs written, more lines skipped than --max-bad)."
 )
-
-app = typer.Typer(
-    name="tollcli",
-    help="GNSS road-user charging log processor: receiver logs → trusted epochs → geo-objects → invoices.",
-    epilog=EPILOG,
-    no_args_is_help=True,
-    add_completion=True,
-    pretty_exceptions_enable=False,
-    rich_markup_mode=None,
-    context_settings={"help_option_names": ["-h", "--help"]},
-)
-
 
 def _version(value: bool) -> None:
     if value:
@@ -42,7 +30,6 @@ def _version(value: bool) -> None:
         raise typer.Exit()
 
 
-@app.callback()
 def root(
     version: Annotated[
         bool,
@@ -52,6 +39,33 @@ def root(
     """GNSS road-user charging log processor."""
 
 
-for command in (process, audit, verify, epochs, integrity, design, simulate, locate, findings, enforce, plot, report, batch):
-    app.command(epilog=EPILOG)(command)
-app.add_typer(geoobjects_app, name="geoobjects")
+def build_app(only: str | None = None) -> typer.Typer:
+    """The application with every command, or with just ``only`` (what ``tollcli CMD`` needs: a fast start; "" none)."""
+    import importlib
+
+    app = typer.Typer(
+        name="tollcli",
+        help="GNSS road-user charging log processor: receiver logs → trusted epochs → geo-objects → invoices.",
+        epilog=EPILOG,
+        no_args_is_help=True,
+        add_completion=True,
+        pretty_exceptions_enable=False,
+        rich_markup_mode=None,
+        context_settings={"help_option_names": ["-h", "--help"]},
+    )
+    app.callback()(root)
+    for name, (module, attr) in COMMANDS.items():
+        if only is not None and name != only:
+            continue
+        command = getattr(importlib.import_module(module), attr)
+        if name == "geoobjects":
+            app.add_typer(command, name="geoobjects")
+        else:
+            app.command(epilog=EPILOG)(command)
+    return app
+
+
+def __getattr__(name: str):
+    if name == "app":  # the whole application (tests, man pages, completion)
+        return build_app()
+    raise AttributeError(name)

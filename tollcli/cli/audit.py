@@ -103,7 +103,7 @@ def audit(
 def _emit(report: dict, summary: str, output: str, quiet: bool) -> None:
     text = json.dumps(report, indent=2, sort_keys=True, default=str) + "\n"
     to_stdout = output == "-" and sys.stdout.isatty()
-    show(audit_tables(report), quiet if not to_stdout else False, to_stdout=to_stdout)
+    show(lambda: audit_tables(report), quiet if not to_stdout else False, to_stdout=to_stdout)
     if to_stdout:
         typer.echo(summary)
     else:

@@ -121,11 +121,14 @@ def audit_tables(report: dict):
 
 
 def show(renderables, quiet: bool, to_stdout: bool = False) -> None:
-    """Print rich tables on an interactive terminal only (stdout when it is the output, else stderr)."""
+    """Print rich tables on an interactive terminal only (stdout when it is the output, else stderr).
+
+    ``renderables``: the tables, or a function making them (called only when they will be shown).
+    """
     if quiet:
         return
     console = Console(no_color=bool(os.environ.get("NO_COLOR"))) if to_stdout else err
     if not console.is_terminal:
         return
-    for r in renderables:
+    for r in renderables() if callable(renderables) else renderables:
         console.print(r)

@@ -16,7 +16,14 @@ def _fail(message: str, code: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from tollcli.cli.app import app
+    from tollcli.cli.app import COMMANDS, build_app
+
+    args = sys.argv[1:] if argv is None else argv
+    first = next((a for a in args if not a.startswith("-")), None)
+    lean = first in COMMANDS and "--install-completion" not in args and "--show-completion" not in args
+    if first is None and "--version" in args:
+        lean, first = True, ""  # no command needed
+    app = build_app(first if lean else None)
 
     try:
         code = app(args=argv, prog_name="tollcli", standalone_mode=False)

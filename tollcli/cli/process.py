@@ -54,10 +54,10 @@ def process(
                               date=date.date().isoformat() if date else None, policy=policy)  # fmt: skip
     invoice, stats = charge_log(log, geo, tariff, settings, nav, roads)
     if output == "-" and sys.stdout.isatty():
-        show(invoice_tables(invoice), False, to_stdout=True)
+        show(lambda: invoice_tables(invoice), False, to_stdout=True)
     else:
         write_text_atomic(output, invoice_csv(invoice) if output.lower().endswith(".csv") else invoice_json(invoice))
-        show(invoice_tables(invoice), quiet)
+        show(lambda: invoice_tables(invoice), quiet)
     warn(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged, "
          f"total {invoice['total']} {invoice['currency']}", quiet)  # fmt: skip
     if stats is not None:

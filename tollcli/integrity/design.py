@@ -16,19 +16,23 @@ import math
 from functools import lru_cache
 
 import numpy as np
-from scipy import optimize, special, stats
+from scipy import (
+    special,  # χ² functions; scipy.stats and optimize (slow to import) only where needed
+)
 
 
 def classic_threshold(p_fa: float, dof) -> np.ndarray:
     """Th with P(t > Th) = p_fa for t ~ χ²_dof (NaN where dof < 1)."""
     dof = np.asarray(dof, dtype=float)
     with np.errstate(invalid="ignore"):
-        return np.where(dof >= 1, stats.chi2.isf(p_fa, np.maximum(dof, 1)), np.nan)
+        return np.where(dof >= 1, special.chdtri(np.maximum(dof, 1), p_fa), np.nan)  # = stats.chi2.isf
 
 
 @lru_cache(maxsize=4096)
 def _lambda_det_scalar(p_fa: float, p_md: float, dof: int) -> float:
-    th = float(stats.chi2.isf(p_fa, dof))
+    from scipy import optimize
+
+    th = float(special.chdtri(dof, p_fa))
 
     def miss(lam: float) -> float:
         return float(special.chndtr(th, dof, lam)) - p_md
@@ -53,6 +57,8 @@ def etc_threshold(p_md: float, dof, lambda_det) -> np.ndarray:
     dof = np.asarray(dof, dtype=float)
     lam = np.asarray(lambda_det, dtype=float)
     ok = (dof >= 1) & np.isfinite(lam)
+    from scipy import stats
+
     with np.errstate(invalid="ignore"):
         th = stats.ncx2.ppf(p_md, np.where(ok, dof, 1), np.where(ok, np.maximum(lam, 1e-12), 1.0))
     return np.where(ok, th, np.nan)
@@ -77,7 +83,7 @@ class EtcThresholdTable:
     def _row(self, k: int) -> np.ndarray:
         row = self._rows.get(k)
         if row is None:
-            row = etc_threshold(self.p_md, np.full(self.grid.shape, k), self.grid**2)
+            row = _stored_row(self.p_md, self.step, self.grid, k)
             self._rows[k] = row
         return row
 
@@ -96,6 +102,42 @@ class EtcThresholdTable:
         return out
 
 
+def _stored_row(p_md: float, step: float, grid: np.ndarray, k: int) -> np.ndarray:
+    """One table row, kept in the cache directory (``TOLLCLI_CACHE_DIR``) across processes.
+
+    The file name carries every input of the row and scipy's version; a missing or
+    unreadable file is recomputed (and rewritten when the directory is writable).
+    """
+    import os
+    import tempfile
+
+    import scipy
+
+    from tollcli.cache import cache_dir
+
+    base = cache_dir()
+    name = f"etc-threshold-pmd{p_md!r}-step{step!r}-n{grid.size}-k{k}-scipy{scipy.__version__}.npy"
+    path = base / "thresholds" / name if base is not None else None
+    if path is not None and path.exists():
+        try:
+            row = np.load(path, allow_pickle=False)
+            if row.shape == grid.shape:
+                return row
+        except (OSError, ValueError):
+            pass
+    row = etc_threshold(p_md, np.full(grid.shape, k), grid**2)
+    if path is not None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+            with os.fdopen(fd, "wb") as fh:
+                np.save(fh, row)
+            os.replace(tmp, path)
+        except OSError:
+            pass
+    return row
+
+
 @lru_cache(maxsize=16)
 def etc_threshold_table(p_md: float) -> EtcThresholdTable:
     """The shared look-up table for ``p_md`` (a process builds each one once: its rows cost ~40 ms apiece)."""
@@ -107,7 +149,7 @@ def false_alarm_probability(threshold, dof) -> np.ndarray:
     dof = np.asarray(dof, dtype=float)
     th = np.asarray(threshold, dtype=float)
     ok = (dof >= 1) & np.isfinite(th)
-    return np.where(ok, stats.chi2.sf(np.where(ok, th, 0.0), np.where(ok, dof, 1)), np.nan)
+    return np.where(ok, special.chdtrc(np.where(ok, dof, 1), np.where(ok, th, 0.0)), np.nan)  # = stats.chi2.sf
 
 
 def p_mgor_max(invoice_share_pct: float, invoice_error_pct: float) -> float:
@@ -125,6 +167,7 @@ def p_fgor_max(invoice_share_pct: float, n_potential: int) -> float:
 
 def p_md_for_overcharge(n_th: int, n_faulty: int = 72, budget: float = 5e-7 / 1.32e-4) -> float:
     """P_MD with P(Bin(N_F,PSR, P_MD) ≥ N_Th) = budget (thesis eqs. 5.36–5.38, Table 5.2)."""
+    from scipy import optimize, stats
 
     def excess(p: float) -> float:
         return float(stats.binom.sf(n_th - 1, n_faulty, p)) - budget

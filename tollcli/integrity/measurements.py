@@ -47,8 +47,16 @@ def pad(values: np.ndarray, epoch_row: np.ndarray, slot: np.ndarray, shape: tupl
 
 
 def sv_labels(constellation: np.ndarray, svid: np.ndarray) -> np.ndarray:
-    """RINEX-style satellite names: ('GPS', 5) → 'G05'."""
+    """RINEX-style satellite names: ('GPS', 5) → 'G05' (each distinct satellite formatted once)."""
     import pandas as pd
 
-    letters = pd.Series(np.asarray(constellation, dtype=object)).map(CONSTELLATION_LETTER).fillna("X")
-    return (letters + pd.Series(np.asarray(svid)).astype(str).str.zfill(2)).to_numpy(dtype=object)
+    const = np.asarray(constellation, dtype=object)
+    svid = np.asarray(svid).astype(np.int64)
+    if const.size == 0:
+        return np.empty(0, dtype=object)
+    codes, names = pd.factorize(const, use_na_sentinel=False)
+    key = codes.astype(np.int64) * 1_000_000 + svid
+    uniq, inverse = np.unique(key, return_inverse=True)
+    labels = np.array([f"{CONSTELLATION_LETTER.get(names[k // 1_000_000], 'X')}{k % 1_000_000:02d}" for k in uniq.tolist()],
+                      dtype=object)  # fmt: skip
+    return labels[inverse.reshape(-1)]

@@ -137,7 +137,7 @@ class NominalModel:
         const = np.asarray(constellation, dtype=object)
         var = self.clk_eph_m**2 + sigma_iono_m(elev, lat_deg, lon_deg, self.iono) ** 2 + sigma_tropo_m(elev) ** 2
         local = np.zeros(np.broadcast(elev, cn0, const).shape)
-        for name in np.unique(const):
+        for name in sorted(set(const.ravel().tolist())):  # a hash set: sorting 10^5 strings costs more
             sel = const == name
             signal = self.signals.get(str(name), "bpsk1_wide")
             local_var = sigma_noise_dll_m(cn0, signal) ** 2 + MULTIPATH_M[signal] ** 2

@@ -49,8 +49,8 @@ def open_binary(source: str | os.PathLike | BinaryIO) -> BinaryIO:
     return buffered  # type: ignore[return-value]
 
 
-def iter_text_blocks(stream: BinaryIO, name: str, block_bytes: int = BLOCK_BYTES) -> Iterator[list[str]]:
-    """Yield lists of complete lines (latin-1 decoded, ``\\r\\n`` stripped).
+def iter_byte_blocks(stream: BinaryIO, name: str, block_bytes: int = BLOCK_BYTES) -> Iterator[bytes]:
+    """Yield blocks of complete lines as bytes, each without its last line feed.
 
     Memory is bounded by ``block_bytes`` plus the longest line.
     """
@@ -66,14 +66,20 @@ def iter_text_blocks(stream: BinaryIO, name: str, block_bytes: int = BLOCK_BYTES
         cut = data.rfind(b"\n")
         if cut < 0:
             if len(data) > 4 * block_bytes:  # no line end in sight: binary junk
-                yield [data.decode("latin-1")]
+                yield data
                 data = b""
             rest = data
             continue
         rest = data[cut + 1 :]
-        yield data[:cut].decode("latin-1").replace("\r", "").split("\n")
+        yield data[:cut]
     if rest:
-        yield rest.decode("latin-1").replace("\r", "").split("\n")
+        yield rest
+
+
+def iter_text_blocks(stream: BinaryIO, name: str, block_bytes: int = BLOCK_BYTES) -> Iterator[list[str]]:
+    """Yield lists of complete lines (latin-1 decoded, ``\\r`` removed)."""
+    for block in iter_byte_blocks(stream, name, block_bytes):
+        yield block.decode("latin-1").replace("\r", "").split("\n")
 
 
 def read_json(path: str, what: str):

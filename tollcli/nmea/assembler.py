@@ -170,6 +170,9 @@ class EpochAssembler:
     def handles(self, sentence_type: str) -> bool:
         return sentence_type in self._handlers
 
+    def handled_types(self) -> tuple[str, ...]:
+        return tuple(self._handlers)
+
     @property
     def n_ready(self) -> int:
         """Finished epochs waiting in the buffers."""

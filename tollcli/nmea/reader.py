@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError, PartialError
-from tollcli.io.sources import BLOCK_BYTES, iter_text_blocks, open_binary, source_name
+from tollcli.io.sources import BLOCK_BYTES, iter_byte_blocks, iter_text_blocks, open_binary, source_name
 from tollcli.nmea.assembler import EpochAssembler
 from tollcli.nmea.dates import DateCarry, resolve_days, to_time_utc_ms
 from tollcli.nmea.fields import checksum
@@ -116,12 +116,15 @@ def iter_nmea_tables(
     chunk_epochs: int = CHUNK_EPOCHS,
     block_bytes: int = BLOCK_BYTES,
     stats: ReadStats | None = None,
+    engine: str = "bulk",
 ) -> Iterator[NmeaTables]:
     """Yield the log's tables chunk by chunk (each chunk ≈ ``chunk_epochs`` epochs).
 
     ``date``: the UTC date of the first epoch, for logs without RMC/ZDA.
     ``block_bytes``: bytes read at a time (chunks are cut at block ends).
     ``stats`` (optional) is filled in as lines are read.
+    ``engine``: ``"bulk"`` (the fast path, :mod:`tollcli.nmea.bulk_reader`) or
+    ``"reference"`` (one line at a time; the bulk path is tested against it).
     """
     stats = stats if stats is not None else ReadStats()
     name = source_name(source)
@@ -130,8 +133,17 @@ def iter_nmea_tables(
     if date is not None:
         carry.last_day = (date - _dt.date(1970, 1, 1)).days
     pending: list[dict[str, np.ndarray]] = []
-    asm = EpochAssembler()
     stream = open_binary(source)
+    if engine == "bulk":
+        try:
+            yield from _bulk_chunks(stream, name, stats, strict, chunk_epochs, block_bytes, pending, carry)
+        finally:
+            if isinstance(source, (str, os.PathLike)) and os.fspath(source) != "-":
+                stream.close()
+        return
+    if engine != "reference":
+        raise ValueError(f"engine {engine!r}: 'bulk' or 'reference'")
+    asm = EpochAssembler()
     try:
         for lines in iter_text_blocks(stream, name, block_bytes):
             _feed_lines(lines, asm, stats, strict, name)
@@ -144,56 +156,90 @@ def iter_nmea_tables(
             stream.close()
 
 
+def _bulk_chunks(stream, name, stats, strict, chunk_epochs, block_bytes, pending, carry) -> Iterator[NmeaTables]:
+    from tollcli.nmea.bulk_reader import BulkReader, _merge
+
+    bulk = BulkReader(stats, strict, name)
+    ready: list[dict[str, np.ndarray]] = []
+    n_ready = 0
+    for block in iter_byte_blocks(stream, name, block_bytes):
+        arrays = bulk.feed(block)
+        if arrays is not None:
+            ready.append(arrays)
+            n_ready += arrays["epoch"].size
+        if n_ready >= chunk_epochs:
+            yield from _emit(_merge(ready), pending, carry, stats, final=False)
+            ready, n_ready = [], 0
+    arrays = bulk.finish()
+    if arrays is not None:
+        ready.append(arrays)
+    yield from _emit(_merge(ready), pending, carry, stats, final=True)
+
+
+HANDLED_TYPES = frozenset(EpochAssembler().handled_types())
+
+
+def classify_line(line: str) -> tuple[str, str, str, list[str]]:
+    """What one raw line is: ``(kind, why, address, fields)``.
+
+    ``kind``: ``blank``, ``comment``, ``not_nmea``, ``no_checksum``, ``bad_checksum``
+    (``why`` says what is wrong), ``unused`` (a valid sentence the reader does not
+    use) or ``sentence`` (a valid sentence of a type the assembler reads; ``fields``
+    are those after the address).
+    """
+    line = line.strip()
+    if not line:
+        return "blank", "", "", []
+    if line[0] == "#":
+        return "comment", "", "", []
+    if line.startswith(ANDROID_PREFIX):
+        line = line[len(ANDROID_PREFIX) :]
+    star = line.rfind("*")
+    end = star if star >= 0 else len(line)
+    start = max(line.rfind("$", 0, end), line.rfind("!", 0, end))  # '!': encapsulated (AIS) sentences
+    if start < 0:
+        return "not_nmea", "not an NMEA sentence", "", []
+    if star < 0:
+        return "no_checksum", "no checksum (truncated sentence?)", "", []
+    body = line[start + 1 : star]
+    try:
+        expected = int(line[star + 1 : star + 3], 16)
+    except ValueError:
+        return "no_checksum", "unreadable checksum", "", []
+    got = checksum(body)
+    if got != expected:
+        return "bad_checksum", f"bad checksum (*{expected:02X} given, {got:02X} computed)", "", []
+    fields = body.split(",")
+    address = fields[0]
+    if len(address) != 5 or address[0] == "P" or address[2:] not in HANDLED_TYPES:
+        return "unused", "", address, []
+    return "sentence", "", address, fields[1:]
+
+
 def _feed_lines(lines: list[str], asm: EpochAssembler, stats: ReadStats, strict: bool, name: str) -> None:
-    """Classify, verify and decode one block of lines (the per-line hot loop)."""
+    """Classify, verify and decode one block of lines, one line at a time (the reference path)."""
     line_no = stats.lines
     for line in lines:
         line_no += 1
-        line = line.strip()
-        if not line:
-            stats.blank += 1
-            continue
-        if line[0] == "#":
-            stats.comments += 1
-            continue
-        if line.startswith(ANDROID_PREFIX):
-            line = line[len(ANDROID_PREFIX) :]
-        star = line.rfind("*")
-        end = star if star >= 0 else len(line)
-        start = max(line.rfind("$", 0, end), line.rfind("!", 0, end))  # '!': encapsulated (AIS) sentences
-        if start < 0:
-            _problem(stats, "not_nmea", line_no, "not an NMEA sentence", strict, name)
-            continue
-        if star < 0:
-            _problem(stats, "no_checksum", line_no, "no checksum (truncated sentence?)", strict, name)
-            continue
-        body = line[start + 1 : star]
-        try:
-            expected = int(line[star + 1 : star + 3], 16)
-        except ValueError:
-            _problem(stats, "no_checksum", line_no, "unreadable checksum", strict, name)
-            continue
-        got = checksum(body)
-        if got != expected:
-            _problem(
-                stats, "bad_checksum", line_no,
-                f"bad checksum (*{expected:02X} given, {got:02X} computed)", strict, name,
-            )
-            continue
-        stats.sentences += 1
-        fields = body.split(",")
-        address = fields[0]
-        stype = address[2:]
-        if len(address) != 5 or address[0] == "P" or not asm.handles(stype):
+        kind, why, address, fields = classify_line(line)
+        if kind == "sentence":
+            stats.sentences += 1
+            try:
+                asm.feed(address[:2], address[2:], fields, line_no)
+            except (ValueError, IndexError, OverflowError) as exc:
+                _problem(stats, "malformed", line_no, f"malformed {address}: {exc}", strict, name)
+                continue
+            stats.decoded += 1
+        elif kind == "unused":
+            stats.sentences += 1
             stats.unused += 1
             stats.unused_types[address] = stats.unused_types.get(address, 0) + 1
-            continue
-        try:
-            asm.feed(address[:2], stype, fields[1:], line_no)
-        except (ValueError, IndexError, OverflowError) as exc:
-            _problem(stats, "malformed", line_no, f"malformed {address}: {exc}", strict, name)
-            continue
-        stats.decoded += 1
+        elif kind == "blank":
+            stats.blank += 1
+        elif kind == "comment":
+            stats.comments += 1
+        else:
+            _problem(stats, kind, line_no, why, strict, name)
     stats.lines = line_no
 
 

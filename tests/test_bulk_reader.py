@@ -1,0 +1,204 @@
+"""The bulk NMEA reader against the per-line reference reader: the same tables, statistics and errors.
+
+The reference path (``engine="reference"``) reads one line at a time with the
+converters of ``tollcli.nmea.fields`` and was checked against gpsd's own decoding
+(test_real_logs). The bulk path must give the same tables on every log: float
+columns bit for bit (``pos_disagreement_m`` to 1e-12, numpy's cos and hypot may
+differ from math's in the last bit), the same statistics, the same first problem.
+"""
+
+from __future__ import annotations
+
+import gzip
+import random
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import SAMPLES, shared
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tollcli.errors import DataError
+from tollcli.nmea import ReadStats, bulk_fields, bulk_reader, compose, read_nmea
+from tollcli.nmea.fields import num
+
+
+def _read(path, engine, **options):
+    stats = ReadStats()
+    try:
+        tables = read_nmea(path, engine=engine, stats=stats, **options)
+    except DataError as exc:
+        return None, stats, str(exc)
+    return tables, stats, None
+
+
+def assert_same(path, **options) -> None:
+    ref, ref_stats, ref_err = _read(path, "reference", **options)
+    bulk, bulk_stats, bulk_err = _read(path, "bulk", **options)
+    assert bulk_err == ref_err
+    assert bulk_stats.as_dict() == ref_stats.as_dict()
+    if ref is None:
+        return
+    for name in ("epochs", "satellites"):
+        a, b = getattr(ref, name), getattr(bulk, name)
+        assert list(a.columns) == list(b.columns) and a.shape == b.shape, f"{path}: {name} {a.shape} vs {b.shape}"
+        for col in a.columns:
+            x, y = a[col], b[col]
+            assert x.dtype == y.dtype, f"{path}: {name}.{col} {x.dtype} vs {y.dtype}"
+            if x.dtype.kind == "f":
+                xv, yv = x.to_numpy(), y.to_numpy()
+                if col == "pos_disagreement_m":
+                    np.testing.assert_allclose(yv, xv, rtol=1e-12, atol=1e-9, err_msg=f"{path}: {col}")
+                else:
+                    assert np.array_equal(xv, yv, equal_nan=True), f"{path}: {name}.{col} differs"
+            else:
+                pd.testing.assert_series_equal(x, y, obj=f"{path}: {name}.{col}")
+
+
+def _gpsd_logs():
+    root = shared("gpsd")
+    return sorted(p for p in root.iterdir() if p.is_file() and not p.name.endswith(".chk") and "COPYING" not in p.name)
+
+
+def test_every_gpsd_log_reads_the_same_both_ways(monkeypatch):
+    fast_logs = []
+    made = []
+    original = bulk_reader.BulkReader.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        made.append(self)
+
+    monkeypatch.setattr(bulk_reader.BulkReader, "__init__", spy)
+    logs = _gpsd_logs()
+    assert len(logs) >= 170
+    for path in logs:
+        made.clear()
+        assert_same(path)
+        if made and made[0].fast_epochs:
+            fast_logs.append(path.name)
+    # the comparison is not the reference against itself: most logs have epochs assembled in bulk
+    assert len(fast_logs) >= 50, len(fast_logs)
+
+
+@pytest.mark.parametrize("block_bytes", [150, 333, 4096])
+def test_block_size_does_not_matter(block_bytes):
+    """Epochs cut across blocks are carried whole: tiny blocks give the same tables."""
+    for path in (shared("android", "pixel6.nmea"), SAMPLES / "sim" / "urban-fault" / "drive.nmea", SAMPLES / "straight-drive.nmea"):
+        assert_same(path, block_bytes=block_bytes)
+        ref, _, _ = _read(path, "reference")
+        small, _, _ = _read(path, "bulk", block_bytes=block_bytes)
+        pd.testing.assert_frame_equal(small.epochs, ref.epochs, check_exact=False, rtol=1e-12)
+
+
+def test_plain_drive_is_read_entirely_in_bulk(tmp_path, monkeypatch):
+    log = tmp_path / "drive.nmea"
+    log.write_text("\n".join(compose.straight_drive(3000)) + "\n")
+    made = []
+    original = bulk_reader.BulkReader.__init__
+    monkeypatch.setattr(bulk_reader.BulkReader, "__init__", lambda self, *a, **k: (original(self, *a, **k), made.append(self))[0])
+    tables = read_nmea(log, block_bytes=50_000)
+    assert len(tables.epochs) == 3000
+    assert made[0].fast_epochs == 3000 and made[0].slow_epochs == 0
+    assert_same(log, block_bytes=50_000)
+
+
+ODD_LOG = [
+    "# a comment", "",
+    compose.gga(3600.0, 48.1, 11.5),
+    compose.rmc(3600.0, 48.1, 11.5, 10.0, 90.0, __import__("datetime").date(2024, 5, 6)),
+    "NMEA," + compose.gga(3601.0, 48.1001, 11.5),  # Android prefix
+    compose.gga(3602.0, 48.1002, 11.5)[:-2] + "ab",  # lower-case checksum (and wrong)
+    compose.gga(3603.0, 48.1003, 11.5)[:-2] + "00",  # bad checksum
+    compose.with_checksum("GPGGA,3604,4806.000,N,01130.000,E,1,08,0.9,500.0,M,47.0,M,,"),  # bad time
+    compose.with_checksum("GPGGA,010005.00,4899.000,N,01130.000,E,1,08,0.9,500.0,M,47.0,M,,"),  # minutes ≥ 60
+    compose.with_checksum("GPGSA,A,3,5.0,07,,,,,,,,,,,1.6,0.9,1.3"),  # a PRN with a point
+    compose.with_checksum("GPGSV,1,1,02,05,45,100,40,07,30,200,35,f"),  # lower-case signal id
+    compose.with_checksum("GPVTG,90.0,91.0,10.0,18.5"),  # NMEA 1.5 layout
+    compose.grs(3606.0, [1.5, -2.0]), compose.gsa([5, 7], 1.6, 0.9, 1.3),
+    compose.with_checksum("GPGLL,4806.000,N,01130.000,E,010007.00,A,A"),
+    compose.zda(3608.0, __import__("datetime").date(2024, 5, 6)),
+    compose.with_checksum("PUBX,00,010008.00,4806.0,N"), "!AIVDM,1,1,,A,13aEOK?P00PD2wVMdLDRhgvL289?,0*26",
+    compose.with_checksum("GPGGA,010009.00,4806.000,N,01130.000,E,1,08,0.9,500.0,M,47.0,M,,") + "\r",
+    compose.with_checksum("GPGGA,010010.00,-4806.000,N,01130.000,E,1,08,0.9,500.0,M,47.0,M,,"),
+    compose.with_checksum("GPGGA,010011.00,4806.000,X,01130.000,E,1,08,0.9,500.0,M,47.0,M,,"),
+    compose.with_checksum("GPGGA,010012.00,4806.000,N,01130.000,E,1e0,08,0.9,500.0,M,47.0,M,,"),
+    "$GPGGA,010013.00,4806.0",  # truncated
+    "\x00\x01binary junk\xff",
+]
+
+
+def test_odd_lines_are_classified_as_the_reference_does(tmp_path):
+    log = tmp_path / "odd.nmea"
+    log.write_bytes(("\n".join(ODD_LOG) + "\n").encode("latin-1"))
+    assert_same(log)
+    stats = _read(log, "bulk")[1]
+    assert stats.bad_checksum == 2 and stats.malformed >= 5 and stats.comments == 1 and stats.blank == 1
+    ref_error = pytest.raises(DataError, read_nmea, log, engine="reference", strict=True).value
+    bulk_error = pytest.raises(DataError, read_nmea, log, engine="bulk", strict=True).value
+    assert str(bulk_error) == str(ref_error)
+    assert str(bulk_error).startswith(f"{log}:6: bad checksum")  # --strict stops at the first problem line
+
+
+def test_gzip_and_crlf(tmp_path):
+    lines = list(compose.straight_drive(50))
+    (tmp_path / "a.nmea.gz").write_bytes(gzip.compress(("\r\n".join(lines) + "\r\n").encode()))
+    assert_same(tmp_path / "a.nmea.gz")
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**32 - 1), n_edits=st.integers(1, 30))
+def test_damaged_logs_read_the_same_both_ways(tmp_path, seed, n_edits):
+    """Random damage (characters dropped, changed, doubled; lines swapped) never makes the two paths differ."""
+    rng = random.Random(seed)
+    lines = list(compose.straight_drive(40))
+    alphabet = "0123456789.,-*$ANEWSVT\r"
+    for _ in range(n_edits):
+        i = rng.randrange(len(lines))
+        line = lines[i]
+        j = rng.randrange(len(line))
+        action = rng.randrange(4)
+        if action == 0:
+            line = line[:j] + line[j + 1 :]
+        elif action == 1:
+            line = line[:j] + rng.choice(alphabet) + line[j + 1 :]
+        elif action == 2:
+            line = line[:j] + line[j] + line[j:]
+        else:
+            k = rng.randrange(len(lines))
+            lines[i], lines[k] = lines[k], lines[i]
+            continue
+        if rng.random() < 0.5 and "*" in line:  # keep the checksum right, so the fields are what is damaged
+            body = line[1 : line.rfind("*")]
+            line = compose.with_checksum(body) if "$" not in body and "*" not in body else line
+        lines[i] = line
+    log = tmp_path / f"damaged-{seed}.nmea"
+    log.write_bytes(("\n".join(lines) + "\n").encode("latin-1"))
+    assert_same(log, block_bytes=rng.choice([200, 1000, 1 << 20]))
+
+
+def test_decimal_fields_match_float_exactly():
+    rng = np.random.default_rng(7)
+    texts = ["0", "-0", "12", "-12.5", ".5", "5.", "4807.038", "00.000001", "-.5", "123456789012345", "9.99999999999999",
+             "1e5", "+5", "-", "", "1.2.3", "12-", "..", "1234567890123456", "12345678.9", "-1234567.8901"]  # fmt: skip
+    texts += [f"{x:.{k}f}" for x, k in zip(rng.uniform(-2e4, 2e4, 5000), rng.integers(0, 12, 5000))]
+    starts = np.cumsum([0] + [len(t) + 1 for t in texts[:-1]])
+    ends = starts + np.array([len(t) for t in texts])
+    buf = np.frombuffer(",".join(texts).encode(), np.uint8)
+
+    class Block:
+        pass
+
+    block = Block()
+    block.buf, block.win = buf, bulk_fields.byte_windows(buf)
+    value, ok, empty, dotted = bulk_fields.decimal(block, starts, ends)
+    for text, v, good, e, d in zip(texts, value, ok, empty, dotted):
+        if e:
+            assert good and np.isnan(v)
+            continue
+        if good:  # read in bulk: exactly float(), and the point seen
+            assert v == num(text) and np.signbit(v) == np.signbit(num(text)), text
+            assert d == ("." in text)
+        else:  # left to the per-line converters: only forms the bulk path does not read
+            assert any(c in text for c in "e+") or text.count(".") > 1 or text in ("-", "12-", "..") or len(text.lstrip("-")) > 15, text

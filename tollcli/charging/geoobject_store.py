@@ -1,0 +1,159 @@
+"""Load a geo-object file for charging: parse once, then reuse a compiled copy keyed by the file's SHA-256.
+
+A geo-object file changes rarely and is read for every log. The first load parses
+the GeoJSON (plain single-ring polygons in bulk, anything else feature by feature),
+checks every feature, projects the polygons to their metric CRS and stores the
+result — ids, names, road classes, HAL, CRS and the metric polygons as WKB — in
+``$TOLLCLI_CACHE_DIR`` (default ``~/.cache/tollcli``) under the file's SHA-256.
+Later loads of the same bytes read that copy (WKB keeps every coordinate bit for
+bit, so invoices do not depend on the cache). ``TOLLCLI_CACHE_DIR=off`` turns the
+cache off; a cache that cannot be written is silently skipped.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+from tollcli.cache import cache_dir
+from tollcli.charging.geoobjects import feature_geometry, project, read_features
+from tollcli.errors import DataError
+
+CACHE_FORMAT = 1
+
+
+@dataclass
+class GeoObjects:
+    ids: np.ndarray
+    names: np.ndarray
+    road_class: np.ndarray
+    hal_m: np.ndarray
+    polygons: np.ndarray  # metric CRS
+    crs: str
+    tree: shapely.STRtree
+
+
+def load_geoobjects(path: str) -> GeoObjects:
+    """A geo-object file (as written by ``tollcli geoobjects build``) ready for recognition."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError:
+        data = None  # read_features reports it
+    cached = _cache_path(data) if data is not None else None
+    if cached is not None and cached.exists():
+        try:
+            return _read_compiled(cached)
+        except (OSError, ValueError, KeyError, shapely.errors.ShapelyError):
+            pass  # a damaged copy: parse again
+    geo = _parse(path)
+    if cached is not None:
+        _write_compiled(cached, geo)
+    return geo
+
+
+def _cache_path(data: bytes) -> Path | None:
+    base = cache_dir()
+    if base is None:
+        return None
+    return base / "geoobjects" / f"{hashlib.sha256(data).hexdigest()}.v{CACHE_FORMAT}.npz"
+
+
+def _parse(path: str) -> GeoObjects:
+    features = read_features(path)
+    if not features:
+        raise DataError(f"{path}: no geo-objects")
+    props = [(f.get("properties") if isinstance(f, dict) else None) for f in features]
+    props = [p if isinstance(p, dict) else {} for p in props]
+    ids = [p.get("id") for p in props]
+    for i, fid in enumerate(ids):
+        if fid in (None, ""):
+            raise DataError(f"{path}: feature #{i} has no id")
+    polys = _polygons(features)
+    hals = np.array([_float(p.get("hal_m")) for p in props])
+    usable = ~shapely.is_missing(polys)
+    usable[usable] = np.isin(shapely.get_type_id(polys[usable]), (3, 6))  # Polygon, MultiPolygon
+    usable[usable] &= ~shapely.is_empty(polys[usable]) & shapely.is_valid(polys[usable])
+    usable &= hals > 0
+    if not usable.all():
+        i = int(np.flatnonzero(~usable)[0])
+        _, why = feature_geometry(features[i])
+        raise DataError(f"{path}: feature {ids[i]}: needs a valid non-empty polygon and hal_m > 0 ({why or 'run tollcli geoobjects check'})")
+    ids = [str(fid) for fid in ids]
+    if len(set(ids)) != len(ids):
+        raise DataError(f"{path}: duplicate geo-object ids")
+    crss = {p.get("crs_metric") for p in props}
+    crs = crss.pop() if len(crss) == 1 and None not in crss else None
+    if crs is None:
+        from tollcli.charging.geoobjects import metric_crs
+
+        crs = metric_crs(polys)
+    metric = project(polys, crs)
+    return GeoObjects(np.array(ids, dtype=object), np.array([str(p.get("name", "")) for p in props], dtype=object),
+                      np.array([str(p.get("road_class", "")) for p in props], dtype=object), hals, metric, crs,
+                      shapely.STRtree(metric))  # fmt: skip
+
+
+def _float(value) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _polygons(features: list) -> np.ndarray:
+    """Shapely polygons of the features (None where unreadable): single-ring polygons built in bulk."""
+    out = np.full(len(features), None, dtype=object)
+    simple, rings = [], []
+    for i, f in enumerate(features):
+        geom = f.get("geometry") if isinstance(f, dict) else None
+        coords = geom.get("coordinates") if isinstance(geom, dict) and geom.get("type") == "Polygon" else None
+        if isinstance(coords, list) and len(coords) == 1 and isinstance(coords[0], list) and len(coords[0]) >= 4:
+            try:
+                ring = np.asarray(coords[0], dtype=float)
+            except (TypeError, ValueError):
+                ring = None
+            if ring is not None and ring.ndim == 2 and ring.shape[1] == 2 and np.isfinite(ring).all():
+                simple.append(i)
+                rings.append(ring)
+                continue
+        out[i] = feature_geometry(f)[0]
+    if simple:
+        lengths = np.array([len(r) for r in rings])
+        with np.errstate(invalid="ignore"):
+            linear = shapely.linearrings(np.concatenate(rings), indices=np.repeat(np.arange(len(rings)), lengths))
+        out[np.array(simple)] = shapely.polygons(linear)
+    return out
+
+
+def _read_compiled(path: Path) -> GeoObjects:
+    with np.load(path, allow_pickle=False) as z:
+        if int(z["format"]) != CACHE_FORMAT:
+            raise ValueError("cache format")
+        blob, ends = z["wkb"].tobytes(), z["wkb_ends"]
+        starts = np.concatenate(([0], ends[:-1]))
+        metric = shapely.from_wkb([blob[a:b] for a, b in zip(starts.tolist(), ends.tolist())])
+        return GeoObjects(z["ids"].astype(object), z["names"].astype(object), z["road_class"].astype(object),
+                          z["hal_m"], metric, str(z["crs"]), shapely.STRtree(metric))  # fmt: skip
+
+
+def _write_compiled(path: Path, geo: GeoObjects) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        wkb = shapely.to_wkb(geo.polygons).tolist()
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, format=CACHE_FORMAT, ids=geo.ids.astype(str), names=geo.names.astype(str),
+                     road_class=geo.road_class.astype(str), hal_m=geo.hal_m, crs=geo.crs,
+                     wkb=np.frombuffer(b"".join(wkb), np.uint8), wkb_ends=np.cumsum([len(w) for w in wkb]))  # fmt: skip
+        os.replace(tmp, path)
+    except OSError:
+        try:
+            os.unlink(tmp)  # type: ignore[possibly-undefined]
+        except (OSError, NameError):
+            pass

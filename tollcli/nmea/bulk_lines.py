@@ -1,0 +1,122 @@
+"""A block of NMEA text as arrays: line spans, checksums, addresses and field spans, without a loop per line.
+
+A line is *plain* when it is ``$AAAAA,...*HH`` exactly: ``$`` first, a five-letter
+address, upper-case hex checksum last, no other ``$``, ``!``, ``*`` or carriage
+return inside. Plain lines are verified and split here in bulk; every other line
+(blank, comment, Android ``NMEA,`` prefix, AIS, lower-case checksum, junk) is left
+to the per-line classifier, which the reference reader uses for every line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tollcli.nmea.bulk_fields import byte_windows
+
+_NL, _CR, _DOLLAR, _BANG, _STAR, _COMMA = 10, 13, 36, 33, 42, 44
+
+
+def _hex_value(chars: np.ndarray) -> np.ndarray:
+    """Upper-case hex digits → 0–15; anything else → -1."""
+    out = np.full(chars.shape, -1, np.int64)
+    digit = (chars >= 48) & (chars <= 57)
+    upper = (chars >= 65) & (chars <= 70)
+    out[digit] = chars[digit].astype(np.int64) - 48
+    out[upper] = chars[upper].astype(np.int64) - 55
+    return out
+
+
+@dataclass
+class BlockLines:
+    """The lines of one block: spans into ``buf`` and, for plain lines, their decoded framing."""
+
+    buf: np.ndarray  # uint8, the block's bytes
+    win: np.ndarray  # bulk_fields.byte_windows(buf): the eight bytes before each position, as uint64
+    start: np.ndarray  # first byte of each line
+    end: np.ndarray  # one past the last byte (line feed and a final carriage return excluded)
+    plain: np.ndarray  # bool: the bulk path can read this line
+    checksum_ok: np.ndarray  # bool (plain lines): the checksum matches
+    given: np.ndarray  # the checksum written on the line (plain lines)
+    computed: np.ndarray  # the checksum of the body (plain lines)
+    address: np.ndarray  # int64: the five address bytes packed big-endian (plain lines)
+    commas: np.ndarray  # positions of every comma in the block, then two sentinels
+    first_comma: np.ndarray  # index into ``commas`` of each line's first comma
+    n_fields: np.ndarray  # fields after the address (plain lines)
+
+    def text(self, i: int) -> str:
+        """Line ``i`` as the reference reader sees it (latin-1, carriage returns removed)."""
+        return self.buf[self.start[i] : self.end[i]].tobytes().decode("latin-1").replace("\r", "")
+
+    def field_span(self, lines: np.ndarray, k: np.ndarray | int) -> tuple[np.ndarray, np.ndarray]:
+        """Start and end of field ``k`` (1 = first after the address) of plain ``lines``; empty past the last.
+
+        Field ``k`` starts after the line's ``k``-th comma and ends at the next comma
+        or at the ``*``, whichever comes first; past the last field it starts beyond
+        the ``*`` and is made empty.
+        """
+        c = np.minimum(self.first_comma[lines] + (np.asarray(k) - 1), self.commas.size - 2)
+        star = self.end[lines] - 3
+        s = self.commas[c] + 1
+        e = np.minimum(np.maximum(self.commas[c + 1], s), star)  # past the last field: empty, at the '*'
+        return np.minimum(s, star), e
+
+
+def split_block(data: bytes) -> BlockLines:
+    """Split ``data`` (whole lines, without the last one's line feed) and frame its plain lines."""
+    buf = np.frombuffer(data, dtype=np.uint8)
+    win = byte_windows(buf)
+    nl = np.flatnonzero(buf == _NL)
+    start = np.concatenate(([0], nl + 1))
+    end = np.append(nl, buf.size)
+    n = start.size
+    if buf.size:
+        end = end - ((end > start) & (buf[np.maximum(end - 1, 0)] == _CR))
+    length = end - start
+    specials = np.flatnonzero((buf == _DOLLAR) | (buf == _BANG) | (buf == _STAR) | (buf == _CR))  # counted per line
+    n_special = np.searchsorted(specials, end) - np.searchsorted(specials, start)
+    # the first eight and the last eight bytes of each line, as little-endian words
+    head = win[np.minimum(start + 8, buf.size)]
+    tail = win[end]
+    plain = (length >= 10) & ((head & 0xFF) == _DOLLAR) & (((tail >> 40) & 0xFF) == _STAR) & (n_special == 2)
+    plain &= ((head >> 48) & 0xFF) == _COMMA
+    hi = _hex_value(((tail >> 48) & 0xFF).astype(np.uint8))
+    lo = _hex_value(((tail >> 56) & 0xFF).astype(np.uint8))
+    plain &= (hi >= 0) & (lo >= 0)
+    given = hi * 16 + lo
+    # XOR of each plain line's body, between '$' and '*'
+    computed = np.full(n, -1, np.int64)
+    p = np.flatnonzero(plain)
+    if p.size:
+        bounds = np.empty(2 * p.size, np.int64)
+        bounds[0::2] = start[p] + 1
+        bounds[1::2] = end[p] - 3
+        computed[p] = np.bitwise_xor.reduceat(buf, bounds)[0::2]
+    checksum_ok = plain & (computed == given)
+    address = ((head >> 8) & 0xFFFFFFFFFF).astype(np.int64)  # the five characters after '$'
+    commas = np.flatnonzero(buf == _COMMA)
+    first_comma = np.searchsorted(commas, start + 6)
+    last_comma = np.searchsorted(commas, end - 3)
+    n_fields = last_comma - first_comma  # commas after the address = fields after it
+    commas = np.append(commas, np.full(2, np.iinfo(np.int64).max // 2))  # sentinels: no line reaches them
+    return BlockLines(buf, win, start, end, plain, checksum_ok, given, computed, address, commas, first_comma, n_fields)
+
+
+def pack_address(text: str) -> int:
+    """``"GPGGA"`` → the int :func:`split_block` gives (first character in the lowest byte)."""
+    return int.from_bytes(text.encode("latin-1"), "little")
+
+
+def unpack_address(value: int) -> str:
+    return int(value).to_bytes(5, "little").decode("latin-1")
+
+
+def type_code(address: np.ndarray) -> np.ndarray:
+    """The sentence type (characters 3–5 of the address) of packed addresses."""
+    return address >> 16
+
+
+def talker_code(address: np.ndarray) -> np.ndarray:
+    """The talker (characters 1–2) of packed addresses."""
+    return address & 0xFFFF

@@ -1,0 +1,329 @@
+"""The fast path of the NMEA reader: a block of bytes → finished epochs, decoded in bulk.
+
+Per block (≈ 1 MB of whole lines):
+
+1. :func:`~tollcli.nmea.bulk_lines.split_block` frames every line and verifies the
+   checksums of the plain ones with array operations;
+2. :mod:`~tollcli.nmea.bulk_sentences` decodes GGA, RMC, VTG, GSA, GSV and GST in
+   bulk; lines it cannot read plainly, other lines and the rarer sentence types
+   (GRS, GNS, GLL, GBS, ZDA) go through the reference reader's per-line classifier
+   and converters, which also decide what is malformed;
+3. epochs are cut where the time of day changes (as the reference assembler does),
+   the last, possibly unfinished epoch is carried into the next block;
+4. :mod:`~tollcli.nmea.bulk_epochs` assembles the common epochs in bulk; an epoch
+   with anything else is fed, sentence by sentence, to the reference
+   :class:`~tollcli.nmea.assembler.EpochAssembler`.
+
+The result is the reference reader's, table for table: ``tests/test_bulk_reader.py``
+compares both on every gpsd log. Should the time stamps of a block ever fall outside
+what the epoch cut assumes, the rest of the log is read by the reference path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tollcli.errors import DataError
+from tollcli.nmea import bulk_epochs, bulk_sentences
+from tollcli.nmea.assembler import EpochAssembler
+from tollcli.nmea.bulk_lines import (
+    BlockLines,
+    pack_address,
+    split_block,
+    type_code,
+    unpack_address,
+)
+from tollcli.nmea.fields import time_of_day_s
+
+#: line kinds
+BLANK, COMMENT, NOT_NMEA, NO_CHECKSUM, BAD_CHECKSUM, UNUSED, MALFORMED, DECODED = range(8)
+_KIND = {"blank": BLANK, "comment": COMMENT, "not_nmea": NOT_NMEA, "no_checksum": NO_CHECKSUM,
+         "bad_checksum": BAD_CHECKSUM, "unused": UNUSED}  # fmt: skip
+_PROBLEM_NAME = {NOT_NMEA: "not_nmea", NO_CHECKSUM: "no_checksum", BAD_CHECKSUM: "bad_checksum", MALFORMED: "malformed"}
+_TIMED_FIRST = {"GGA", "RMC", "GNS", "GST", "GRS", "GBS", "ZDA"}
+_BULK = {pack_address("XX" + t) >> 16: t for t in bulk_epochs.SENTENCE_TYPES}
+_DECODERS = {"GGA": bulk_sentences.gga, "RMC": bulk_sentences.rmc, "VTG": bulk_sentences.vtg,
+             "GSA": bulk_sentences.gsa, "GSV": bulk_sentences.gsv, "GST": bulk_sentences.gst}  # fmt: skip
+#: an epoch longer than this (bytes) is not waited for: the rest of the log goes the reference way
+MAX_CARRY_BYTES = 16 << 20
+SAME_TIME_S = 5e-4  # as the reference assembler
+
+
+class BulkReader:
+    """Feed it blocks of whole lines with :meth:`feed`; it returns finished epochs as arrays."""
+
+    def __init__(self, stats, strict: bool, name: str):
+        from tollcli.nmea.reader import HANDLED_TYPES
+
+        self.stats = stats
+        self.strict = strict
+        self.name = name
+        self.next_epoch = 0
+        self.carry = b""
+        self.reference: EpochAssembler | None = None  # set once the rest of the log goes the reference way
+        self._handled = {pack_address("XX" + t) >> 16 for t in HANDLED_TYPES}
+        self.fast_epochs = 0  # epochs assembled in bulk (for tests and benchmarks)
+        self.slow_epochs = 0
+
+    # ------------------------------------------------------------------ public
+    def feed(self, data: bytes, final: bool = False) -> dict[str, np.ndarray] | None:
+        """Read one block (whole lines, no trailing line feed); the epochs it finished, or None."""
+        if self.carry:
+            data = self.carry + b"\n" + data
+            self.carry = b""
+        if self.reference is not None:
+            return self._reference_feed(data, final)
+        return self._bulk_feed(data, final)
+
+    def finish(self) -> dict[str, np.ndarray] | None:
+        """End of the log: the last epoch."""
+        if self.carry:
+            data, self.carry = self.carry, b""
+            return self.feed(data, final=True)
+        if self.reference is not None:
+            self.reference.finish()
+            return self.reference.take()
+        return None
+
+    # ------------------------------------------------------------------ reference path
+    def _reference_feed(self, data: bytes, final: bool) -> dict[str, np.ndarray]:
+        from tollcli.nmea.reader import _feed_lines
+
+        if self.reference is None:
+            self.reference = EpochAssembler()
+            self.reference._next_epoch = self.next_epoch
+        lines = data.decode("latin-1").replace("\r", "").split("\n") if data else []
+        _feed_lines(lines, self.reference, self.stats, self.strict, self.name)
+        if final:
+            self.reference.finish()
+        self.slow_epochs += self.reference.n_ready
+        return self.reference.take()
+
+    # ------------------------------------------------------------------ bulk path
+    def _bulk_feed(self, data: bytes, final: bool) -> dict[str, np.ndarray] | None:
+        bl = split_block(data)
+        n = bl.start.size
+        first_line = self.stats.lines
+        kind = np.full(n, -1, np.int8)
+        why: dict[int, str] = {}
+        stype = np.full(n, "", dtype=object)
+        tod = np.full(n, np.nan)
+        slow = np.zeros(n, bool)
+        parsed: dict[int, tuple[str, list[str]]] = {}
+
+        kind[bl.plain & ~bl.checksum_ok] = BAD_CHECKSUM
+        for i in np.flatnonzero(bl.plain & ~bl.checksum_ok):
+            why[int(i)] = f"bad checksum (*{int(bl.given[i]):02X} given, {int(bl.computed[i]):02X} computed)"
+        good = bl.plain & bl.checksum_ok
+        type3 = type_code(bl.address)
+        proprietary = (bl.address & 0xFF) == ord("P")
+        handled = good & ~proprietary & np.isin(type3, list(self._handled))
+        kind[good & ~handled] = UNUSED
+
+        decoded: dict[str, dict] = {}
+        python_lines = list(np.flatnonzero(~bl.plain))
+        for code, t in _BULK.items():
+            idx = np.flatnonzero(handled & (type3 == code))
+            d = _DECODERS[t](bl, idx)
+            d["line"] = idx
+            ok = d["ok"]
+            python_lines.extend(idx[~ok])
+            d = bulk_epochs.subset(d, ok)
+            kind[d["line"]] = DECODED
+            stype[d["line"]] = t
+            if "tod" in d:
+                tod[d["line"]] = d["tod"]
+            decoded[t] = d
+        bulk_codes = np.array(list(_BULK), dtype=np.int64)
+        python_lines.extend(np.flatnonzero(handled & ~np.isin(type3, bulk_codes)))
+        self._per_line(bl, sorted(int(i) for i in python_lines), first_line, kind, why, stype, tod, slow, parsed)
+
+        # epochs: a new one where the time of day changes
+        dec = np.flatnonzero(kind == DECODED)
+        dec_tod = tod[dec]
+        timed = ~np.isnan(dec_tod)
+        cur_tod = _ffill(dec_tod)
+        prev_tod = np.concatenate(([np.nan], cur_tod[:-1]))
+        new = timed & ~np.isnan(prev_tod) & ~(np.abs(dec_tod - prev_tod) < SAME_TIME_S)
+        local = np.cumsum(new)
+        n_local = int(local[-1]) + 1 if dec.size else 0
+        if n_local:
+            first_dec = np.flatnonzero(np.concatenate(([True], local[1:] != local[:-1])))
+            first_tod = _first_timed(local, dec_tod, n_local)
+            spread = np.abs(dec_tod - first_tod[local])
+            opener = first_tod[local[first_dec[1:]]]
+            before = first_tod[local[first_dec[1:]] - 1]
+            if np.any(spread[timed] >= SAME_TIME_S) or np.any(~(np.abs(opener - before) >= SAME_TIME_S)):
+                self.reference = EpochAssembler()
+                self.reference._next_epoch = self.next_epoch
+                return self._reference_feed(data, final)
+
+        # the last epoch may go on in the next block
+        cut = n
+        n_done = n_local
+        if not final and n_local:
+            cut = int(dec[first_dec[-1]])
+            n_done = n_local - 1
+            self.carry = data[bl.start[cut] :]
+            if len(self.carry) > MAX_CARRY_BYTES:  # no epoch end in sight: go line by line from here
+                data, self.carry = self.carry, b""
+                self._count(bl, kind, why, stype, cut, first_line)
+                self.reference = EpochAssembler()
+                self.reference._next_epoch = self.next_epoch
+                return self._reference_feed(data, final)
+        self._count(bl, kind, why, stype, cut, first_line)
+        if n_done == 0:
+            return None
+        return self._assemble(bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, stype, decoded, parsed)
+
+    def _per_line(self, bl: BlockLines, lines, first_line, kind, why, stype, tod, slow, parsed) -> None:
+        """Classify and check lines one by one, as the reference reader does (the rare ones)."""
+        from tollcli.nmea.reader import classify_line
+
+        scratch = EpochAssembler()
+        for i in lines:
+            k, reason, address, fields = classify_line(bl.text(i))
+            if k != "sentence":
+                kind[i] = _KIND[k]
+                if reason:
+                    why[i] = reason
+                if k == "unused":
+                    stype[i] = address  # the full address, for the unused-type counts
+                continue
+            t = address[2:]
+            try:
+                scratch.feed(address[:2], t, fields, first_line + i + 1)
+            except (ValueError, IndexError, OverflowError) as exc:
+                kind[i] = MALFORMED
+                why[i] = f"malformed {address}: {exc}"
+                continue
+            kind[i] = DECODED
+            stype[i] = t
+            slow[i] = True
+            parsed[i] = (address, fields)
+            if t in _TIMED_FIRST:
+                tod[i] = time_of_day_s(fields[0])
+            elif t == "GLL" and len(fields) > 4:
+                tod[i] = time_of_day_s(fields[4])
+            if scratch.n_ready > 1000:
+                scratch = EpochAssembler()
+
+    def _count(self, bl: BlockLines, kind, why, stype, cut: int, first_line: int) -> None:
+        """Add the first ``cut`` lines to the statistics (and stop at the first problem when strict)."""
+        stats = self.stats
+        k = kind[:cut]
+        counts = np.bincount(k, minlength=8)
+        problems = np.flatnonzero((k == NOT_NMEA) | (k == NO_CHECKSUM) | (k == BAD_CHECKSUM) | (k == MALFORMED))
+        if problems.size:
+            i = int(problems[0])
+            if self.strict:
+                raise DataError(f"{self.name}:{first_line + i + 1}: {why[i]}")
+            if not stats.first_problem:
+                stats.first_problem = f"line {first_line + i + 1}: {why[i]}"
+        stats.blank += int(counts[BLANK])
+        stats.comments += int(counts[COMMENT])
+        stats.not_nmea += int(counts[NOT_NMEA])
+        stats.no_checksum += int(counts[NO_CHECKSUM])
+        stats.bad_checksum += int(counts[BAD_CHECKSUM])
+        stats.malformed += int(counts[MALFORMED])
+        stats.unused += int(counts[UNUSED])
+        stats.decoded += int(counts[DECODED])
+        stats.sentences += int(counts[UNUSED] + counts[MALFORMED] + counts[DECODED])
+        unused = np.flatnonzero(k == UNUSED)
+        if unused.size:
+            names = [stype[i] or unpack_address(int(bl.address[i])) for i in unused]
+            for name in names:  # first-seen order, as the reference reader's dict
+                stats.unused_types[name] = stats.unused_types.get(name, 0) + 1
+        stats.lines = first_line + cut
+
+    def _assemble(self, bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, stype, decoded, parsed):
+        """Arrays of the ``n_done`` finished epochs: the common ones in bulk, the rest line by line."""
+        in_done = local < n_done
+        ep_tod = _first_timed(local, dec_tod, n_done + 1)[:n_done]
+        keep_epoch = ~np.isnan(ep_tod)  # an epoch without a time is not one (the reference drops it too)
+        ep_global = np.full(n_done, -1, np.int64)
+        ep_global[keep_epoch] = self.next_epoch + np.arange(int(keep_epoch.sum()))
+        self.next_epoch += int(keep_epoch.sum())
+        ep_line = first_line + dec[first_dec[:n_done]] + 1
+        is_slow = np.zeros(n_done, bool)
+        np.logical_or.at(is_slow, local[in_done], slow[dec[in_done]])
+
+        # the bulk-decoded rows of every type, by epoch
+        line_epoch = np.full(bl.start.size, -1, np.int64)
+        line_epoch[dec[in_done]] = local[in_done]
+        rows = {}
+        for t, d in decoded.items():
+            e = line_epoch[d["line"]]
+            d = bulk_epochs.subset(d, e >= 0)
+            d["e"] = line_epoch[d["line"]]
+            d["order"] = d["line"]
+            rows[t] = d
+        is_slow |= bulk_epochs.unsupported_epochs(n_done, rows)
+        fast = keep_epoch & ~is_slow
+        position = np.cumsum(fast) - 1
+        for t, d in rows.items():
+            d = bulk_epochs.subset(d, fast[d["e"]])
+            d["e"] = position[d["e"]]
+            rows[t] = d
+        fast_ids = np.flatnonzero(fast)
+        parts = [bulk_epochs.assemble(ep_global[fast_ids], ep_tod[fast_ids], None, ep_line[fast_ids], rows)]
+        self.fast_epochs += fast_ids.size
+        slow_ids = np.flatnonzero(keep_epoch & is_slow)
+        if slow_ids.size:
+            parts.append(self._reference_epochs(bl, first_line, dec, local, slow_ids, ep_global, parsed))
+            self.slow_epochs += slow_ids.size
+        return _merge(parts)
+
+    def _reference_epochs(self, bl, first_line, dec, local, epoch_ids, ep_global, parsed):
+        """The given epochs assembled sentence by sentence by the reference assembler."""
+        from tollcli.nmea.reader import classify_line
+
+        asm = EpochAssembler()
+        wanted = np.zeros(int(local.max()) + 1, bool)
+        wanted[epoch_ids] = True
+        current = -1
+        for i, ep in zip(dec[wanted[local]].tolist(), local[wanted[local]].tolist()):
+            if ep != current:
+                asm.finish()  # closes the previous epoch
+                asm._next_epoch = int(ep_global[ep])
+                current = ep
+            if i in parsed:
+                address, fields = parsed[i]
+            else:
+                _, _, address, fields = classify_line(bl.text(i))
+            asm.feed(address[:2], address[2:], fields, first_line + i + 1)
+        asm.finish()
+        return asm.take()
+
+
+def _ffill(values: np.ndarray) -> np.ndarray:
+    """NaNs replaced by the last value before them (NaN at the start)."""
+    idx = np.where(~np.isnan(values), np.arange(values.size), -1)
+    np.maximum.accumulate(idx, out=idx)
+    out = np.where(idx >= 0, values[np.maximum(idx, 0)], np.nan)
+    return out
+
+
+def _first_timed(local: np.ndarray, tod: np.ndarray, n: int) -> np.ndarray:
+    """Per epoch, the time of its first timed sentence (NaN when none)."""
+    out = np.full(n, np.nan)
+    timed = ~np.isnan(tod)
+    e = local[timed]
+    if e.size:
+        uniq, first = np.unique(e, return_index=True)
+        keep = uniq < n
+        out[uniq[keep]] = tod[timed][first[keep]]
+    return out
+
+
+def _merge(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Concatenate epoch arrays from both paths, in epoch order."""
+    parts = [p for p in parts if p["epoch"].size or p["sat_epoch"].size]
+    if len(parts) == 1:
+        return parts[0]
+    if not parts:
+        return EpochAssembler().take()
+    out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    order = np.argsort(out["epoch"], kind="stable")
+    sat_order = np.argsort(out["sat_epoch"], kind="stable")
+    return {k: (v[sat_order] if k.startswith("sat_") else v[order]) for k, v in out.items()}

@@ -1,0 +1,227 @@
+"""Decode the common sentences of a block in bulk: one function per type, arrays in, arrays out.
+
+Each decoder takes the block (:class:`~tollcli.nmea.bulk_lines.BlockLines`) and the
+indices of its lines of that type, and returns a dict of arrays (one row per line)
+with an ``ok`` mask. A line that is not ``ok`` is re-read by the per-line reader,
+which either finds it malformed or reads it (its epoch is then assembled per line).
+Fields and rules are those of :mod:`tollcli.nmea.assembler`, which documents them.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from tollcli.nmea import bulk_fields as bf
+from tollcli.nmea.bulk_lines import BlockLines, pack_address, talker_code
+from tollcli.nmea.fields import KMH_MPS, KNOT_MPS
+from tollcli.nmea.satellite_ids import (
+    CONSTELLATIONS,
+    SYSTEM_ID_CONSTELLATION,
+    TALKER_CONSTELLATION,
+    satellite_id,
+)
+
+MAX_PRN = 1_023  # satellite numbers in the look-up table; larger ones go the per-line way
+#: constellation hints, in the order of the satellite look-up table's rows
+HINTS = (None, "GLONASS", "Galileo", "BeiDou", "QZSS", "NavIC")
+_CONST_INDEX = {name: i for i, name in enumerate(CONSTELLATIONS)}
+
+
+@lru_cache(maxsize=1)
+def satellite_table() -> tuple[np.ndarray, np.ndarray]:
+    """(constellation index, svid) of every (hint row, number 0…9999), from :func:`satellite_id`."""
+    const = np.zeros((len(HINTS), MAX_PRN + 1), np.int8)
+    svid = np.zeros((len(HINTS), MAX_PRN + 1), np.int64)
+    for h, hint in enumerate(HINTS):
+        for prn in range(1, MAX_PRN + 1):
+            c, s = satellite_id(hint, prn)
+            const[h, prn] = _CONST_INDEX[c]
+            svid[h, prn] = s
+    return const, svid
+
+
+def _hint_row(name: str | None) -> int:
+    return HINTS.index(name) if name in HINTS else 0
+
+
+#: talker (two packed bytes) → hint row; system id → hint row
+_TALKER_ROW = {pack_address(t): _hint_row(c) for t, c in TALKER_CONSTELLATION.items()}
+_SYSID_ROW = {k: _hint_row(v) for k, v in SYSTEM_ID_CONSTELLATION.items()}
+
+
+def talker_rows(address: np.ndarray) -> np.ndarray:
+    """Hint row of each line's talker (0, the number alone, for unknown talkers)."""
+    talker = talker_code(address)
+    out = np.zeros(address.size, np.int64)
+    for code, row in _TALKER_ROW.items():
+        out[talker == code] = row
+    return out
+
+
+def _span(bl: BlockLines, idx: np.ndarray, k: int):
+    return bl.field_span(idx, k)
+
+
+def _numbers(bl: BlockLines, idx: np.ndarray, ks: tuple[int, ...]):
+    """Fields ``ks`` of lines ``idx`` read as decimals in one pass: (values, ok, empty, dotted), each (len(ks), n)."""
+    lines = np.tile(idx, len(ks))
+    k = np.repeat(np.asarray(ks, np.int64), idx.size)
+    s, e = bl.field_span(lines, k)
+    shape = (len(ks), idx.size)
+    return tuple(a.reshape(shape) for a in bf.decimal(bl, s, e))
+
+
+def _as_int(v: np.ndarray, ok: np.ndarray, empty: np.ndarray, dotted: np.ndarray, lo: int, hi: int, missing: int = -1):
+    """Decimals read by :func:`_numbers` as integers in [lo, hi], as ``fields.integer`` (``int("5.0")`` fails)."""
+    out = np.where(ok & ~empty, np.nan_to_num(v), missing).astype(np.int64)
+    return out, ok & ~dotted & (empty | ((out >= lo) & (out <= hi)))
+
+
+def _letter(bl, idx, k) -> np.ndarray:
+    """The field's character code when it is exactly one character, 0 when empty, -1 otherwise."""
+    s, e = _span(bl, idx, k)
+    n = e - s
+    ch = bl.buf[np.clip(s, 0, bl.buf.size - 1)].astype(np.int64)
+    return np.where(n == 0, 0, np.where(n == 1, ch, -1))
+
+
+def _first_char(bl, idx, k) -> np.ndarray:
+    """The field's first character code, 0 when empty."""
+    s, e = _span(bl, idx, k)
+    ch = bl.buf[np.clip(s, 0, bl.buf.size - 1)].astype(np.int64)
+    return np.where(e > s, ch, 0)
+
+
+def _latlon(bl, idx, v, ok, empty, i_lat: int, k_lat: int):
+    """Latitude and longitude from rows ``i_lat``, ``i_lat + 1`` of :func:`_numbers` (fields ``k_lat``, ``k_lat + 2``)."""
+    lat, ok1 = bf.ddmm_deg(v[i_lat], ok[i_lat], empty[i_lat], _letter(bl, idx, k_lat + 1), 90.0, ord("S"), ord("N"))
+    lon, ok2 = bf.ddmm_deg(v[i_lat + 1], ok[i_lat + 1], empty[i_lat + 1], _letter(bl, idx, k_lat + 3), 180.0, ord("W"), ord("E"))
+    return lat, lon, ok1 & ok2
+
+
+def _tod(bl, idx, k=1):
+    s, e = _span(bl, idx, k)
+    return bf.time_of_day_s(bl, s, e)
+
+
+def gga(bl: BlockLines, idx: np.ndarray) -> dict:
+    nf = bl.n_fields[idx]
+    tod, ok = _tod(bl, idx)
+    v, oks, empty, dotted = _numbers(bl, idx, (2, 4, 6, 7, 8, 9, 11))
+    lat, lon, ok_pos = _latlon(bl, idx, v, oks, empty, 0, 2)
+    quality, ok_q = _as_int(v[2], oks[2], empty[2], dotted[2], 0, 127)
+    n_used, ok_n = _as_int(v[3], oks[3], empty[3], dotted[3], 0, 9_999)
+    sep = np.where(nf > 10, v[6], np.nan)
+    ok_s = oks[6] | (nf <= 10)
+    return dict(tod=tod, lat=lat, lon=lon, quality=quality, n_used=n_used, hdop=v[4], alt=v[5], sep=sep,
+                ok=(nf >= 9) & ok & ok_pos & ok_q & ok_n & oks[4] & oks[5] & ok_s)  # fmt: skip
+
+
+def rmc(bl: BlockLines, idx: np.ndarray) -> dict:
+    nf = bl.n_fields[idx]
+    tod, ok = _tod(bl, idx)
+    status = _letter(bl, idx, 2)
+    v, oks, empty, _ = _numbers(bl, idx, (3, 5, 7, 8))
+    lat, lon, ok_pos = _latlon(bl, idx, v, oks, empty, 0, 3)
+    s, e = _span(bl, idx, 9)
+    date, ok_d = bf.rmc_date_days(bl, s, e)
+    mode = np.where(nf > 11, _first_char(bl, idx, 12), 0)
+    return dict(tod=tod, status=status, lat=lat, lon=lon, speed=v[2] * KNOT_MPS, course=v[3], date=date, mode=mode,
+                ok=(nf >= 9) & ok & ok_pos & oks[2] & oks[3] & ok_d)  # fmt: skip
+
+
+def vtg(bl: BlockLines, idx: np.ndarray) -> dict:
+    """Only the NMEA 2.3+ layout (``course,T,,M,knots,N,kmh,K[,mode]``); the 1.5 layout is left to the per-line path."""
+    nf = bl.n_fields[idx]
+    t = _letter(bl, idx, 2)
+    v, oks, _, _ = _numbers(bl, idx, (1, 5, 7))
+    course, knots, kmh = v
+    s, e = _span(bl, idx, 9)
+    mode_n = (nf > 8) & (e - s == 1) & (bl.buf[np.clip(s, 0, bl.buf.size - 1)] == ord("N"))
+    speed = np.where(np.isnan(kmh), knots * KNOT_MPS, kmh * KMH_MPS)
+    return dict(course=course, speed=speed, mode_n=mode_n,
+                ok=(nf >= 7) & ((t == ord("T")) | (t == 0)) & oks.all(axis=0))  # fmt: skip
+
+
+GST_COLUMNS = ("rms_residual_m", "sigma_major_m", "sigma_minor_m", "ellipse_orient_deg", "sigma_lat_m", "sigma_lon_m", "sigma_alt_m")
+
+
+def gst(bl: BlockLines, idx: np.ndarray) -> dict:
+    nf = bl.n_fields[idx]
+    tod, ok = _tod(bl, idx)
+    v, oks, _, _ = _numbers(bl, idx, tuple(range(2, 9)))
+    out = dict(zip(GST_COLUMNS, v))
+    out["tod"] = tod
+    out["ok"] = ok & (nf >= 8) & oks.all(axis=0)
+    return out
+
+
+def gsa(bl: BlockLines, idx: np.ndarray) -> dict:
+    """GSA with 17 fields, or 18 with a one-digit NMEA 4.10 system id; satellites as (line, slot) rows."""
+    nf = bl.n_fields[idx]
+    last = _letter(bl, idx, 18)
+    has_sys = (nf == 18) & (last >= ord("0")) & (last <= ord("9"))
+    ok = (nf == 17) | has_sys
+    sysid = np.where(has_sys, last - ord("0"), -1)
+    v, oks, empty, dotted = _numbers(bl, idx, (2, 15, 16, 17))
+    fix_mode, ok_m = _as_int(v[0], oks[0], empty[0], dotted[0], 0, 127)
+    pdop, hdop, vdop = v[1], v[2], v[3]
+    ok &= ok_m & oks[1:].all(axis=0)
+    hint = talker_rows(bl.address[idx])
+    for code, row in _SYSID_ROW.items():
+        hint[sysid == code] = row
+    hint[(sysid >= 7)] = 0  # an unknown system id: the number decides
+    # the twelve satellite slots
+    rows = np.repeat(np.arange(idx.size), 12)
+    slot = np.tile(np.arange(3, 15), idx.size)
+    s, e = bl.field_span(idx[rows], slot)
+    prn, ok_prn = bf.integer(bl, s, e, lo=1, hi=9_999)
+    ok_prn &= prn <= MAX_PRN  # beyond the look-up table: the per-line path
+    ok &= ok_prn.reshape(idx.size, 12).all(axis=1)
+    present = e > s
+    const_t, svid_t = satellite_table()
+    rows, prn = rows[present], prn[present]
+    safe = np.clip(prn, 0, MAX_PRN)
+    return dict(fix_mode=fix_mode, pdop=pdop, hdop=hdop, vdop=vdop, sysid=sysid, ok=ok,
+                sat_row=rows, sat_const=const_t[hint[rows], safe], sat_svid=svid_t[hint[rows], safe])  # fmt: skip
+
+
+def gsv(bl: BlockLines, idx: np.ndarray) -> dict:
+    """GSV groups as (line, group) rows; a trailing one-character hex signal id (NMEA 4.10)."""
+    nf = bl.n_fields[idx]
+    body = nf - 3
+    has_signal = (body % 4) == 1
+    ok = (nf >= 3) & ((body % 4 == 0) | has_signal)
+    s, e = bl.field_span(idx, nf)
+    ch = bl.buf[np.clip(s, 0, bl.buf.size - 1)].astype(np.int64)
+    hexv = np.where((ch >= 48) & (ch <= 57), ch - 48, np.where((ch >= 65) & (ch <= 70), ch - 55, -2))
+    signal = np.where(has_signal, np.where(e == s, -1, np.where(e - s == 1, hexv, -2)), -1)
+    ok &= signal >= -1
+    groups = np.maximum(body, 0) // 4
+    rows = np.repeat(np.arange(idx.size), groups)
+    first = np.cumsum(groups) - groups
+    g = np.arange(rows.size) - first[rows]
+    k0 = 4 + 4 * g
+    line = idx[rows]
+    lines4 = np.tile(line, 4)
+    s, e = bl.field_span(lines4, np.concatenate([k0, k0 + 1, k0 + 2, k0 + 3]))
+    v, oks, empty, dotted = bf.decimal(bl, s, e)
+    m = line.size
+    present = ~empty[:m]
+    prn, ok_prn = _as_int(v[:m], oks[:m], empty[:m], dotted[:m], 1, 9_999)
+    ok_prn &= prn <= MAX_PRN
+    elev, azim, cn0 = v[m : 2 * m], v[2 * m : 3 * m], v[3 * m :]
+    ok_e, ok_a, ok_c = oks[m : 2 * m], oks[2 * m : 3 * m], oks[3 * m :]
+    with np.errstate(invalid="ignore"):
+        ok_range = (np.isnan(elev) | ((elev >= -90.0) & (elev <= 90.0))) & (np.isnan(azim) | ((azim >= 0.0) & (azim <= 360.0)))
+    sat_ok = ~present | (ok_prn & ok_e & ok_a & ok_c & ok_range)
+    ok &= np.bincount(rows[~sat_ok], minlength=idx.size) == 0
+    keep = present
+    hint = talker_rows(bl.address[idx])
+    const_t, svid_t = satellite_table()
+    safe = np.clip(prn[keep], 0, MAX_PRN)
+    r = rows[keep]
+    return dict(ok=ok, sat_row=r, sat_const=const_t[hint[r], safe], sat_svid=svid_t[hint[r], safe],
+                sat_prn=prn[keep], sat_signal=signal[r], sat_elev=elev[keep], sat_azim=azim[keep], sat_cn0=cn0[keep])  # fmt: skip
