@@ -1,7 +1,7 @@
 """Assemble epochs from sentences decoded in bulk, with the rules of :mod:`tollcli.nmea.assembler`.
 
-The bulk path assembles the common epoch: at most one GGA, RMC, VTG and GST, any
-number of GSA and GSV, each satellite reported once per epoch. Epochs outside that
+The bulk path assembles the common epoch: at most one GGA, RMC, VTG, GST, GLL and
+ZDA, any number of GSA and GSV, each satellite reported once per epoch. Epochs outside that
 (:func:`unsupported_epochs`) are assembled per line by the reference assembler.
 Every function here works on all epochs of a block at once.
 """
@@ -13,7 +13,7 @@ import numpy as np
 from tollcli.nmea.assembler import FLOAT_COLUMNS
 from tollcli.nmea.satellite_ids import CONSTELLATIONS
 
-SENTENCE_TYPES = ("GGA", "RMC", "VTG", "GSA", "GSV", "GST")
+SENTENCE_TYPES = ("GGA", "RMC", "VTG", "GSA", "GSV", "GST", "GLL", "ZDA")
 SAT_FIELDS = ("sat_row", "sat_const", "sat_svid", "sat_prn", "sat_signal", "sat_elev", "sat_azim", "sat_cn0")
 _A, _V = ord("A"), ord("V")
 _NOT_FIX = np.array([ord(c) for c in "ENMS"])
@@ -36,9 +36,9 @@ def subset(decoded: dict, keep: np.ndarray) -> dict:
 
 
 def unsupported_epochs(n_epochs: int, s: dict[str, dict]) -> np.ndarray:
-    """Epochs the bulk rules do not cover: a repeated GGA/RMC/VTG/GST or a satellite twice in GSV."""
+    """Epochs the bulk rules do not cover: a repeated GGA/RMC/VTG/GST/GLL/ZDA or a satellite twice in GSV."""
     bad = np.zeros(n_epochs, bool)
-    for t in ("GGA", "RMC", "VTG", "GST"):
+    for t in ("GGA", "RMC", "VTG", "GST", "GLL", "ZDA"):
         bad |= np.bincount(s[t]["e"], minlength=n_epochs) > 1
     g = s["GSV"]
     if g["sat_row"].size:
@@ -80,6 +80,76 @@ def _last_finite(n: int, e: np.ndarray, values: np.ndarray) -> np.ndarray:
     return out
 
 
+def _by_epoch(n: int, rows: dict, values: np.ndarray, fill) -> tuple[np.ndarray, np.ndarray]:
+    """One sentence type's values and line per epoch (at most one per epoch; ``fill`` and a huge line elsewhere)."""
+    v = np.full(n, fill, dtype=np.asarray(values).dtype)
+    v[rows["e"]] = values
+    line = np.full(n, np.iinfo(np.int64).max, np.int64)
+    line[rows["e"]] = rows["order"]
+    return v, line
+
+
+def _first_given(n: int, sources: list[tuple[dict, np.ndarray]]) -> np.ndarray:
+    """Per epoch, the first non-zero code in line order among the sources (0 when none)."""
+    out = np.zeros(n, np.int64)
+    first_line = np.full(n, np.iinfo(np.int64).max, np.int64)
+    for rows, values in sources:
+        v, line = _by_epoch(n, rows, np.asarray(values, np.int64), 0)
+        take = (v != 0) & (line < first_line)
+        out = np.where(take, v, out)
+        first_line = np.where(take, line, first_line)
+    return out
+
+
+def _dates(n: int, sources: list[tuple[dict, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Per epoch, the last date given in line order, and the later minus the earlier one when two differ."""
+    (a_rows, a_date), (b_rows, b_date) = sources
+    a, a_line = _by_epoch(n, a_rows, np.asarray(a_date, np.int64), -1)
+    b, b_line = _by_epoch(n, b_rows, np.asarray(b_date, np.int64), -1)
+    b_later = b_line > a_line
+    first, last = np.where(b_later, a, b), np.where(b_later, b, a)
+    date = np.where(last >= 0, last, first)
+    differ = (first >= 0) & (last >= 0) & (first != last)
+    return date, np.where(differ, (last - first).astype(float), np.nan)
+
+
+def _positions(n: int, candidates: list[tuple[dict, np.ndarray, int]]):
+    """Latitude, longitude, disagreement (m) and rank of each epoch's position, folding the candidates in line order.
+
+    As the reference assembler: a candidate of another rank than the best so far is
+    measured against it (the largest distance is kept); a better rank replaces it.
+    """
+    k = len(candidates)
+    lat = np.full((n, k), np.nan)
+    lon = np.full((n, k), np.nan)
+    ok = np.zeros((n, k), bool)
+    line = np.full((n, k), np.iinfo(np.int64).max, np.int64)
+    rank = np.array([c[2] for c in candidates])
+    for j, (rows, usable, _) in enumerate(candidates):
+        lat[rows["e"], j], lon[rows["e"], j] = rows["lat"], rows["lon"]
+        ok[rows["e"], j] = usable
+        line[rows["e"], j] = rows["order"]
+    order = np.argsort(line, axis=1, kind="stable")
+    best_lat, best_lon = np.full(n, np.nan), np.full(n, np.nan)
+    best_rank = np.full(n, 99)
+    gap_max = np.full(n, -1.0)
+    for j in range(k):
+        c = order[:, j]
+        c_ok = np.take_along_axis(ok, c[:, None], 1)[:, 0]
+        c_lat = np.take_along_axis(lat, c[:, None], 1)[:, 0]
+        c_lon = np.take_along_axis(lon, c[:, None], 1)[:, 0]
+        c_rank = rank[c]
+        measure = c_ok & (best_rank < 99) & (c_rank != best_rank)
+        with np.errstate(invalid="ignore"):
+            gap = np.hypot((c_lat - best_lat) * 111_195.0, (c_lon - best_lon) * 111_195.0 * np.cos(np.radians(c_lat)))
+            gap_max = np.where(measure & (gap > gap_max), gap, gap_max)
+        better = c_ok & (c_rank < best_rank)
+        best_lat = np.where(better, c_lat, best_lat)
+        best_lon = np.where(better, c_lon, best_lon)
+        best_rank = np.where(better, c_rank, best_rank)
+    return best_lat, best_lon, np.where(gap_max >= 0, gap_max, np.nan), best_rank
+
+
 def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, date_days_unused, line: np.ndarray, s: dict[str, dict]) -> dict[str, np.ndarray]:
     """The epoch and satellite arrays (as :meth:`EpochAssembler.take` gives them) of supported epochs.
 
@@ -87,7 +157,7 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, date_days_unused, line: n
     position in ``epoch_ids``) and ``order`` (the line index, for "which came first").
     """
     n = epoch_ids.size
-    gga, rmc, vtg, gsa, gsv, gst = (s[t] for t in SENTENCE_TYPES)
+    gga, rmc, vtg, gsa, gsv, gst, gll, zda = (s[t] for t in SENTENCE_TYPES)
     out: dict[str, np.ndarray] = {"epoch": epoch_ids.astype(np.int64), "tod_s": tod_s, "line": line.astype(np.int64)}
     floats = {k: np.full(n, np.nan) for k in FLOAT_COLUMNS}
 
@@ -95,38 +165,28 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, date_days_unused, line: n
     q = _scatter(n, gga["e"], gga["quality"], -1, np.int64)
     n_used_gga = _scatter(n, gga["e"], gga["n_used"], -1, np.int64)
     gga_pos = (gga["quality"] != 0) & np.isfinite(gga["lat"]) & np.isfinite(gga["lon"])
-    has_gga_pos = _scatter(n, gga["e"], gga_pos, False, bool)
-    gga_lat = _scatter(n, gga["e"], gga["lat"], np.nan)
-    gga_lon = _scatter(n, gga["e"], gga["lon"], np.nan)
-    gga_line = _scatter(n, gga["e"], gga["order"], -1, np.int64)
     fixed = gga["quality"] != 0
     floats["alt_m"] = _scatter(n, gga["e"][fixed], gga["alt"][fixed], np.nan)
     floats["geoid_sep_m"] = _scatter(n, gga["e"][fixed], gga["sep"][fixed], np.nan)
     hdop_gga = _scatter(n, gga["e"], gga["hdop"], np.nan)
 
-    # RMC: date, status, mode letter; position (rank 2) and velocity (rank 0) when 'A'
-    date = _scatter(n, rmc["e"], rmc["date"], -1, np.int64)
-    status = _scatter(n, rmc["e"], np.where((rmc["status"] == _A) | (rmc["status"] == _V), rmc["status"], 0), 0, np.int64)
-    mode = _scatter(n, rmc["e"], rmc["mode"], 0, np.int64)
+    # RMC: position (rank 2) and velocity (rank 0) when 'A'
     active = rmc["status"] == _A
-    rmc_pos = active & np.isfinite(rmc["lat"]) & np.isfinite(rmc["lon"])
-    has_rmc_pos = _scatter(n, rmc["e"], rmc_pos, False, bool)
-    rmc_lat = _scatter(n, rmc["e"], rmc["lat"], np.nan)
-    rmc_lon = _scatter(n, rmc["e"], rmc["lon"], np.nan)
-    rmc_line = _scatter(n, rmc["e"], rmc["order"], -1, np.int64)
     speed = _scatter(n, rmc["e"][active], rmc["speed"][active], np.nan)
     course = _scatter(n, rmc["e"][active], rmc["course"][active], np.nan)
-
-    # position: GGA wins; with both, how far apart (measured with the later sentence's latitude)
-    floats["lat_deg"] = np.where(has_gga_pos, gga_lat, np.where(has_rmc_pos, rmc_lat, np.nan))
-    floats["lon_deg"] = np.where(has_gga_pos, gga_lon, np.where(has_rmc_pos, rmc_lon, np.nan))
-    both = has_gga_pos & has_rmc_pos
-    later_lat = np.where(rmc_line > gga_line, rmc_lat, gga_lat)
-    dn = (rmc_lat - gga_lat) * 111_195.0
-    de = (rmc_lon - gga_lon) * 111_195.0 * np.cos(np.radians(later_lat))
-    with np.errstate(invalid="ignore"):
-        floats["pos_disagreement_m"] = np.where(both, np.hypot(dn, de), np.nan)
-    pos_rank = np.where(has_gga_pos, 0, np.where(has_rmc_pos, 2, 99))
+    # RMC and GLL: status and mode letter, the first given in line order
+    status = _first_given(n, [(rmc, np.where((rmc["status"] == _A) | (rmc["status"] == _V), rmc["status"], 0)),
+                              (gll, np.where((gll["status"] == _A) | (gll["status"] == _V), gll["status"], 0))])  # fmt: skip
+    mode = _first_given(n, [(rmc, rmc["mode"]), (gll, gll["mode"])])
+    # RMC and ZDA: the date, the last given; a second, different one is a disagreement
+    date, floats["date_disagreement_days"] = _dates(n, [(rmc, rmc["date"]), (zda, zda["date"])])
+    # position: GGA, RMC ('A'), GLL (not 'V'), the best rank wins; each later one is measured against the best so far
+    candidates = [
+        (gga, gga_pos, 0),
+        (rmc, active & np.isfinite(rmc["lat"]) & np.isfinite(rmc["lon"]), 2),
+        (gll, (gll["status"] != _V) & np.isfinite(gll["lat"]) & np.isfinite(gll["lon"]), 3),
+    ]
+    floats["lat_deg"], floats["lon_deg"], floats["pos_disagreement_m"], pos_rank = _positions(n, candidates)
 
     # VTG: velocity (rank 1) unless its mode is 'N'
     use = ~vtg["mode_n"]

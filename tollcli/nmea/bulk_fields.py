@@ -166,7 +166,7 @@ def days_from_civil(year: np.ndarray, month: np.ndarray, day: np.ndarray) -> np.
     return era * 146_097 + doe - 719_468
 
 
-def _days_in_month(year: np.ndarray, month: np.ndarray) -> np.ndarray:
+def days_in_month(year: np.ndarray, month: np.ndarray) -> np.ndarray:
     leap = ((year % 4 == 0) & (year % 100 != 0)) | (year % 400 == 0)
     table = np.array([0, 31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31])
     return table[np.clip(month, 0, 12)] + (leap & (month == 2))
@@ -184,7 +184,7 @@ def rmc_date_days(block, start, end) -> tuple[np.ndarray, np.ndarray]:
     d = chars.astype(np.int64) - _ZERO
     day, month, yy = d[:, 0] * 10 + d[:, 1], d[:, 2] * 10 + d[:, 3], d[:, 4] * 10 + d[:, 5]
     year = np.where(yy >= 80, 1900 + yy, 2000 + yy)
-    ok = digit & (month >= 1) & (month <= 12) & (day >= 1) & (day <= _days_in_month(year, month))
+    ok = digit & (month >= 1) & (month <= 12) & (day >= 1) & (day <= days_in_month(year, month))
     days = np.where(ok, days_from_civil(year, month, day), -1)
     return days, ok | empty
 

@@ -4,9 +4,9 @@ Per block (≈ 1 MB of whole lines):
 
 1. :func:`~tollcli.nmea.bulk_lines.split_block` frames every line and verifies the
    checksums of the plain ones with array operations;
-2. :mod:`~tollcli.nmea.bulk_sentences` decodes GGA, RMC, VTG, GSA, GSV and GST in
-   bulk; lines it cannot read plainly, other lines and the rarer sentence types
-   (GRS, GNS, GLL, GBS, ZDA) go through the reference reader's per-line classifier
+2. :mod:`~tollcli.nmea.bulk_sentences` decodes GGA, RMC, VTG, GSA, GSV, GST, GLL
+   and ZDA in bulk; lines it cannot read plainly, other lines and the rarer
+   sentence types (GRS, GNS, GBS) go through the reference reader's per-line classifier
    and converters, which also decide what is malformed;
 3. epochs are cut where the time of day changes (as the reference assembler does),
    the last, possibly unfinished epoch is carried into the next block;
@@ -43,7 +43,8 @@ _PROBLEM_NAME = {NOT_NMEA: "not_nmea", NO_CHECKSUM: "no_checksum", BAD_CHECKSUM:
 _TIMED_FIRST = {"GGA", "RMC", "GNS", "GST", "GRS", "GBS", "ZDA"}
 _BULK = {pack_address("XX" + t) >> 16: t for t in bulk_epochs.SENTENCE_TYPES}
 _DECODERS = {"GGA": bulk_sentences.gga, "RMC": bulk_sentences.rmc, "VTG": bulk_sentences.vtg,
-             "GSA": bulk_sentences.gsa, "GSV": bulk_sentences.gsv, "GST": bulk_sentences.gst}  # fmt: skip
+             "GSA": bulk_sentences.gsa, "GSV": bulk_sentences.gsv, "GST": bulk_sentences.gst,
+             "GLL": bulk_sentences.gll, "ZDA": bulk_sentences.zda}  # fmt: skip
 #: an epoch longer than this (bytes) is not waited for: the rest of the log goes the reference way
 MAX_CARRY_BYTES = 16 << 20
 SAME_TIME_S = 5e-4  # as the reference assembler
@@ -109,6 +110,7 @@ class BulkReader:
         stype = np.full(n, "", dtype=object)
         tod = np.full(n, np.nan)
         slow = np.zeros(n, bool)
+        inert = np.zeros(n, bool)  # decoded, but changes no epoch (a VTG with mode 'N')
         parsed: dict[int, tuple[str, list[str]]] = {}
 
         kind[bl.plain & ~bl.checksum_ok] = BAD_CHECKSUM
@@ -133,13 +135,15 @@ class BulkReader:
             stype[d["line"]] = t
             if "tod" in d:
                 tod[d["line"]] = d["tod"]
+            if "mode_n" in d:
+                inert[d["line"][d["mode_n"]]] = True
             decoded[t] = d
         bulk_codes = np.array(list(_BULK), dtype=np.int64)
         python_lines.extend(np.flatnonzero(handled & ~np.isin(type3, bulk_codes)))
-        self._per_line(bl, sorted(int(i) for i in python_lines), first_line, kind, why, stype, tod, slow, parsed)
+        self._per_line(bl, sorted(int(i) for i in python_lines), first_line, kind, why, stype, tod, slow, inert, parsed)
 
         # epochs: a new one where the time of day changes
-        dec = np.flatnonzero(kind == DECODED)
+        dec = np.flatnonzero((kind == DECODED) & ~inert)
         dec_tod = tod[dec]
         timed = ~np.isnan(dec_tod)
         cur_tod = _ffill(dec_tod)
@@ -176,7 +180,7 @@ class BulkReader:
             return None
         return self._assemble(bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, stype, decoded, parsed)
 
-    def _per_line(self, bl: BlockLines, lines, first_line, kind, why, stype, tod, slow, parsed) -> None:
+    def _per_line(self, bl: BlockLines, lines, first_line, kind, why, stype, tod, slow, inert, parsed) -> None:
         """Classify and check lines one by one, as the reference reader does (the rare ones)."""
         from tollcli.nmea.reader import classify_line
 
@@ -205,6 +209,8 @@ class BulkReader:
                 tod[i] = time_of_day_s(fields[0])
             elif t == "GLL" and len(fields) > 4:
                 tod[i] = time_of_day_s(fields[4])
+            elif t == "VTG" and len(fields) > 8 and fields[1] in ("T", "") and fields[8] == "N":
+                inert[i] = True
             if scratch.n_ready > 1000:
                 scratch = EpochAssembler()
 

@@ -225,3 +225,30 @@ def gsv(bl: BlockLines, idx: np.ndarray) -> dict:
     r = rows[keep]
     return dict(ok=ok, sat_row=r, sat_const=const_t[hint[r], safe], sat_svid=svid_t[hint[r], safe],
                 sat_prn=prn[keep], sat_signal=signal[r], sat_elev=elev[keep], sat_azim=azim[keep], sat_cn0=cn0[keep])  # fmt: skip
+
+
+def gll(bl: BlockLines, idx: np.ndarray) -> dict:
+    """GLL: position, then (NMEA 2.3+) time, status and mode."""
+    nf = bl.n_fields[idx]
+    v, oks, empty, _ = _numbers(bl, idx, (1, 3))
+    lat, lon, ok_pos = _latlon(bl, idx, v, oks, empty, 0, 1)
+    tod, ok_t = _tod(bl, idx, 5)
+    tod = np.where(nf > 4, tod, np.nan)
+    status = np.where(nf > 5, _letter(bl, idx, 6), 0)
+    mode = np.where(nf > 6, _first_char(bl, idx, 7), 0)
+    return {"tod": tod, "lat": lat, "lon": lon, "status": status, "mode": mode,
+            "ok": (nf >= 4) & ok_pos & (ok_t | (nf <= 4))}  # fmt: skip
+
+
+def zda(bl: BlockLines, idx: np.ndarray) -> dict:
+    """ZDA: time and date (read only when day, month and year are all given, as the per-line reader does)."""
+    nf = bl.n_fields[idx]
+    tod, ok = _tod(bl, idx)
+    v, oks, empty, dotted = _numbers(bl, idx, (2, 3, 4))
+    given = ~empty.any(axis=0)
+    day, ok_d = _as_int(v[0], oks[0], empty[0], dotted[0], 1, 31)
+    month, ok_m = _as_int(v[1], oks[1], empty[1], dotted[1], 1, 12)
+    year, ok_y = _as_int(v[2], oks[2], empty[2], dotted[2], 1, 9_999)
+    valid = ok_d & ok_m & ok_y & (day <= bf.days_in_month(year, month))
+    date = np.where(given & valid, bf.days_from_civil(year, month, day), -1)
+    return {"tod": tod, "date": date, "ok": (nf >= 4) & ok & (~given | valid)}

@@ -21,7 +21,13 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError, PartialError
-from tollcli.io.sources import BLOCK_BYTES, iter_byte_blocks, iter_text_blocks, open_binary, source_name
+from tollcli.io.sources import (
+    BLOCK_BYTES,
+    iter_byte_blocks,
+    iter_text_blocks,
+    open_binary,
+    source_name,
+)
 from tollcli.nmea.assembler import EpochAssembler
 from tollcli.nmea.dates import DateCarry, resolve_days, to_time_utc_ms
 from tollcli.nmea.fields import checksum
