@@ -11,17 +11,24 @@ import numpy as np
 import pandas as pd
 
 from tollcli.charging.invoice import build_invoice, file_sha256, invoice_json, seal
-from tollcli.charging.recognition import charges, load_geoobjects, recognise
+from tollcli.charging.recognition import (
+    charges,
+    concat_pairs,
+    inside_pairs,
+    load_geoobjects,
+    positions_from_pairs,
+)
 from tollcli.charging.tariffs import load_tariff
-from tollcli.errors import UsageError
+from tollcli.enforcement.findings import FindingSettings, trip_findings
+from tollcli.enforcement.trip import cn0_summary
+from tollcli.errors import DataError, UsageError
+from tollcli.integrity.from_nmea import AngleCarry, nmea_measurements
 from tollcli.integrity.pseudorange_inputs import pseudorange_epochs
-from tollcli.io.sources import sniff_format
-from tollcli.integrity.from_nmea import nmea_measurements
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
-from tollcli.enforcement.findings import FindingSettings, trip_findings
 from tollcli.integrity.sigma_models import NominalModel
-from tollcli.nmea import ReadStats, read_nmea
+from tollcli.io.sources import sniff_format
+from tollcli.nmea import ReadStats, iter_nmea_tables
 from tollcli.nmea.reader import check_usable
 
 
@@ -65,22 +72,18 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     kind = sniff_format(log)
     stats = None
     nominal = NominalModel()
+    epoch_raim = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa)
     if kind == "nmea":
-        date = dt.date.fromisoformat(settings.date) if settings.date else None
-        tables = read_nmea(log, strict=settings.strict, date=date)
-        check_usable(tables.stats)
-        stats = tables.stats
-        epochs = tables.epochs
-        model = settings.sigma_model if settings.sigma_model != "input" else "nominal"
-        meas = nmea_measurements(epochs, tables.satellites, model, settings.sigma_m, nominal)
+        epochs, per_epoch, pairs, cn0, stats = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal,
+                                                                 keep_all=epoch_table is not None)  # fmt: skip
     else:
         epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal)
-    per_epoch = run_raim(meas, RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa))
+        per_epoch = run_raim(meas, epoch_raim)
+        pairs, cn0 = inside_pairs(epochs, meas, geo_objects, params), None
     policy, why, matched = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
-    positions = recognise(epochs, meas, geo_objects, params, tc_s=settings.tc_s, n_th=settings.n_th,
-                          epoch_why=why, matched_road=matched)  # fmt: skip
+    positions = positions_from_pairs(pairs, epochs["time_utc"], geo_objects, tc_s=settings.tc_s, epoch_why=why, matched_road=matched)
     finding_settings = FindingSettings.for_class(settings.vehicle_class)
-    found = trip_findings(epochs, tables.satellites if kind == "nmea" else None, per_epoch, geo_objects, finding_settings)
+    found = trip_findings(epochs, None, per_epoch, geo_objects, finding_settings, cn0=cn0)
     table = charges(positions, settings.n_th)
     dated = epochs["time_utc"].dropna()
     inputs = {"log": log, "geoobjects": geo, "tariff": tariff,
@@ -103,10 +106,58 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     return invoice, stats
 
 
+#: epoch columns kept for the whole log after its chunks are read (policy checks, findings, the invoice's period)
+KEPT_EPOCH_COLUMNS = ("epoch", "time_utc", "tod_s", "line", "lat_deg", "lon_deg", "fix_valid", "n_used", "hdop", "speed_mps",
+                      "course_deg", "sigma_major_m", "pos_disagreement_m", "date_disagreement_days")  # fmt: skip
+#: per-epoch RAIM columns kept (the policy checks and the findings use them)
+KEPT_RAIM_COLUMNS = ("raim_status", "n_used", "test_stat", "threshold")
+#: epochs per chunk: the working set of the satellite-level steps (an hour at 1 Hz)
+CHUNK_EPOCHS = 3_600
+
+
+def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams,
+                      nominal: NominalModel, keep_all: bool = False):  # fmt: skip
+    """Read an NMEA log chunk by chunk: each chunk's satellites, RAIM and geo-object pairs are done before the next.
+
+    What is kept for the whole log is small per epoch: the epoch columns later steps use
+    (all of them with ``keep_all``), the per-epoch RAIM columns, the C/N0 summary, and the
+    (epoch, geo-object) pairs with the position inside. Memory is the chunk's, not the log's.
+    """
+    date = dt.date.fromisoformat(settings.date) if settings.date else None
+    model = settings.sigma_model if settings.sigma_model != "input" else "nominal"
+    stats = ReadStats()
+    carry = AngleCarry()
+    epoch_parts, raim_parts, pair_parts, cn0_parts = [], [], [], []
+    offset = 0
+    for chunk in iter_nmea_tables(log, strict=settings.strict, date=date, stats=stats, chunk_epochs=CHUNK_EPOCHS):
+        epochs = chunk.epochs
+        if epochs.empty:
+            continue
+        meas = nmea_measurements(epochs, chunk.satellites, model, settings.sigma_m, nominal, carry=carry)
+        raim = run_raim(meas, epoch_raim)
+        raim_parts.append(raim if keep_all else raim[list(KEPT_RAIM_COLUMNS)])
+        pair_parts.append(inside_pairs(epochs, meas, geo, params, row_offset=offset))
+        cn0_parts.append(cn0_summary(chunk.satellites, len(epochs), int(epochs["epoch"].iat[0])))
+        epoch_parts.append(epochs if keep_all else epochs[list(KEPT_EPOCH_COLUMNS)])
+        offset += len(epochs)
+    check_usable(stats)
+    if not epoch_parts:
+        raise DataError(f"{log}: no epoch with a time of day")
+    epochs = pd.concat(epoch_parts, ignore_index=True)
+    per_epoch = pd.concat(raim_parts, ignore_index=True)
+    cn0 = pd.concat(cn0_parts, ignore_index=True)
+    return epochs, per_epoch, concat_pairs(pair_parts), cn0, stats
+
+
 def _policy_checks(epochs, settings: ChargeSettings, roads: str | None):
     """The policy in force, each epoch's failed check ('' when none) and matched road (None without roads)."""
     from tollcli.integrity.map_matching import load_roads
-    from tollcli.integrity.verdict import POLICIES, default_policy, epoch_checks, failed_check
+    from tollcli.integrity.verdict import (
+        POLICIES,
+        default_policy,
+        epoch_checks,
+        failed_check,
+    )
 
     has_speed = "speed_mps" in epochs and bool(np.isfinite(epochs["speed_mps"].to_numpy(float)).mean() > 0.5)
     policy = settings.policy or default_policy(has_speed, roads is not None)

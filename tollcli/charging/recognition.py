@@ -69,16 +69,51 @@ def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params:
     (the RAIM status, or for a RAIM-valid position the policy's failed check: ``epoch_why`` per
     epoch row, '' when it passes; with ``matched_road`` a position counts only for the geo-object of
     the road it is matched to, else ``mm_other_road``).
+
+    Two steps, so that a long log can run the first chunk by chunk: :func:`inside_pairs`
+    (the RAIM under each geo-object's HAL, per epoch inside it) and :func:`positions_from_pairs`.
+    """
+    pairs = inside_pairs(epochs, meas, geo, params)
+    return positions_from_pairs(pairs, epochs["time_utc"], geo, tc_s, passage_gap_s, epoch_why, matched_road)
+
+
+PAIR_COLUMNS = ("epoch_row", "obj", "raim_status", "test_stat", "threshold", "p_fa", "test_stat_source", "raim_valid")
+
+
+def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams, row_offset: int = 0) -> dict[str, np.ndarray]:
+    """Every (epoch, geo-object) with the position inside, and the RAIM verdict under that geo-object's HAL.
+
+    ``raim_valid``: RAIM-valid and, after an exclusion, the shifted position still inside.
+    ``row_offset`` is added to the epoch rows (for a chunk of a longer log).
     """
     rows, obj, x, y = candidate_pairs(epochs, geo)
     if rows.size == 0:
-        return pd.DataFrame(columns=["epoch_row", "geoobject", "time_utc", "passage", "raim_status", "test_stat",
-                                     "threshold", "p_fa", "test_stat_source", "valid", "independent", "verdict"])  # fmt: skip
+        return {"epoch_row": np.zeros(0, np.int64), "obj": np.zeros(0, np.int64), "raim_status": np.zeros(0, object),
+                "test_stat": np.zeros(0), "threshold": np.zeros(0), "p_fa": np.zeros(0),
+                "test_stat_source": np.zeros(0, object), "raim_valid": np.zeros(0, bool)}  # fmt: skip
     raim = run_raim(_subset(meas, rows), params, hal_m=geo.hal_m[obj])
     status = raim["raim_status"].to_numpy(dtype=object)
     shifted_inside = shapely.contains_xy(geo.polygons[obj], x[rows] + raim["fde_shift_e_m"].to_numpy(),
                                          y[rows] + raim["fde_shift_n_m"].to_numpy())  # fmt: skip
-    valid = np.isin(status, VALID_STATUSES) & shifted_inside
+    return {"epoch_row": rows + row_offset, "obj": obj, "raim_status": status, "test_stat": raim["test_stat"].to_numpy(),
+            "threshold": raim["threshold"].to_numpy(), "p_fa": raim["p_fa"].to_numpy(),
+            "test_stat_source": raim["test_stat_source"].to_numpy(dtype=object),
+            "raim_valid": np.isin(status, VALID_STATUSES) & shifted_inside}  # fmt: skip
+
+
+def concat_pairs(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    return {k: np.concatenate([p[k] for p in parts]) for k in PAIR_COLUMNS} if parts else {}
+
+
+def positions_from_pairs(pairs: dict[str, np.ndarray], time_utc: pd.Series, geo: GeoObjects, tc_s: float = 5.0,
+                         passage_gap_s: float = PASSAGE_GAP_S, epoch_why: np.ndarray | None = None,
+                         matched_road: np.ndarray | None = None) -> pd.DataFrame:  # fmt: skip
+    """The positions table of :func:`recognise` from :func:`inside_pairs` (``time_utc``: of every epoch row)."""
+    if not pairs or pairs["epoch_row"].size == 0:
+        return pd.DataFrame(columns=["epoch_row", "geoobject", "time_utc", "passage", "raim_status", "test_stat",
+                                     "threshold", "p_fa", "test_stat_source", "valid", "independent", "verdict"])  # fmt: skip
+    rows, obj, status = pairs["epoch_row"], pairs["obj"], pairs["raim_status"]
+    valid = pairs["raim_valid"].copy()
     verdict = status.copy()
     if epoch_why is not None:
         why = np.asarray(epoch_why, dtype=object)[rows]
@@ -89,19 +124,18 @@ def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params:
         other = valid & (np.asarray(matched_road, dtype=object)[rows] != geo.ids[obj])
         verdict[other] = "mm_other_road"
         valid &= ~other
-    t_s = utc_seconds(epochs["time_utc"])[rows]
+    t_s = utc_seconds(time_utc)[rows]
     # passages: consecutive inside fixes of one geo-object less than passage_gap_s apart
     by_obj = np.lexsort((t_s, obj))
     rows, obj, t_s, valid, status, verdict = rows[by_obj], obj[by_obj], t_s[by_obj], valid[by_obj], status[by_obj], verdict[by_obj]
-    raim = raim.iloc[by_obj].reset_index(drop=True)
     new = np.ones(rows.size, dtype=bool)
     new[1:] = (obj[1:] != obj[:-1]) | (np.diff(t_s) > passage_gap_s)
     passage = np.cumsum(new) - 1
     independent = thin_independent(t_s, passage, valid, tc_s)
     return pd.DataFrame({
-        "epoch_row": rows, "geoobject": geo.ids[obj], "time_utc": epochs["time_utc"].iloc[rows].to_numpy(), "passage": passage,
-        "raim_status": status, "test_stat": raim["test_stat"].to_numpy(), "threshold": raim["threshold"].to_numpy(),
-        "p_fa": raim["p_fa"].to_numpy(), "test_stat_source": raim["test_stat_source"].to_numpy(dtype=object),
+        "epoch_row": rows, "geoobject": geo.ids[obj], "time_utc": time_utc.array[rows], "passage": passage,
+        "raim_status": status, "test_stat": pairs["test_stat"][by_obj], "threshold": pairs["threshold"][by_obj],
+        "p_fa": pairs["p_fa"][by_obj], "test_stat_source": pairs["test_stat_source"][by_obj],
         "valid": valid, "independent": independent, "verdict": verdict,
     })  # fmt: skip
 

@@ -25,6 +25,13 @@ FILES = (
     ("geoobjects/*.geojson", "geo-objects: constant-HAL buffer polygons with id, hal_m, road_class (tollcli geoobjects build)"),
     ("geoobjects/*.toml", "tariffs: fees per geo-object or road class and vehicle class, time-of-day bands"),
     ("samples/", "bundled drive logs and the script that made them"),
+    ("~/.cache/tollcli/", "compiled geo-object files (by SHA-256 of the GeoJSON) and RAIM threshold tables; "
+                          "safe to delete, rebuilt when missing"),
+)
+ENVIRONMENT = (
+    ("TOLLCLI_CACHE_DIR", "where the cache goes (default $XDG_CACHE_HOME/tollcli or ~/.cache/tollcli); "
+                          "'off' turns it off. Results never depend on it: every cached file is named by all its inputs"),
+    ("NO_COLOR", "no colours in the tables shown on a terminal"),
 )
 
 
@@ -94,6 +101,9 @@ def _page(name: str, cmd, summary: str, subcommands: list[tuple[str, str]] | Non
     out.append(".SH EXIT STATUS")
     for code, meaning in EXIT_STATUS:
         out += [".TP", f"\\fB{code}\\fR", _esc(meaning)]
+    out.append(".SH ENVIRONMENT")
+    for name_, meaning in ENVIRONMENT:
+        out += [".TP", f"\\fB{name_}\\fR", _esc(meaning)]
     out.append(".SH FILES")
     for path, meaning in FILES:
         out += [".TP", f"\\fI{_esc(path)}\\fR", _esc(meaning)]

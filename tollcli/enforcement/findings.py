@@ -84,8 +84,12 @@ def _finding(kind: str, t0: float, t1: float, lat0, lon0, lat1=None, lon1=None, 
 
 
 def trip_findings(epochs: pd.DataFrame, satellites: pd.DataFrame | None = None, raim: pd.DataFrame | None = None,
-                  geo=None, settings: FindingSettings = FindingSettings()) -> list[dict]:  # fmt: skip
-    """All findings of one trip, in time order. ``raim``: per-epoch RAIM columns (same rows as ``epochs``)."""
+                  geo=None, settings: FindingSettings = FindingSettings(), cn0: pd.DataFrame | None = None) -> list[dict]:  # fmt: skip
+    """All findings of one trip, in time order. ``raim``: per-epoch RAIM columns (same rows as ``epochs``).
+
+    ``cn0``: the per-epoch C/N0 summary (:func:`~tollcli.enforcement.trip.cn0_summary`) when the
+    satellite table itself is not kept (a long log read in chunks).
+    """
     epochs = epochs.reset_index(drop=True)
     if epochs.empty:
         return []
@@ -101,7 +105,7 @@ def trip_findings(epochs: pd.DataFrame, satellites: pd.DataFrame | None = None, 
     out += _jumps(fx, settings)
     out += _time_jumps(epochs, t, settings)
     out += _speed_checks(epochs, t, fx, settings)
-    out += _cn0_checks(epochs, satellites, t, fx, settings)
+    out += _cn0_checks(epochs, satellites if cn0 is None else cn0, t, fx, settings)
     out += _fix_loss(epochs, t, fx, settings)
     out += _disagreements(epochs, t)
     if raim is not None:
@@ -218,7 +222,7 @@ def _speed_checks(epochs: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings) -
 
 def _cn0_checks(epochs: pd.DataFrame, satellites, t: np.ndarray, fx, s: FindingSettings) -> list[dict]:
     out = []
-    summary = cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
+    summary = satellites if satellites is not None and "n_tracked" in satellites else cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
     n = summary["n_tracked"].to_numpy(float)
     # an epoch with a fix but no satellite report is the receiver's GSV cadence (or a time-only
     # sentence), not a loss of satellites: unknown, not zero
