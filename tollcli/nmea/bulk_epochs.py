@@ -13,8 +13,8 @@ import numpy as np
 from tollcli.nmea.assembler import FLOAT_COLUMNS
 from tollcli.nmea.satellite_ids import CONSTELLATIONS
 
-SENTENCE_TYPES = ("GGA", "RMC", "VTG", "GSA", "GSV", "GST", "GLL", "ZDA")
-SAT_FIELDS = ("sat_row", "sat_const", "sat_svid", "sat_prn", "sat_signal", "sat_elev", "sat_azim", "sat_cn0")
+SENTENCE_TYPES = ("GGA", "RMC", "VTG", "GSA", "GSV", "GST", "GLL", "ZDA", "GRS")
+SAT_FIELDS = ("sat_row", "sat_k", "sat_const", "sat_svid", "sat_prn", "sat_signal", "sat_elev", "sat_azim", "sat_cn0")
 _A, _V = ord("A"), ord("V")
 _NOT_FIX = np.array([ord(c) for c in "ENMS"])
 _GGA_VALID = (1, 2, 3, 4, 5)
@@ -46,6 +46,13 @@ def unsupported_epochs(n_epochs: int, s: dict[str, dict]) -> np.ndarray:
         rank, n_codes = _code_ranks(code)
         counts = np.bincount(g["e"][g["sat_row"]] * n_codes + rank[code], minlength=n_epochs * n_codes)
         bad |= (counts.reshape(n_epochs, n_codes) > 1).any(axis=1)
+    g, r = s["GSA"], s["GRS"]
+    if r["e"].size and g["sat_row"].size:  # residuals go by satellite: a satellite used twice is left to the reference
+        code = _sat_code(g["sat_const"], g["sat_svid"])
+        rank, n_codes = _code_ranks(code)
+        counts = np.bincount(g["e"][g["sat_row"]] * n_codes + rank[code], minlength=n_epochs * n_codes)
+        with_grs = np.bincount(r["e"], minlength=n_epochs) > 0
+        bad |= (counts.reshape(n_epochs, n_codes) > 1).any(axis=1) & with_grs
     return bad
 
 
@@ -150,6 +157,49 @@ def _positions(n: int, candidates: list[tuple[dict, np.ndarray, int]]):
     return best_lat, best_lon, np.where(gap_max >= 0, gap_max, np.nan), best_rank
 
 
+def _group_seq(e: np.ndarray) -> np.ndarray:
+    """Each row's place among the rows of its epoch (``e`` non-decreasing)."""
+    return np.arange(e.size) - np.searchsorted(e, e, side="left")
+
+
+def _gsa_residuals(gsa: dict, grs: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Which used satellites (GSA satellite rows) get a GRS residual, and its value.
+
+    As the reference assembler: a GSA with a system id takes the epoch's first GRS of
+    that system id; otherwise (or when there is none) the GRS in the same place, if it
+    has no system id or the same one. Only a GRS with as many residuals as the GSA has
+    satellites is used.
+    """
+    n_sat = gsa["sat_row"].size
+    if grs["e"].size == 0 or n_sat == 0:
+        return np.zeros(n_sat, bool), np.zeros(0)
+    g_e, r_e = gsa["e"], grs["e"]
+    g_sys, r_sys = gsa["sysid"], grs["sysid"]
+    big = 1 << 20
+    matched = np.full(g_e.size, -1, np.int64)
+    # by system id: the first GRS of the epoch with it
+    r_with = np.flatnonzero(r_sys >= 0)
+    if r_with.size:
+        keys, first = np.unique(r_e[r_with] * big + r_sys[r_with], return_index=True)
+        want = g_e * big + g_sys
+        pos = np.clip(np.searchsorted(keys, want), 0, keys.size - 1)
+        found = (g_sys >= 0) & (keys[pos] == want)
+        matched[found] = r_with[first[pos[found]]]
+    else:
+        found = np.zeros(g_e.size, bool)
+    # by place in the epoch
+    r_key = r_e * big + _group_seq(r_e)
+    g_key = g_e * big + _group_seq(g_e)
+    pos = np.clip(np.searchsorted(r_key, g_key), 0, r_key.size - 1)
+    same_place = ~found & (r_key[pos] == g_key) & ((r_sys[pos] == -1) | (r_sys[pos] == g_sys))
+    matched[same_place] = pos[same_place]
+    usable = (matched >= 0) & (grs["n_res"][np.maximum(matched, 0)] == gsa["n_keys"])
+    row = gsa["sat_row"]
+    has = usable[row]
+    values = grs["residuals"][matched[row[has]], gsa["sat_k"][has]]
+    return has, values
+
+
 def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, date_days_unused, line: np.ndarray, s: dict[str, dict]) -> dict[str, np.ndarray]:
     """The epoch and satellite arrays (as :meth:`EpochAssembler.take` gives them) of supported epochs.
 
@@ -157,7 +207,7 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, date_days_unused, line: n
     position in ``epoch_ids``) and ``order`` (the line index, for "which came first").
     """
     n = epoch_ids.size
-    gga, rmc, vtg, gsa, gsv, gst, gll, zda = (s[t] for t in SENTENCE_TYPES)
+    gga, rmc, vtg, gsa, gsv, gst, gll, zda, grs = (s[t] for t in SENTENCE_TYPES)
     out: dict[str, np.ndarray] = {"epoch": epoch_ids.astype(np.int64), "tod_s": tod_s, "line": line.astype(np.int64)}
     floats = {k: np.full(n, np.nan) for k in FLOAT_COLUMNS}
 
@@ -246,7 +296,10 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, date_days_unused, line: n
     out["sat_azim_deg"] = pick(gsv["sat_azim"], np.nan, np.float64)
     out["sat_cn0_dbhz"] = pick(gsv["sat_cn0"], np.nan, np.float64)
     out["sat_used"] = used
-    out["sat_residual_m"] = np.full(cells.size, np.nan)
+    residual_grid = np.full(n * n_codes, np.nan)
+    has, values = _gsa_residuals(gsa, grs)
+    residual_grid[used_cell[has]] = values
+    out["sat_residual_m"] = residual_grid[cells]
     n_in_view = np.bincount(view_e, minlength=n)
     n_used_gsa = np.bincount(sat_epoch[used], minlength=n)
 

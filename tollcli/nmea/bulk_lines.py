@@ -1,8 +1,9 @@
 """A block of NMEA text as arrays: line spans, checksums, addresses and field spans, without a loop per line.
 
-A line is *plain* when it is ``$AAAAA,...*HH`` exactly: ``$`` first, a five-letter
-address, upper-case hex checksum last, no other ``$``, ``!``, ``*`` or carriage
-return inside. Plain lines are verified and split here in bulk; every other line
+A line is *plain* when it is ``$AAAAA,...*HH``: ``$`` first (after Android's
+``NMEA,`` prefix), a five-letter address, an upper-case hex checksum, no other
+``$``, ``!``, ``*`` or carriage return; what follows the checksum is ignored, as
+the reference reader does (Android's time stamp). Plain lines are verified and split here in bulk; every other line
 (blank, comment, Android ``NMEA,`` prefix, AIS, lower-case checksum, junk) is left
 to the per-line classifier, which the reference reader uses for every line.
 """
@@ -35,7 +36,7 @@ class BlockLines:
     buf: np.ndarray  # uint8, the block's bytes
     win: np.ndarray  # bulk_fields.byte_windows(buf): the eight bytes before each position, as uint64
     start: np.ndarray  # first byte of each line
-    end: np.ndarray  # one past the last byte (line feed and a final carriage return excluded)
+    end: np.ndarray  # one past the last byte (line feed and a final carriage return excluded; plain: the checksum's)
     plain: np.ndarray  # bool: the bulk path can read this line
     checksum_ok: np.ndarray  # bool (plain lines): the checksum matches
     given: np.ndarray  # the checksum written on the line (plain lines)
@@ -63,6 +64,9 @@ class BlockLines:
         return np.minimum(s, star), e
 
 
+_ANDROID = np.uint64(int.from_bytes(b"NMEA,", "little"))
+
+
 def split_block(data: bytes) -> BlockLines:
     """Split ``data`` (whole lines, without the last one's line feed) and frame its plain lines."""
     buf = np.frombuffer(data, dtype=np.uint8)
@@ -73,18 +77,26 @@ def split_block(data: bytes) -> BlockLines:
     n = start.size
     if buf.size:
         end = end - ((end > start) & (buf[np.maximum(end - 1, 0)] == _CR))
-    length = end - start
     specials = np.flatnonzero((buf == _DOLLAR) | (buf == _BANG) | (buf == _STAR) | (buf == _CR))  # counted per line
-    n_special = np.searchsorted(specials, end) - np.searchsorted(specials, start)
-    # the first eight and the last eight bytes of each line, as little-endian words
-    head = win[np.minimum(start + 8, buf.size)]
-    tail = win[end]
-    plain = (length >= 10) & ((head & 0xFF) == _DOLLAR) & (((tail >> 40) & 0xFF) == _STAR) & (n_special == 2)
-    plain &= ((head >> 48) & 0xFF) == _COMMA
+    # an Android GnssLogger line carries "NMEA," before the sentence (and its time after the checksum)
+    android = (win[np.minimum(start + 8, buf.size)] & 0xFFFFFFFFFF) == _ANDROID
+    start = np.where(android, start + 5, start)
+    last = np.searchsorted(specials, end) - 1
+    n_special = last + 1 - np.searchsorted(specials, start)
+    # the sentence ends two characters after its '*' (the reference reader ignores what follows)
+    star = np.where(n_special > 0, specials[np.clip(last, 0, max(specials.size - 1, 0))] if specials.size else 0, end)
+    framed = np.minimum(star + 3, end)
+    head = win[np.minimum(start + 8, buf.size)]  # the first eight bytes of each sentence, little-endian
+    tail = win[framed]  # the last eight
+    length = framed - start
+    plain = (length >= 10) & ((head & 0xFF) == _DOLLAR) & (buf[np.clip(star, 0, max(buf.size - 1, 0))] == _STAR) if buf.size else np.zeros(n, bool)
+    plain &= (n_special == 2) & (star + 3 <= end) & (((head >> 48) & 0xFF) == _COMMA)
     hi = _hex_value(((tail >> 48) & 0xFF).astype(np.uint8))
     lo = _hex_value(((tail >> 56) & 0xFF).astype(np.uint8))
     plain &= (hi >= 0) & (lo >= 0)
     given = hi * 16 + lo
+    end = np.where(plain, framed, end)
+    start = np.where(plain | ~android, start, start - 5)  # lines left to the per-line reader keep their prefix
     # XOR of each plain line's body, between '$' and '*'
     computed = np.full(n, -1, np.int64)
     p = np.flatnonzero(plain)

@@ -4,9 +4,9 @@ Per block (≈ 1 MB of whole lines):
 
 1. :func:`~tollcli.nmea.bulk_lines.split_block` frames every line and verifies the
    checksums of the plain ones with array operations;
-2. :mod:`~tollcli.nmea.bulk_sentences` decodes GGA, RMC, VTG, GSA, GSV, GST, GLL
-   and ZDA in bulk; lines it cannot read plainly, other lines and the rarer
-   sentence types (GRS, GNS, GBS) go through the reference reader's per-line classifier
+2. :mod:`~tollcli.nmea.bulk_sentences` decodes GGA, RMC, VTG, GSA, GSV, GST, GRS,
+   GLL and ZDA in bulk; lines it cannot read plainly, other lines and the rarer
+   sentence types (GNS, GBS) go through the reference reader's per-line classifier
    and converters, which also decide what is malformed;
 3. epochs are cut where the time of day changes (as the reference assembler does),
    the last, possibly unfinished epoch is carried into the next block;
@@ -44,7 +44,7 @@ _TIMED_FIRST = {"GGA", "RMC", "GNS", "GST", "GRS", "GBS", "ZDA"}
 _BULK = {pack_address("XX" + t) >> 16: t for t in bulk_epochs.SENTENCE_TYPES}
 _DECODERS = {"GGA": bulk_sentences.gga, "RMC": bulk_sentences.rmc, "VTG": bulk_sentences.vtg,
              "GSA": bulk_sentences.gsa, "GSV": bulk_sentences.gsv, "GST": bulk_sentences.gst,
-             "GLL": bulk_sentences.gll, "ZDA": bulk_sentences.zda}  # fmt: skip
+             "GLL": bulk_sentences.gll, "ZDA": bulk_sentences.zda, "GRS": bulk_sentences.grs}  # fmt: skip
 #: an epoch longer than this (bytes) is not waited for: the rest of the log goes the reference way
 MAX_CARRY_BYTES = 16 << 20
 SAME_TIME_S = 5e-4  # as the reference assembler

@@ -181,11 +181,13 @@ def gsa(bl: BlockLines, idx: np.ndarray) -> dict:
     ok_prn &= prn <= MAX_PRN  # beyond the look-up table: the per-line path
     ok &= ok_prn.reshape(idx.size, 12).all(axis=1)
     present = e > s
+    k = np.cumsum(present.reshape(idx.size, 12), axis=1).ravel() - 1  # a satellite's place in its GSA's list
     const_t, svid_t = satellite_table()
-    rows, prn = rows[present], prn[present]
+    rows, prn, k = rows[present], prn[present], k[present]
     safe = np.clip(prn, 0, MAX_PRN)
-    return dict(fix_mode=fix_mode, pdop=pdop, hdop=hdop, vdop=vdop, sysid=sysid, ok=ok,
-                sat_row=rows, sat_const=const_t[hint[rows], safe], sat_svid=svid_t[hint[rows], safe])  # fmt: skip
+    return {"fix_mode": fix_mode, "pdop": pdop, "hdop": hdop, "vdop": vdop, "sysid": sysid, "ok": ok,
+            "n_keys": present.reshape(idx.size, 12).sum(axis=1), "sat_row": rows, "sat_k": k,
+            "sat_const": const_t[hint[rows], safe], "sat_svid": svid_t[hint[rows], safe]}  # fmt: skip
 
 
 def gsv(bl: BlockLines, idx: np.ndarray) -> dict:
@@ -252,3 +254,30 @@ def zda(bl: BlockLines, idx: np.ndarray) -> dict:
     valid = ok_d & ok_m & ok_y & (day <= bf.days_in_month(year, month))
     date = np.where(given & valid, bf.days_from_civil(year, month, day), -1)
     return {"tod": tod, "date": date, "ok": (nf >= 4) & ok & (~given | valid)}
+
+
+GRS_SLOTS = 14
+
+
+def grs(bl: BlockLines, idx: np.ndarray) -> dict:
+    """GRS: time, residuals in the order of the satellites of the GSA they go with, NMEA 4.10 system id.
+
+    As the per-line reader: fourteen fields after the mode are twelve residuals, the
+    system id and the signal id; otherwise all are residuals; empty trailing ones are dropped.
+    """
+    nf = bl.n_fields[idx]
+    tod, ok = _tod(bl, idx)
+    body = nf - 2
+    ok &= (nf >= 3) & (body <= GRS_SLOTS)
+    n_slots = np.where(body == 14, 12, np.clip(body, 0, GRS_SLOTS))
+    v, oks, empty, _ = _numbers(bl, idx, tuple(range(3, 3 + GRS_SLOTS)))
+    inside = np.arange(GRS_SLOTS)[:, None] < n_slots[None, :]
+    ok &= (oks | ~inside).all(axis=0)
+    values = np.where(inside, v, np.nan)
+    given = inside & ~empty
+    n_res = np.where(given.any(axis=0), GRS_SLOTS - np.argmax(given[::-1], axis=0), 0)
+    s, e = _span(bl, idx, 15)
+    sys_value, ok_sys = bf.integer(bl, s, e)
+    has_sys = (body == 14) & (e > s)
+    ok &= ok_sys | (body != 14)
+    return {"tod": tod, "ok": ok, "sysid": np.where(has_sys, sys_value, -1), "n_res": n_res, "residuals": values.T.copy()}
