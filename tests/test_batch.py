@@ -65,6 +65,15 @@ def test_cli_resumes_reports_the_bad_log_and_writes_a_dataset(logs, tmp_path):
     assert table.num_rows == 4 * 230
     assert sorted(set(table.column("vehicle").to_pylist())) == ["TRK-rural-clean", "TRK-rural-fault", "TRK-urban-clean", "TRK-urban-fault"]
     assert set(table.column("date").to_pylist()) == {"2026-03-02"} and "raim_status" in table.column_names
+    # the dataset as DuckDB sees it: one table, date and vehicle from the folder names
+    import duckdb
+
+    rows = duckdb.sql(
+        f"SELECT vehicle, count(*) AS epochs, sum(CASE WHEN raim_status = 'valid' THEN 1 ELSE 0 END) AS valid "
+        f"FROM read_parquet('{out / 'epochs'}/*/*/*.parquet', hive_partitioning = true) GROUP BY vehicle ORDER BY vehicle"
+    ).fetchall()  # fmt: skip
+    assert [r[0] for r in rows] == ["TRK-rural-clean", "TRK-rural-fault", "TRK-urban-clean", "TRK-urban-fault"]
+    assert all(r[1] == 230 for r in rows) and all(0 < r[2] <= 230 for r in rows)
     # a log that changed is processed again
     invoice = json.loads((out / "invoices" / "TRK-rural-clean" / "TRK-rural-clean.json").read_text())
     assert invoice["vehicle"] == "TRK-rural-clean" and invoice["total"] == "2.38"
