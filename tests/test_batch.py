@@ -7,8 +7,8 @@ import shutil
 from pathlib import Path
 
 import pytest
-
 from conftest import REPO, SAMPLES, run_cli
+
 from tollcli.batch.run import expand_inputs, run_batch
 from tollcli.charging.pipeline import ChargeSettings
 

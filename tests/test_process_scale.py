@@ -11,9 +11,9 @@ import json
 import numpy as np
 import pytest
 import shapely
+from conftest import REPO, SAMPLES, run_cli
 from scipy import stats
 
-from conftest import REPO, SAMPLES, run_cli
 from tollcli.charging import geoobject_store, pipeline
 from tollcli.charging.invoice import invoice_json, seal
 from tollcli.charging.pipeline import ChargeSettings, charge_log
