@@ -202,3 +202,18 @@ def test_decimal_fields_match_float_exactly():
             assert d == ("." in text)
         else:  # left to the per-line converters: only forms the bulk path does not read
             assert any(c in text for c in "e+") or text.count(".") > 1 or text in ("-", "12-", "..") or len(text.lstrip("-")) > 15, text
+
+
+def test_cli_reader_option_gives_the_same_file(tmp_path):
+    from conftest import run_cli
+
+    log = str(SAMPLES / "sim" / "urban-fault" / "drive.nmea")
+    outs = []
+    for reader in ("bulk", "reference"):
+        out = tmp_path / f"{reader}.csv"
+        r = run_cli("epochs", log, "-o", str(out), "--reader", reader, "-q")
+        assert r.returncode == 0, r.stderr
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
+    r = run_cli("epochs", log, "--reader", "fast")
+    assert r.returncode == 2 and b"--reader fast" in r.stderr

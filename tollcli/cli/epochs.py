@@ -27,6 +27,11 @@ def epochs(
     quiet: opt.Quiet = False,
     as_json: opt.JsonSummary = False,
     max_bad: opt.MaxBad = None,
+    reader: Annotated[
+        str,
+        typer.Option("--reader", help="bulk (array decoding, the default) or reference (one line at a time: "
+                     "slower, the same tables; for cross-checking a log)."),  # fmt: skip
+    ] = "bulk",
 ) -> None:
     """Decode an NMEA 0183 log into one row per epoch.
 
@@ -34,6 +39,8 @@ def epochs(
     cannot be used are skipped and counted on stderr; --strict makes the first
     one an error.
     """
+    if reader not in ("bulk", "reference"):
+        raise UsageError(f"--reader {reader}: bulk or reference")
     if as_json and output == "-":
         raise UsageError("--json prints the summary on stdout: give the table a file with -o")
     if satellites == "-" and output == "-":
@@ -43,7 +50,7 @@ def epochs(
     sat_writer = TableWriter(satellites, format_for(satellites)) if satellites else None
     with epoch_writer, (sat_writer or _Null()):
         with progress(f"reading {log}", quiet) as advance:
-            for chunk in iter_nmea_tables(log, strict=strict, date=date.date() if date else None, stats=stats):
+            for chunk in iter_nmea_tables(log, strict=strict, date=date.date() if date else None, stats=stats, engine=reader):
                 epoch_writer.write(chunk.epochs)
                 if sat_writer is not None:
                     sat_writer.write(chunk.satellites)
