@@ -56,13 +56,9 @@ def assert_same(path, **options) -> None:
                 pd.testing.assert_series_equal(x, y, obj=f"{path}: {name}.{col}")
 
 
-def _gpsd_logs():
-    root = shared("gpsd")
-    return sorted(p for p in root.iterdir() if p.is_file() and not p.name.endswith(".chk") and "COPYING" not in p.name)
-
-
-def test_every_gpsd_log_reads_the_same_both_ways(monkeypatch):
-    fast_logs = []
+@pytest.fixture
+def readers(monkeypatch) -> list:
+    """Every BulkReader made during the test (to see how many epochs it assembled in bulk)."""
     made = []
     original = bulk_reader.BulkReader.__init__
 
@@ -71,12 +67,22 @@ def test_every_gpsd_log_reads_the_same_both_ways(monkeypatch):
         made.append(self)
 
     monkeypatch.setattr(bulk_reader.BulkReader, "__init__", spy)
+    return made
+
+
+def _gpsd_logs():
+    root = shared("gpsd")
+    return sorted(p for p in root.iterdir() if p.is_file() and not p.name.endswith(".chk") and "COPYING" not in p.name)
+
+
+def test_every_gpsd_log_reads_the_same_both_ways(readers):
+    fast_logs = []
     logs = _gpsd_logs()
     assert len(logs) >= 170
     for path in logs:
-        made.clear()
+        readers.clear()
         assert_same(path)
-        if made and made[0].fast_epochs:
+        if readers and readers[0].fast_epochs:
             fast_logs.append(path.name)
     # the comparison is not the reference against itself: most logs have epochs assembled in bulk
     assert len(fast_logs) >= 75, len(fast_logs)
@@ -92,15 +98,12 @@ def test_block_size_does_not_matter(block_bytes):
         pd.testing.assert_frame_equal(small.epochs, ref.epochs, check_exact=False, rtol=1e-12)
 
 
-def test_plain_drive_is_read_entirely_in_bulk(tmp_path, monkeypatch):
+def test_plain_drive_is_read_entirely_in_bulk(tmp_path, readers):
     log = tmp_path / "drive.nmea"
     log.write_text("\n".join(compose.straight_drive(3000)) + "\n")
-    made = []
-    original = bulk_reader.BulkReader.__init__
-    monkeypatch.setattr(bulk_reader.BulkReader, "__init__", lambda self, *a, **k: (original(self, *a, **k), made.append(self))[0])
     tables = read_nmea(log, block_bytes=50_000)
     assert len(tables.epochs) == 3000
-    assert made[0].fast_epochs == 3000 and made[0].slow_epochs == 0
+    assert readers[0].fast_epochs == 3000 and readers[0].slow_epochs == 0
     assert_same(log, block_bytes=50_000)
 
 

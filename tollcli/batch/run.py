@@ -144,8 +144,7 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
             outcomes.append(run_one(job))
             tick(1)
     else:
-        from concurrent.futures import ProcessPoolExecutor
-        from concurrent.futures import as_completed as done_first
+        from concurrent.futures import ProcessPoolExecutor, as_completed as done_first
 
         with ProcessPoolExecutor(max_workers=workers) as pool:
             for fut in done_first([pool.submit(run_one, job) for job in jobs]):

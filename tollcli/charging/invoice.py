@@ -32,10 +32,6 @@ def _iso(ts) -> str:
     return pd.Timestamp(ts).tz_convert("UTC").strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
 
 
-def _num(value):
-    return None if value is None or pd.isna(value) else float(value)
-
-
 def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame, geo: GeoObjects, tariff: Tariff, *,
                   vehicle: str, vehicle_class: str, inputs: dict[str, str], parameters: dict, period) -> dict:  # fmt: skip
     """The invoice document (a dict of JSON-ready values).

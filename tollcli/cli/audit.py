@@ -3,23 +3,17 @@
 from __future__ import annotations
 
 import glob
+from collections import Counter
 import json
 import os
 import sys
-from collections import Counter
+
 from typing import Annotated, Optional
 
 import pandas as pd
 import typer
 
-from tollcli.charging.audit import (
-    audit_with_truth,
-    driven_from_truth,
-    fee_table,
-    findings_of,
-    load_invoice,
-    risk_report,
-)
+from tollcli.charging.audit import findings_of, audit_with_truth, driven_from_truth, fee_table, load_invoice, risk_report
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
 from tollcli.cli import options as opt

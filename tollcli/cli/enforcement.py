@@ -13,25 +13,9 @@ import typer
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.cli import options as opt
 from tollcli.cli.console import warn
-from tollcli.enforcement.findings import (
-    CLASS_MAX_SPEED_MPS,
-    FindingSettings,
-    trip_findings,
-)
-from tollcli.enforcement.locate import (
-    COLUMNS,
-    latest_per_vehicle,
-    locate_in,
-    located_rows,
-    vehicle_from_log,
-    vehicle_from_path,
-)
-from tollcli.enforcement.roadside import (
-    RoadsideSettings,
-    cross_check,
-    read_gantries,
-    read_reads,
-)
+from tollcli.enforcement.findings import CLASS_MAX_SPEED_MPS, FindingSettings, trip_findings
+from tollcli.enforcement.locate import COLUMNS, latest_per_vehicle, locate_in, located_rows, vehicle_from_log, vehicle_from_path
+from tollcli.enforcement.roadside import RoadsideSettings, cross_check, read_gantries, read_reads
 from tollcli.errors import UsageError
 from tollcli.integrity.log_table import iter_integrity
 from tollcli.integrity.raim import RaimParams

@@ -7,13 +7,7 @@ from typing import Annotated
 
 import typer
 
-from tollcli.charging.geoobjects import (
-    CONNECT_TOL_M,
-    HAL_MAX_M,
-    TRIM_FACTOR,
-    build_geoobjects,
-    check_geoobjects,
-)
+from tollcli.charging.geoobjects import CONNECT_TOL_M, HAL_MAX_M, TRIM_FACTOR, build_geoobjects, check_geoobjects
 from tollcli.cli import options as opt
 from tollcli.cli.console import warn
 from tollcli.errors import DataError, UsageError

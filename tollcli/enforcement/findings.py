@@ -105,7 +105,8 @@ def trip_findings(epochs: pd.DataFrame, satellites: pd.DataFrame | None = None, 
     out += _jumps(fx, settings)
     out += _time_jumps(epochs, t, settings)
     out += _speed_checks(epochs, t, fx, settings)
-    out += _cn0_checks(epochs, satellites if cn0 is None else cn0, t, fx, settings)
+    summary = cn0 if cn0 is not None else cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
+    out += _cn0_checks(epochs, summary, t, fx, settings)
     out += _fix_loss(epochs, t, fx, settings)
     out += _disagreements(epochs, t)
     if raim is not None:
@@ -220,9 +221,9 @@ def _speed_checks(epochs: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings) -
     return out
 
 
-def _cn0_checks(epochs: pd.DataFrame, satellites, t: np.ndarray, fx, s: FindingSettings) -> list[dict]:
+def _cn0_checks(epochs: pd.DataFrame, summary: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings) -> list[dict]:
+    """Jamming and spoofing signs in the per-epoch C/N0 summary (:func:`~tollcli.enforcement.trip.cn0_summary`)."""
     out = []
-    summary = satellites if satellites is not None and "n_tracked" in satellites else cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
     n = summary["n_tracked"].to_numpy(float)
     # an epoch with a fix but no satellite report is the receiver's GSV cadence (or a time-only
     # sentence), not a loss of satellites: unknown, not zero

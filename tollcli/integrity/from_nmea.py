@@ -21,6 +21,7 @@ from tollcli.integrity.measurements import Measurements, pad, slots, sv_labels
 from tollcli.integrity.sigma_models import NominalModel, sigma_for
 from tollcli.integrity.wls import observation_matrix
 
+
 MAX_ANGLE_AGE_S = 30.0
 
 

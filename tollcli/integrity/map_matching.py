@@ -27,12 +27,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from tollcli.charging.geoobjects import (
-    feature_geometry,
-    metric_crs,
-    project,
-    read_features,
-)
+from tollcli.charging.geoobjects import feature_geometry, metric_crs, project, read_features
 from tollcli.errors import DataError
 
 

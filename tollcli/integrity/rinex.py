@@ -20,8 +20,8 @@ import pandas as pd
 
 from tollcli.errors import DataError, UsageError
 from tollcli.integrity.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
-from tollcli.integrity.broadcast import EPHEMERIS_FIELDS, WEEK_S, kepler_position_clock
 from tollcli.integrity.gsdc import gps_millis_to_utc
+from tollcli.integrity.broadcast import EPHEMERIS_FIELDS, WEEK_S, kepler_position_clock
 from tollcli.integrity.measurements import Measurements, pad, slots
 from tollcli.integrity.pseudorange_wls import C_MPS, final_geometry, solve_positions
 from tollcli.integrity.sigma_models import NominalModel, sigma_for

@@ -200,7 +200,7 @@ def _gsa_residuals(gsa: dict, grs: dict) -> tuple[np.ndarray, np.ndarray]:
     return has, values
 
 
-def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, date_days_unused, line: np.ndarray, s: dict[str, dict]) -> dict[str, np.ndarray]:
+def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict[str, dict]) -> dict[str, np.ndarray]:
     """The epoch and satellite arrays (as :meth:`EpochAssembler.take` gives them) of supported epochs.
 
     ``s[type]`` holds each sentence type's decoded rows with ``e`` (the epoch's

@@ -158,9 +158,7 @@ class BulkReader:
             opener = first_tod[local[first_dec[1:]]]
             before = first_tod[local[first_dec[1:]] - 1]
             if np.any(spread[timed] >= SAME_TIME_S) or np.any(~(np.abs(opener - before) >= SAME_TIME_S)):
-                self.reference = EpochAssembler()
-                self.reference._next_epoch = self.next_epoch
-                return self._reference_feed(data, final)
+                return self._reference_feed(data, final)  # from here on, line by line
 
         # the last epoch may go on in the next block
         cut = n
@@ -172,13 +170,11 @@ class BulkReader:
             if len(self.carry) > MAX_CARRY_BYTES:  # no epoch end in sight: go line by line from here
                 data, self.carry = self.carry, b""
                 self._count(bl, kind, why, stype, cut, first_line)
-                self.reference = EpochAssembler()
-                self.reference._next_epoch = self.next_epoch
-                return self._reference_feed(data, final)
+                return self._reference_feed(data, final)  # from here on, line by line
         self._count(bl, kind, why, stype, cut, first_line)
         if n_done == 0:
             return None
-        return self._assemble(bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, stype, decoded, parsed)
+        return self._assemble(bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, decoded, parsed)
 
     def _per_line(self, bl: BlockLines, lines, first_line, kind, why, stype, tod, slow, inert, parsed) -> None:
         """Classify and check lines one by one, as the reference reader does (the rare ones)."""
@@ -242,7 +238,7 @@ class BulkReader:
                 stats.unused_types[name] = stats.unused_types.get(name, 0) + 1
         stats.lines = first_line + cut
 
-    def _assemble(self, bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, stype, decoded, parsed):
+    def _assemble(self, bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, decoded, parsed):
         """Arrays of the ``n_done`` finished epochs: the common ones in bulk, the rest line by line."""
         in_done = local < n_done
         ep_tod = _first_timed(local, dec_tod, n_done + 1)[:n_done]
@@ -272,7 +268,7 @@ class BulkReader:
             d["e"] = position[d["e"]]
             rows[t] = d
         fast_ids = np.flatnonzero(fast)
-        parts = [bulk_epochs.assemble(ep_global[fast_ids], ep_tod[fast_ids], None, ep_line[fast_ids], rows)]
+        parts = [bulk_epochs.assemble(ep_global[fast_ids], ep_tod[fast_ids], ep_line[fast_ids], rows)]
         self.fast_epochs += fast_ids.size
         slow_ids = np.flatnonzero(keep_epoch & is_slow)
         if slow_ids.size:

@@ -14,12 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from tollcli.charging.geoobjects import (
-    feature_geometry,
-    metric_crs,
-    project,
-    read_features,
-)
+from tollcli.charging.geoobjects import feature_geometry, metric_crs, project, read_features
 from tollcli.errors import DataError
 from tollcli.geodesy import enu_shift2geodetic
 
