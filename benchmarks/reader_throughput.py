@@ -2,8 +2,9 @@
 
 Speed: the same synthetic multi-constellation log (RMC, VTG, GGA, 2×GSA, 3×GSV,
 GST per epoch) is read by ``tollcli.nmea.iter_nmea_tables`` (full decoding into
-epoch and satellite tables) with the bulk path (the default) and with the per-line
-reference path, and by ``pynmea2.parse`` on every line (sentence objects only, no
+epoch and satellite tables) with the bulk path (the default, with its compiled
+kernels), the bulk path with its numpy kernels only (an install without a C
+compiler), and the per-line reference path, and by ``pynmea2.parse`` on every line (sentence objects only, no
 tables: the baseline). All read the file from disk; best of ``--repeat`` runs, in
 turn, in one process.
 
@@ -22,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from tollcli.nmea import ReadStats, compose, iter_nmea_tables
+from tollcli.nmea import ReadStats, compose, iter_nmea_tables, kernels
 
 BYTES_PER_EPOCH = 562  # of compose.straight_drive, measured
 
@@ -44,12 +45,18 @@ def write_log(path: Path, target_bytes: int) -> int:
     return lines
 
 
-def ours(path: Path, engine: str = "bulk") -> float:
-    start = time.perf_counter()
-    stats = ReadStats()
-    for _ in iter_nmea_tables(path, stats=stats, engine=engine):
-        pass
-    return time.perf_counter() - start
+def ours(path: Path, engine: str = "bulk", compiled: bool = True) -> float:
+    saved = kernels.compiled
+    if not compiled:
+        kernels.compiled = None  # the numpy kernels: what an install without a C compiler runs
+    try:
+        start = time.perf_counter()
+        stats = ReadStats()
+        for _ in iter_nmea_tables(path, stats=stats, engine=engine):
+            pass
+        return time.perf_counter() - start
+    finally:
+        kernels.compiled = saved
 
 
 def plain_pynmea2(path: Path) -> float:
@@ -90,18 +97,23 @@ def main() -> None:
         log = Path(tmp) / "speed.nmea"
         n_lines = write_log(log, int(args.speed_mb * 1e6))
         ours(log)  # warm the look-up tables and the page cache
-        times = {"bulk": [], "reference": [], "pynmea2": []}
+        times = {"bulk": [], "numpy": [], "reference": [], "pynmea2": []}
         for _ in range(args.repeat):
             times["bulk"].append(ours(log))
+            times["numpy"].append(ours(log, compiled=False))
             times["reference"].append(ours(log, "reference"))
             times["pynmea2"].append(plain_pynmea2(log))
         t_ours, t_ref, t_base = (min(times[k]) for k in ("bulk", "reference", "pynmea2"))
         print(f"log: {n_lines} lines, {os.path.getsize(log) / 1e6:.1f} MB (synthetic, GPS+Galileo, 9 sentences/epoch)")
-        print(f"tollcli bulk reader (epoch+satellite tables):      {n_lines / t_ours:12,.0f} lines/s")
+        t_numpy = min(times["numpy"])
+        print(f"tollcli bulk reader (epoch+satellite tables):      {n_lines / t_ours:12,.0f} lines/s"
+              f"  ({'compiled kernels' if kernels.compiled is not None else 'NOT COMPILED: numpy kernels'})")
+        print(f"tollcli bulk reader, numpy kernels only:           {n_lines / t_numpy:12,.0f} lines/s")
         print(f"tollcli reference reader (per line, same tables):  {n_lines / t_ref:12,.0f} lines/s")
         print(f"pynmea2.parse per line (baseline, no tables):      {n_lines / t_base:12,.0f} lines/s")
         print(f"ratio bulk / pynmea2:                              {t_base / t_ours:12.2f}")
         print(f"ratio bulk / reference:                            {t_ref / t_ours:12.2f}")
+        print(f"ratio numpy-kernel bulk / pynmea2:                 {t_base / t_numpy:12.2f}")
         if args.no_memory:
             return
         results = []

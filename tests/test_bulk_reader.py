@@ -20,8 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tollcli.errors import DataError
-from tollcli.nmea import ReadStats, bulk_fields, bulk_reader, compose, read_nmea
-from tollcli.nmea.fields import num
+from tollcli.nmea import ReadStats, bulk_reader, compose, read_nmea
 
 
 def _read(path, engine, **options):
@@ -179,32 +178,6 @@ def test_damaged_logs_read_the_same_both_ways(tmp_path, seed, n_edits):
     log = tmp_path / f"damaged-{seed}.nmea"
     log.write_bytes(("\n".join(lines) + "\n").encode("latin-1"))
     assert_same(log, block_bytes=rng.choice([200, 1000, 1 << 20]))
-
-
-def test_decimal_fields_match_float_exactly():
-    rng = np.random.default_rng(7)
-    texts = ["0", "-0", "12", "-12.5", ".5", "5.", "4807.038", "00.000001", "-.5", "123456789012345", "9.99999999999999",
-             "1e5", "+5", "-", "", "1.2.3", "12-", "..", "1234567890123456", "12345678.9", "-1234567.8901"]  # fmt: skip
-    texts += [f"{x:.{k}f}" for x, k in zip(rng.uniform(-2e4, 2e4, 5000), rng.integers(0, 12, 5000))]
-    starts = np.cumsum([0] + [len(t) + 1 for t in texts[:-1]])
-    ends = starts + np.array([len(t) for t in texts])
-    buf = np.frombuffer(",".join(texts).encode(), np.uint8)
-
-    class Block:
-        pass
-
-    block = Block()
-    block.buf, block.win = buf, bulk_fields.byte_windows(buf)
-    value, ok, empty, dotted = bulk_fields.decimal(block, starts, ends)
-    for text, v, good, e, d in zip(texts, value, ok, empty, dotted):
-        if e:
-            assert good and np.isnan(v)
-            continue
-        if good:  # read in bulk: exactly float(), and the point seen
-            assert v == num(text) and np.signbit(v) == np.signbit(num(text)), text
-            assert d == ("." in text)
-        else:  # left to the per-line converters: only forms the bulk path does not read
-            assert any(c in text for c in "e+") or text.count(".") > 1 or text in ("-", "12-", "..") or len(text.lstrip("-")) > 15, text
 
 
 def test_cli_reader_option_gives_the_same_file(tmp_path):

@@ -12,7 +12,7 @@ from typing import BinaryIO
 
 from tollcli.errors import DataError, UsageError
 
-BLOCK_BYTES = 1 << 20
+BLOCK_BYTES = 1 << 21
 GZIP_MAGIC = b"\x1f\x8b"
 
 

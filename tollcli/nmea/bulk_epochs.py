@@ -24,6 +24,8 @@ _ONE_CHAR = np.array([""] + [chr(i) for i in range(1, 256)], dtype=object)
 
 def subset(decoded: dict, keep: np.ndarray) -> dict:
     """The decoded rows where ``keep`` holds (satellite rows follow their sentence)."""
+    if keep.all():
+        return dict(decoded)
     out = {k: v[keep] for k, v in decoded.items() if not k.startswith("sat_")}
     if "sat_row" in decoded:
         new_index = np.cumsum(keep) - 1

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tollcli.nmea import kernels
+
 NAN = np.nan
 MAX_WIDTH = 18  # characters; longer fields go to the per-line path
 _POW10_INT = 10 ** np.arange(19, dtype=np.int64)
@@ -85,6 +87,22 @@ def _byte_counts(word: np.ndarray):
 def decimal(block, start: np.ndarray, end: np.ndarray, integer_only: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Decimal fields → (float value, ok, empty, has_dot); empty fields give NaN and ok.
 
+    By the compiled kernel where it was built, else by :func:`decimal_numpy`: the same values.
+    """
+    if kernels.compiled is None:
+        return decimal_numpy(block, start, end, integer_only)
+    start = np.ascontiguousarray(start, np.int64)
+    end = np.ascontiguousarray(end, np.int64)
+    n = start.size
+    value = np.empty(n, np.float64)
+    ok, empty, has_dot = np.empty(n, bool), np.empty(n, bool), np.empty(n, bool)
+    kernels.compiled.decimal(block.buf, start, end, integer_only, value, ok, empty, has_dot)
+    return value, ok, empty, has_dot
+
+
+def decimal_numpy(block, start: np.ndarray, end: np.ndarray, integer_only: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`decimal` in numpy only (the reference for the compiled kernel).
+
     ``block``: anything with ``buf`` (uint8) and ``win`` (:func:`byte_windows` of it).
     Each field is read right-aligned as one or two 64-bit words (up to 16
     characters), padded with '0': digits and points counted by multiplying bytes
@@ -93,6 +111,8 @@ def decimal(block, start: np.ndarray, end: np.ndarray, integer_only: bool = Fals
     float division and remainder.
     """
     buf, win = block.buf, block.win
+    if win is None:
+        win = block.win = byte_windows(buf)
     length = end - start
     n = length.size
     empty = length == 0
@@ -132,7 +152,20 @@ def integer(block, start, end, lo: int = 0, hi: int = 32_767, missing: int = -1)
 
 
 def time_of_day_s(block, start, end) -> tuple[np.ndarray, np.ndarray]:
-    """``hhmmss[.sss]`` fields → (seconds after midnight, ok); empty → NaN."""
+    """``hhmmss[.sss]`` fields → (seconds after midnight, ok); empty → NaN.
+
+    By the compiled kernel where it was built, else by :func:`time_of_day_s_numpy`.
+    """
+    if kernels.compiled is None:
+        return time_of_day_s_numpy(block, start, end)
+    start, end = np.ascontiguousarray(start, np.int64), np.ascontiguousarray(end, np.int64)
+    tod, ok = np.empty(start.size, np.float64), np.empty(start.size, bool)
+    kernels.compiled.time_of_day(block.buf, start, end, tod, ok)
+    return tod, ok
+
+
+def time_of_day_s_numpy(block, start, end) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`time_of_day_s` in numpy only (the reference for the compiled kernel)."""
     buf = block.buf
     length = end - start
     empty = length == 0
@@ -144,7 +177,7 @@ def time_of_day_s(block, start, end) -> tuple[np.ndarray, np.ndarray]:
     hh = d[:, 0] * 10 + d[:, 1]
     mm = d[:, 2] * 10 + d[:, 3]
     head_ok = ((chars >= _ZERO) & (chars <= _NINE)).all(axis=1) & (length >= 6)
-    ss, ss_ok, _, _ = decimal(block, np.minimum(start + 4, end), end)
+    ss, ss_ok, _, _ = decimal_numpy(block, np.minimum(start + 4, end), end)
     # float("5") and int checks as in fields.time_of_day_s: first six characters digits
     s5 = np.where(length >= 6, buf[np.minimum(start + 4, buf.size - 1)], 0)
     s6 = np.where(length >= 6, buf[np.minimum(start + 5, buf.size - 1)], 0)
@@ -173,7 +206,20 @@ def days_in_month(year: np.ndarray, month: np.ndarray) -> np.ndarray:
 
 
 def rmc_date_days(block, start, end) -> tuple[np.ndarray, np.ndarray]:
-    """RMC ``ddmmyy`` → (days since 1970-01-01, ok); empty → -1; years 80–99 are 19xx."""
+    """RMC ``ddmmyy`` → (days since 1970-01-01, ok); empty → -1; years 80–99 are 19xx.
+
+    By the compiled kernel where it was built, else by :func:`rmc_date_days_numpy`.
+    """
+    if kernels.compiled is None:
+        return rmc_date_days_numpy(block, start, end)
+    start, end = np.ascontiguousarray(start, np.int64), np.ascontiguousarray(end, np.int64)
+    days, ok = np.empty(start.size, np.int64), np.empty(start.size, bool)
+    kernels.compiled.rmc_date(block.buf, start, end, days, ok)
+    return days, ok
+
+
+def rmc_date_days_numpy(block, start, end) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`rmc_date_days` in numpy only (the reference for the compiled kernel)."""
     buf = block.buf
     length = end - start
     empty = length == 0

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tollcli.nmea import kernels
 from tollcli.nmea.bulk_fields import byte_windows
 
 _NL, _CR, _DOLLAR, _BANG, _STAR, _COMMA = 10, 13, 36, 33, 42, 44
@@ -34,7 +35,7 @@ class BlockLines:
     """The lines of one block: spans into ``buf`` and, for plain lines, their decoded framing."""
 
     buf: np.ndarray  # uint8, the block's bytes
-    win: np.ndarray  # bulk_fields.byte_windows(buf): the eight bytes before each position, as uint64
+    win: np.ndarray | None  # bulk_fields.byte_windows(buf), for the numpy kernels (None: made when needed)
     start: np.ndarray  # first byte of each line
     end: np.ndarray  # one past the last byte (line feed and a final carriage return excluded; plain: the checksum's)
     plain: np.ndarray  # bool: the bulk path can read this line
@@ -57,6 +58,16 @@ class BlockLines:
         or at the ``*``, whichever comes first; past the last field it starts beyond
         the ``*`` and is made empty.
         """
+        if kernels.compiled is not None:
+            lines = np.ascontiguousarray(lines, np.int64)
+            k = np.ascontiguousarray(k, np.int64).ravel()
+            s, e = np.empty(lines.size, np.int64), np.empty(lines.size, np.int64)
+            kernels.compiled.field_span(self.first_comma, self.end, self.commas, lines.ravel(), k, s, e)
+            return s.reshape(lines.shape), e.reshape(lines.shape)
+        return self.field_span_numpy(lines, k)
+
+    def field_span_numpy(self, lines: np.ndarray, k: np.ndarray | int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`field_span` in numpy only (the reference for the compiled kernel)."""
         c = np.minimum(self.first_comma[lines] + (np.asarray(k) - 1), self.commas.size - 2)
         star = self.end[lines] - 3
         s = self.commas[c] + 1
@@ -67,8 +78,31 @@ class BlockLines:
 _ANDROID = np.uint64(int.from_bytes(b"NMEA,", "little"))
 
 
+_SENTINEL = np.iinfo(np.int64).max // 2  # after the last comma: no line reaches it
+
+
 def split_block(data: bytes) -> BlockLines:
-    """Split ``data`` (whole lines, without the last one's line feed) and frame its plain lines."""
+    """Split ``data`` (whole lines, without the last one's line feed) and frame its plain lines.
+
+    By the compiled kernel where it was built (one pass per line), else by
+    :func:`split_block_numpy`: the same arrays.
+    """
+    if kernels.compiled is None:
+        return split_block_numpy(data)
+    buf = np.frombuffer(data, dtype=np.uint8)
+    n = int(np.count_nonzero(buf == _NL)) + 1
+    start, end, given, computed, address, first_comma, n_fields = (np.empty(n, np.int64) for _ in range(7))
+    plain = np.empty(n, bool)
+    commas = np.empty(int(np.count_nonzero(buf == _COMMA)) + 2, np.int64)
+    commas[-2:] = _SENTINEL
+    kernels.compiled.frame(buf, start, end, plain, given, computed, address, commas, first_comma, n_fields)
+    checksum_ok = plain & (computed == given)
+    return BlockLines(buf, None, start, end, plain, checksum_ok, given, computed, address, commas,
+                      first_comma, n_fields)  # fmt: skip
+
+
+def split_block_numpy(data: bytes) -> BlockLines:
+    """:func:`split_block` in numpy only (the reference for the compiled kernel)."""
     buf = np.frombuffer(data, dtype=np.uint8)
     win = byte_windows(buf)
     nl = np.flatnonzero(buf == _NL)
@@ -111,7 +145,7 @@ def split_block(data: bytes) -> BlockLines:
     first_comma = np.searchsorted(commas, start + 6)
     last_comma = np.searchsorted(commas, end - 3)
     n_fields = last_comma - first_comma  # commas after the address = fields after it
-    commas = np.append(commas, np.full(2, np.iinfo(np.int64).max // 2))  # sentinels: no line reaches them
+    commas = np.append(commas, np.full(2, _SENTINEL))  # sentinels: no line reaches them
     return BlockLines(buf, win, start, end, plain, checksum_ok, given, computed, address, commas, first_comma, n_fields)
 
 

@@ -83,14 +83,14 @@ def _letter(bl, idx, k) -> np.ndarray:
     """The field's character code when it is exactly one character, 0 when empty, -1 otherwise."""
     s, e = _span(bl, idx, k)
     n = e - s
-    ch = bl.buf[np.clip(s, 0, bl.buf.size - 1)].astype(np.int64)
+    ch = bl.buf[np.minimum(s, bl.buf.size - 1)].astype(np.int64)
     return np.where(n == 0, 0, np.where(n == 1, ch, -1))
 
 
 def _first_char(bl, idx, k) -> np.ndarray:
     """The field's first character code, 0 when empty."""
     s, e = _span(bl, idx, k)
-    ch = bl.buf[np.clip(s, 0, bl.buf.size - 1)].astype(np.int64)
+    ch = bl.buf[np.minimum(s, bl.buf.size - 1)].astype(np.int64)
     return np.where(e > s, ch, 0)
 
 
@@ -197,7 +197,7 @@ def gsv(bl: BlockLines, idx: np.ndarray) -> dict:
     has_signal = (body % 4) == 1
     ok = (nf >= 3) & ((body % 4 == 0) | has_signal)
     s, e = bl.field_span(idx, nf)
-    ch = bl.buf[np.clip(s, 0, bl.buf.size - 1)].astype(np.int64)
+    ch = bl.buf[np.minimum(s, bl.buf.size - 1)].astype(np.int64)
     hexv = np.where((ch >= 48) & (ch <= 57), ch - 48, np.where((ch >= 65) & (ch <= 70), ch - 55, -2))
     signal = np.where(has_signal, np.where(e == s, -1, np.where(e - s == 1, hexv, -2)), -1)
     ok &= signal >= -1

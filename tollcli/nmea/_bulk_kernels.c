@@ -1,0 +1,390 @@
+/* Compiled twins of the bulk NMEA reader's kernels: line framing (bulk_lines.split_block),
+ * field spans (BlockLines.field_span), decimal, time-of-day and date fields (bulk_fields).
+ *
+ * Each function reads the block's bytes and fills arrays that the caller
+ * allocated (numpy arrays passed through the buffer protocol), with exactly the
+ * values the numpy versions give: tests/test_bulk_kernels.py compares the two on
+ * every gpsd log and on random bytes. The numpy versions stay the reference and
+ * the fallback where this module was not built.
+ *
+ * No numpy headers: only the buffer protocol, so the build needs nothing but a
+ * C compiler and Python's headers.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+static const double POW10[23] = {1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11,
+                                 1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+
+/* non-zero for the bytes a line pass stops at: ',', '$', '!', '*', carriage return */
+static const uint8_t CLASS[256] = {[','] = 1, ['$'] = 1, ['!'] = 1, ['*'] = 1, ['\r'] = 1};
+
+static int hex_value(int c) {
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    return -1;
+}
+
+/* byte i of the buffer, 0 outside it (the numpy version pads with zeros) */
+#define AT(i) (((i) >= 0 && (i) < n) ? (int)buf[(i)] : 0)
+/* byte k of the eight-byte head at s; within the last eight bytes of the buffer, the
+ * numpy version reads the buffer's last eight bytes instead (its window index is clipped) */
+#define HEAD(s, k) AT(((s) + 8 <= n ? (s) : n - 8) + (k))
+
+static Py_ssize_t count_below(const int64_t *sorted, Py_ssize_t size, int64_t value) {
+    Py_ssize_t lo = 0, hi = size;
+    while (lo < hi) {
+        Py_ssize_t mid = (lo + hi) / 2;
+        if (sorted[mid] < value) lo = mid + 1; else hi = mid;
+    }
+    return lo;
+}
+
+static int check(Py_buffer *b, Py_ssize_t items, Py_ssize_t itemsize, const char *name) {
+    if (b->len < items * itemsize) {
+        PyErr_Format(PyExc_ValueError, "%s: buffer too small", name);
+        return 0;
+    }
+    return 1;
+}
+
+/* frame(buf, start, end, plain, given, computed, address, commas, first_comma, n_fields)
+ *
+ * buf: uint8, the block. start/end/given/computed/address/first_comma/n_fields: int64
+ * with one item per line (line feeds + 1); plain: uint8 (bool), same length;
+ * commas: int64 with one item per comma plus two, the last two set to the sentinel.
+ */
+static PyObject *frame(PyObject *self, PyObject *args) {
+    Py_buffer b_buf, b_start, b_end, b_plain, b_given, b_computed, b_address, b_commas, b_first, b_nf;
+    if (!PyArg_ParseTuple(args, "y*w*w*w*w*w*w*w*w*w*", &b_buf, &b_start, &b_end, &b_plain, &b_given,
+                          &b_computed, &b_address, &b_commas, &b_first, &b_nf))
+        return NULL;
+    PyObject *result = NULL;
+    const uint8_t *buf = (const uint8_t *)b_buf.buf;
+    const Py_ssize_t n = b_buf.len;
+    Py_ssize_t lines = b_start.len / 8;
+    Py_ssize_t n_commas = b_commas.len / 8 - 2;
+    if (n_commas < 0) {
+        PyErr_SetString(PyExc_ValueError, "frame: commas needs two items past the last comma");
+        goto done;
+    }
+    if (!check(&b_end, lines, 8, "end") || !check(&b_plain, lines, 1, "plain") ||
+        !check(&b_given, lines, 8, "given") || !check(&b_computed, lines, 8, "computed") ||
+        !check(&b_address, lines, 8, "address") || !check(&b_first, lines, 8, "first_comma") ||
+        !check(&b_nf, lines, 8, "n_fields"))
+        goto done;
+    int64_t *start = b_start.buf, *end = b_end.buf, *given = b_given.buf, *computed = b_computed.buf;
+    int64_t *address = b_address.buf, *commas = b_commas.buf, *first = b_first.buf, *nf = b_nf.buf;
+    uint8_t *plain = b_plain.buf;
+    Py_ssize_t line = 0, c = 0;
+    int bad = 0;
+    Py_BEGIN_ALLOW_THREADS
+    /* one pass per line: its commas (recorded for the whole block), its '$', '!', '*' and
+     * carriage returns (counted, the last kept with the XOR of the bytes before it) */
+    Py_ssize_t ls = 0;
+    while (line < lines) {
+        const uint8_t *nl = ls < n ? memchr(buf + ls, '\n', (size_t)(n - ls)) : NULL;
+        Py_ssize_t le = nl ? (Py_ssize_t)(nl - buf) : n;
+        if (!nl && line != lines - 1) { bad = 1; break; }
+        Py_ssize_t e = le;
+        if (e > ls && buf[e - 1] == '\r') e--;
+        int android = HEAD(ls, 0) == 'N' && HEAD(ls, 1) == 'M' && HEAD(ls, 2) == 'E' && HEAD(ls, 3) == 'A' &&
+                      HEAD(ls, 4) == ',';
+        Py_ssize_t s = android ? ls + 5 : ls;
+        Py_ssize_t n_special = 0, last = -1, c_last = c, c_first = c;
+        unsigned x = 0, x_last = 0;
+        for (Py_ssize_t j = ls; j < e; j++) {
+            uint8_t ch = buf[j];
+            if (CLASS[ch]) {
+                if (ch == ',') {
+                    if (c >= n_commas) { bad = 1; break; }
+                    commas[c++] = j;
+                    if (j < s + 6) c_first = c;
+                } else if (j >= s) {
+                    n_special++; last = j; x_last = x; c_last = c;
+                }
+            }
+            x ^= ch;
+        }
+        if (bad) break;
+        Py_ssize_t star = n_special > 0 ? last : e;
+        Py_ssize_t framed = star + 3 < e ? star + 3 : e;
+        int hi = hex_value(AT(framed - 2)), lo = hex_value(AT(framed - 1));
+        int is_plain = (framed - s >= 10) && HEAD(s, 0) == '$' && AT(star < n ? star : n - 1) == '*' &&
+                       n_special == 2 && star + 3 <= e && HEAD(s, 6) == ',' && hi >= 0 && lo >= 0;
+        given[line] = (int64_t)hi * 16 + lo;
+        int64_t addr = 0;
+        for (int k = 5; k >= 1; k--) addr = (addr << 8) | (int64_t)HEAD(s, k);
+        address[line] = addr;
+        if (is_plain) {
+            /* x_last: XOR of the line's bytes before the '*'; take out those up to the '$' */
+            unsigned prefix = 0;
+            for (Py_ssize_t j = ls; j <= s; j++) prefix ^= buf[j];
+            computed[line] = (int64_t)(x_last ^ prefix);
+            start[line] = s;
+            end[line] = framed;
+            /* within the line: the commas before s + 6 and before the '*' */
+            first[line] = c_first;
+            nf[line] = c_last - c_first;
+        } else {
+            computed[line] = -1;
+            start[line] = android ? ls : s;
+            end[line] = e;
+            first[line] = -1;  /* counted over the whole block below */
+        }
+        plain[line] = (uint8_t)is_plain;
+        line++;
+        ls = le + 1;
+    }
+    if (!bad && c != n_commas) bad = 1;
+    for (Py_ssize_t i = 0; !bad && i < lines; i++)
+        if (!plain[i]) {
+            Py_ssize_t f = count_below(commas, n_commas, start[i] + 6);
+            first[i] = f;
+            nf[i] = count_below(commas, n_commas, end[i] - 3) - f;
+        }
+    Py_END_ALLOW_THREADS
+    if (bad) {
+        PyErr_SetString(PyExc_ValueError, "frame: line or comma count does not match the buffer");
+        goto done;
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    PyBuffer_Release(&b_buf); PyBuffer_Release(&b_start); PyBuffer_Release(&b_end); PyBuffer_Release(&b_plain);
+    PyBuffer_Release(&b_given); PyBuffer_Release(&b_computed); PyBuffer_Release(&b_address);
+    PyBuffer_Release(&b_commas); PyBuffer_Release(&b_first); PyBuffer_Release(&b_nf);
+    return result;
+}
+
+/* One decimal field [s, e) of buf (n bytes): sets value, empty, has_dot and returns ok.
+ * The rules of bulk_fields.decimal_numpy: the last 16 characters are examined; the field
+ * is plain when they are digits with at most one point (none if integer_only) and a
+ * leading minus, with at least one digit and at most 15 characters after the minus; its
+ * value is the exact integer of its digits divided by the exact power of ten of its
+ * places, which IEEE division rounds as float() does. Empty: NaN and ok. */
+static inline int parse_decimal(const uint8_t *buf, Py_ssize_t n, int64_t s, int64_t e, int integer_only,
+                                double *value, uint8_t *empty, uint8_t *has_dot) {
+    int64_t len = e - s;
+    if (len == 0) {
+        *value = NAN; *empty = 1; *has_dot = 0;
+        return 1;
+    }
+    *empty = 0;
+    int neg = n > 0 && buf[s < n ? (s > 0 ? s : 0) : n - 1] == '-';
+    int64_t from = e - 16 > s ? e - 16 : s;
+    int n_bad = 0, dots = 0, places = 0;
+    int64_t mantissa = 0;
+    for (int64_t j = from; j < e; j++) {
+        int ch = AT(j);
+        if (ch >= '0' && ch <= '9') {
+            mantissa = mantissa * 10 + (ch - '0');
+            if (dots) places++;
+        } else if (ch == '.') {
+            dots++;
+        } else {
+            n_bad++;
+        }
+    }
+    *has_dot = dots > 0;
+    int good = n_bad == neg && dots <= (integer_only ? 0 : 1) && len - dots - neg >= 1 && len - neg <= 15;
+    if (!good) {
+        *value = NAN;
+        return 0;
+    }
+    double v = dots ? (double)mantissa / POW10[places] : (double)mantissa;
+    *value = neg ? -v : v;
+    return 1;
+}
+
+/* decimal(buf, start, end, integer_only, value, ok, empty, has_dot)
+ *
+ * start/end: int64 spans; value: float64; ok/empty/has_dot: uint8 (bool).
+ */
+static PyObject *decimal(PyObject *self, PyObject *args) {
+    Py_buffer b_buf, b_start, b_end, b_value, b_ok, b_empty, b_dot;
+    int integer_only;
+    if (!PyArg_ParseTuple(args, "y*y*y*pw*w*w*w*", &b_buf, &b_start, &b_end, &integer_only, &b_value, &b_ok,
+                          &b_empty, &b_dot))
+        return NULL;
+    PyObject *result = NULL;
+    const uint8_t *buf = (const uint8_t *)b_buf.buf;
+    const Py_ssize_t n = b_buf.len;
+    Py_ssize_t m = b_start.len / 8;
+    if (!check(&b_end, m, 8, "end") || !check(&b_value, m, 8, "value") || !check(&b_ok, m, 1, "ok") ||
+        !check(&b_empty, m, 1, "empty") || !check(&b_dot, m, 1, "has_dot"))
+        goto done;
+    const int64_t *start = b_start.buf, *end = b_end.buf;
+    double *value = b_value.buf;
+    uint8_t *ok = b_ok.buf, *empty = b_empty.buf, *has_dot = b_dot.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < m; i++)
+        ok[i] = (uint8_t)parse_decimal(buf, n, start[i], end[i], integer_only, value + i, empty + i, has_dot + i);
+    Py_END_ALLOW_THREADS
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    PyBuffer_Release(&b_buf); PyBuffer_Release(&b_start); PyBuffer_Release(&b_end); PyBuffer_Release(&b_value);
+    PyBuffer_Release(&b_ok); PyBuffer_Release(&b_empty); PyBuffer_Release(&b_dot);
+    return result;
+}
+
+/* field_span(first_comma, end, commas, lines, k, s_out, e_out)
+ *
+ * int64 throughout; k has one item (for every line) or one per line. The rules of
+ * BlockLines.field_span: field k starts after the line's k-th comma and ends at the
+ * next comma or at the '*'; past the last field it is empty, at the '*'.
+ */
+static PyObject *field_span(PyObject *self, PyObject *args) {
+    Py_buffer b_first, b_end, b_commas, b_lines, b_k, b_s, b_e;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*w*w*", &b_first, &b_end, &b_commas, &b_lines, &b_k, &b_s, &b_e))
+        return NULL;
+    PyObject *result = NULL;
+    Py_ssize_t m = b_lines.len / 8, n_lines = b_first.len / 8, n_k = b_k.len / 8, top = b_commas.len / 8 - 2;
+    if (top < 0 || (n_k != 1 && n_k != m) || b_end.len / 8 != n_lines || !check(&b_s, m, 8, "s") ||
+        !check(&b_e, m, 8, "e")) {
+        PyErr_SetString(PyExc_ValueError, "field_span: sizes do not match");
+        goto done;
+    }
+    const int64_t *first = b_first.buf, *end = b_end.buf, *commas = b_commas.buf, *lines = b_lines.buf, *ks = b_k.buf;
+    int64_t *so = b_s.buf, *eo = b_e.buf;
+    int bad = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < m; i++) {
+        int64_t line = lines[i];
+        if (line < 0 || line >= n_lines) { bad = 1; break; }
+        int64_t c = first[line] + ks[n_k == 1 ? 0 : i] - 1;
+        if (c > top) c = top;
+        if (c < 0) { bad = 1; break; }
+        int64_t star = end[line] - 3, s = commas[c] + 1, e = commas[c + 1];
+        if (e < s) e = s;
+        if (e > star) e = star;
+        so[i] = s < star ? s : star;
+        eo[i] = e;
+    }
+    Py_END_ALLOW_THREADS
+    if (bad) {
+        PyErr_SetString(PyExc_IndexError, "field_span: line or field out of range");
+        goto done;
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    PyBuffer_Release(&b_first); PyBuffer_Release(&b_end); PyBuffer_Release(&b_commas); PyBuffer_Release(&b_lines);
+    PyBuffer_Release(&b_k); PyBuffer_Release(&b_s); PyBuffer_Release(&b_e);
+    return result;
+}
+
+/* time_of_day(buf, start, end, tod, ok): hhmmss[.sss] fields → seconds after midnight
+ * (float64, NaN when empty or bad) and ok (uint8: empty or good). The rules of
+ * bulk_fields.time_of_day_s_numpy: six leading digits, hh <= 23, mm <= 59, the seconds
+ * (from the fifth character) a plain decimal in [0, 61). */
+static PyObject *time_of_day(PyObject *self, PyObject *args) {
+    Py_buffer b_buf, b_start, b_end, b_tod, b_ok;
+    if (!PyArg_ParseTuple(args, "y*y*y*w*w*", &b_buf, &b_start, &b_end, &b_tod, &b_ok)) return NULL;
+    PyObject *result = NULL;
+    const uint8_t *buf = (const uint8_t *)b_buf.buf;
+    const Py_ssize_t n = b_buf.len;
+    Py_ssize_t m = b_start.len / 8;
+    if (!check(&b_end, m, 8, "end") || !check(&b_tod, m, 8, "tod") || !check(&b_ok, m, 1, "ok")) goto done;
+    const int64_t *start = b_start.buf, *end = b_end.buf;
+    double *tod = b_tod.buf;
+    uint8_t *ok = b_ok.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < m; i++) {
+        int64_t s = start[i], e = end[i];
+        tod[i] = NAN;
+        if (e == s) { ok[i] = 1; continue; }
+        ok[i] = 0;
+        if (e - s < 6) continue;
+        int d[6], digits = 1;
+        for (int k = 0; k < 6; k++) {
+            d[k] = AT(s + k) - '0';
+            if (d[k] < 0 || d[k] > 9) digits = 0;
+        }
+        if (!digits) continue;
+        int hh = d[0] * 10 + d[1], mm = d[2] * 10 + d[3];
+        double ss;
+        uint8_t empty, dot;
+        if (!parse_decimal(buf, n, s + 4, e, 0, &ss, &empty, &dot)) continue;
+        if (hh > 23 || mm > 59 || !(ss >= 0.0) || !(ss < 61.0)) continue;
+        tod[i] = ((double)hh * 3600.0 + (double)mm * 60.0) + ss;
+        ok[i] = 1;
+    }
+    Py_END_ALLOW_THREADS
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    PyBuffer_Release(&b_buf); PyBuffer_Release(&b_start); PyBuffer_Release(&b_end); PyBuffer_Release(&b_tod);
+    PyBuffer_Release(&b_ok);
+    return result;
+}
+
+static int64_t days_from_civil(int64_t y, int64_t m, int64_t d) {
+    y -= m <= 2;
+    int64_t era = (y >= 0 ? y : y - 399) / 400;
+    int64_t yoe = y - era * 400;
+    int64_t doy = (153 * ((m + 9) % 12) + 2) / 5 + d - 1;
+    int64_t doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    return era * 146097 + doe - 719468;
+}
+
+/* rmc_date(buf, start, end, days, ok): ddmmyy fields → days since 1970-01-01 (int64, -1
+ * when empty or bad; years 80–99 are 19xx) and ok (uint8: empty or good). */
+static PyObject *rmc_date(PyObject *self, PyObject *args) {
+    Py_buffer b_buf, b_start, b_end, b_days, b_ok;
+    if (!PyArg_ParseTuple(args, "y*y*y*w*w*", &b_buf, &b_start, &b_end, &b_days, &b_ok)) return NULL;
+    PyObject *result = NULL;
+    const uint8_t *buf = (const uint8_t *)b_buf.buf;
+    const Py_ssize_t n = b_buf.len;
+    Py_ssize_t m = b_start.len / 8;
+    if (!check(&b_end, m, 8, "end") || !check(&b_days, m, 8, "days") || !check(&b_ok, m, 1, "ok")) goto done;
+    const int64_t *start = b_start.buf, *end = b_end.buf;
+    int64_t *days = b_days.buf;
+    uint8_t *ok = b_ok.buf;
+    static const int month_days[13] = {0, 31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < m; i++) {
+        int64_t s = start[i], e = end[i];
+        days[i] = -1;
+        ok[i] = e == s;
+        if (e - s != 6) continue;
+        int d[6], digits = 1;
+        for (int k = 0; k < 6; k++) {
+            d[k] = AT(s + k) - '0';
+            if (d[k] < 0 || d[k] > 9) digits = 0;
+        }
+        if (!digits) continue;
+        int day = d[0] * 10 + d[1], month = d[2] * 10 + d[3], yy = d[4] * 10 + d[5];
+        int year = yy >= 80 ? 1900 + yy : 2000 + yy;
+        int leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
+        if (month < 1 || month > 12 || day < 1 || day > month_days[month] + (leap && month == 2)) continue;
+        days[i] = days_from_civil(year, month, day);
+        ok[i] = 1;
+    }
+    Py_END_ALLOW_THREADS
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    PyBuffer_Release(&b_buf); PyBuffer_Release(&b_start); PyBuffer_Release(&b_end); PyBuffer_Release(&b_days);
+    PyBuffer_Release(&b_ok);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"time_of_day", time_of_day, METH_VARARGS, "Read hhmmss[.sss] fields (see bulk_fields.time_of_day_s)."},
+    {"rmc_date", rmc_date, METH_VARARGS, "Read ddmmyy fields (see bulk_fields.rmc_date_days)."},
+    {"field_span", field_span, METH_VARARGS, "Field spans of plain lines (see BlockLines.field_span)."},
+    {"frame", frame, METH_VARARGS, "Frame the lines of a block (see bulk_lines.split_block)."},
+    {"decimal", decimal, METH_VARARGS, "Read decimal fields (see bulk_fields.decimal)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_bulk_kernels",
+                                    "Compiled twins of the bulk NMEA reader's kernels.", -1,
+                                    methods};
+
+PyMODINIT_FUNC PyInit__bulk_kernels(void) { return PyModule_Create(&module); }
