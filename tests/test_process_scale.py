@@ -7,18 +7,30 @@ straightforward path.
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
+import pandas as pd
 import pytest
 import shapely
 from conftest import REPO, SAMPLES, run_cli
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import stats
 
 from tollcli.charging import geoobject_store, pipeline
+from tollcli.charging.canonical_json import canonical_json
 from tollcli.charging.invoice import invoice_json, seal
 from tollcli.charging.pipeline import ChargeSettings, charge_log
-from tollcli.integrity import design
+from tollcli.charging.recognition import inside_pairs, load_geoobjects
+from tollcli.enforcement.trip import cn0_summary
+from tollcli.integrity import design, from_nmea
 from tollcli.integrity.measurements import CONSTELLATION_LETTER, sv_labels
+from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.wls import wls_geometry
+from tollcli.nmea import read_nmea
 
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
 TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
@@ -127,3 +139,106 @@ def test_lean_command_start_and_full_help():
     assert r.returncode == 0 and "--geo" in r.stdout.decode()
     r = run_cli("--version")
     assert r.returncode == 0 and r.stdout.decode().startswith("tollcli ")
+
+
+# --- the faster pieces of process, each against the straightforward computation it replaced ---
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers(-(10**20), 10**20) | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=4) | st.tuples(inner, inner) | st.dictionaries(st.text(max_size=6), inner, max_size=4),
+    max_leaves=30,
+)  # fmt: skip
+
+
+@settings(max_examples=300, deadline=None)
+@given(json_values)
+def test_canonical_json_is_json_dumps_indented_sorted(value):
+    assert canonical_json(value) == json.dumps(value, indent=2, sort_keys=True, ensure_ascii=False)
+
+
+def test_canonical_json_of_a_real_invoice_and_unusual_values():
+    invoice, _ = charge_log(str(SAMPLES / "straight-drive.nmea"), GEO, TARIFF, ChargeSettings())
+    body = dict(invoice)
+    assert canonical_json(body) == json.dumps(body, indent=2, sort_keys=True, ensure_ascii=False)
+    odd = {"a": np.float64(1.5), "b": [True, np.float64("nan")], "c": {"é": "\n\"\u2028"}}
+    int_keys = {3: "int key", 10: [1]}  # left to json.dumps
+    for value in (odd, int_keys):
+        assert canonical_json(value) == json.dumps(value, indent=2, sort_keys=True, ensure_ascii=False)
+    with pytest.raises(TypeError):  # what json.dumps refuses, it still refuses
+        canonical_json({"x": np.int64(3)})
+
+
+def test_latest_angles_per_satellite_are_groupby_last():
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        n = int(rng.integers(1, 60))
+        known = pd.DataFrame({"t_s": rng.integers(0, 10, n).astype(float),
+                              "constellation": rng.choice(np.array(["GPS", "Galileo", None, "BeiDou"], dtype=object), n),
+                              "svid": rng.integers(1, 5, n).astype(np.int64), "elev_deg": rng.random(n), "azim_deg": rng.random(n)})  # fmt: skip
+        expected = known.sort_values("t_s", kind="stable").groupby(["constellation", "svid"], as_index=False).last()
+        rows = from_nmea._latest_rows(known["t_s"].to_numpy(), known["constellation"].to_numpy(), known["svid"].to_numpy())
+        got = known.iloc[rows][expected.columns].reset_index(drop=True)
+        pd.testing.assert_frame_equal(got, expected, check_dtype=False)
+
+
+def test_first_of_each_satellite_is_drop_duplicates():
+    rng = np.random.default_rng(6)
+    for svid_max in (40, 70_000):  # the second takes the general path
+        n = 500
+        t = pd.DataFrame({"epoch": rng.integers(0, 20, n), "constellation": rng.choice(np.array(["GPS", "Galileo", None], dtype=object), n),
+                          "svid": rng.integers(0, svid_max, n) % 7})  # fmt: skip
+        rows = from_nmea._first_of_each(t["epoch"].to_numpy(np.int64), t["constellation"].to_numpy(), t["svid"].to_numpy(np.int64))
+        assert rows.tolist() == np.flatnonzero(~t.duplicated(["epoch", "constellation", "svid"]).to_numpy()).tolist()
+
+
+def test_cn0_summary_against_pandas_groupby():
+    rng = np.random.default_rng(8)
+    for _ in range(100):
+        m = int(rng.integers(0, 300))
+        sats = pd.DataFrame({"epoch": rng.integers(95, 130, m),
+                             "cn0_dbhz": np.where(rng.random(m) < 0.1, np.nan, np.round(rng.uniform(-5, 50, m), 1))})  # fmt: skip
+        got = cn0_summary(sats, 30, 100)
+        s = sats[np.isfinite(sats["cn0_dbhz"]) & (sats["cn0_dbhz"] > 0)]
+        g = s.groupby(s["epoch"] - 100)["cn0_dbhz"]
+        want = pd.DataFrame({"n_tracked": g.size(), "cn0_median": g.median(), "cn0_p80": g.quantile(0.8), "cn0_std": g.std(ddof=0)})
+        want = want.reindex(range(30))
+        assert got["n_tracked"].tolist() == want["n_tracked"].fillna(0).astype(int).tolist()
+        for col in ("cn0_median", "cn0_p80", "cn0_std"):
+            np.testing.assert_allclose(got[col], want[col], rtol=1e-13, atol=1e-13, err_msg=col)
+        assert np.array_equal(got["cn0_median"], want["cn0_median"], equal_nan=True)  # order statistics: exact
+
+
+def test_stored_p_fa_rows_are_those_of_the_thresholds(tmp_path, monkeypatch):
+    monkeypatch.setenv("TOLLCLI_CACHE_DIR", str(tmp_path))
+    table = design.EtcThresholdTable(5e-5, step=0.5, sqrt_lambda_max=20.0)
+    dof = np.array([0, 1, 3, 3, 8, 12, 5])
+    lam = np.array([4.0, 9.0, 0.0, 100.0, 1e6, np.nan, 30.0])
+    assert np.array_equal(table.p_fa(dof, lam), design.false_alarm_probability(table(dof, lam), dof), equal_nan=True)
+    assert len(list(tmp_path.rglob("etc-pfa-*.npy"))) == 4  # k = 1, 3, 5, 8 (not 12: its λ is NaN)
+
+
+def test_process_does_not_import_scipy_special_with_cached_rows(tmp_path):
+    """The χ² functions are only needed to build the cached rows: a second process imports no scipy.special."""
+    code = ("import sys\nfrom tollcli.charging.pipeline import ChargeSettings, charge_log\n"
+            f"charge_log({str(SAMPLES / 'straight-drive.nmea')!r}, {GEO!r}, {TARIFF!r}, ChargeSettings())\n"
+            "print('scipy.special' in sys.modules)\n")  # fmt: skip
+    env = {**os.environ, "TOLLCLI_CACHE_DIR": str(tmp_path)}
+    first = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    second = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    assert first.stdout.strip() == "True" and second.stdout.strip() == "False"
+
+
+def test_shared_geometry_gives_the_same_pairs():
+    """inside_pairs with the chunk's WLS geometry (computed once) = recomputing it for the pairs' epochs."""
+    tables = read_nmea(SAMPLES / "sim" / "urban-fault" / "drive.nmea")
+    meas = from_nmea.nmea_measurements(tables.epochs, tables.satellites)
+    geo = load_geoobjects(GEO)
+    params = RaimParams(fde=True)
+    shared = inside_pairs(tables.epochs, meas, geo, params, geometry=wls_geometry(meas.H, meas.sigma_m, meas.mask))
+    alone = inside_pairs(tables.epochs, meas, geo, params)
+    assert shared["epoch_row"].size > 0
+    for k in alone:
+        a, b = alone[k], shared[k]
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), k

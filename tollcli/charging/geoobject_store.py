@@ -37,6 +37,7 @@ class GeoObjects:
     polygons: np.ndarray  # metric CRS
     crs: str
     tree: shapely.STRtree
+    source_sha256: str | None = None  # SHA-256 of the file's bytes these were made from (None: not from a file)
 
 
 def load_geoobjects(path: str) -> GeoObjects:
@@ -45,23 +46,27 @@ def load_geoobjects(path: str) -> GeoObjects:
         data = Path(path).read_bytes()
     except OSError:
         data = None  # read_features reports it
-    cached = _cache_path(data) if data is not None else None
+    digest = hashlib.sha256(data).hexdigest() if data is not None else None
+    cached = _cache_path(digest) if digest is not None else None
     if cached is not None and cached.exists():
         try:
-            return _read_compiled(cached)
+            geo = _read_compiled(cached)
+            geo.source_sha256 = digest
+            return geo
         except (OSError, ValueError, KeyError, shapely.errors.ShapelyError):
             pass  # a damaged copy: parse again
     geo = _parse(path)
+    geo.source_sha256 = digest  # hashed once, for the cache key and for the invoice
     if cached is not None:
         _write_compiled(cached, geo)
     return geo
 
 
-def _cache_path(data: bytes) -> Path | None:
+def _cache_path(digest: str) -> Path | None:
     base = cache_dir()
     if base is None:
         return None
-    return base / "geoobjects" / f"{hashlib.sha256(data).hexdigest()}.v{CACHE_FORMAT}.npz"
+    return base / "geoobjects" / f"{digest}.v{CACHE_FORMAT}.npz"
 
 
 def _parse(path: str) -> GeoObjects:

@@ -15,6 +15,7 @@ from decimal import Decimal
 import pandas as pd
 
 from tollcli import __version__
+from tollcli.charging.canonical_json import canonical_json
 from tollcli.charging.recognition import GeoObjects
 from tollcli.charging.tariffs import Tariff
 from tollcli.times import iso_utc
@@ -109,7 +110,7 @@ def invoice_json(invoice: dict) -> str:
     """The invoice's canonical text: JSON, keys sorted, two-space indent (a sealed invoice's is kept)."""
     if isinstance(invoice, SealedInvoice) and invoice.text is not None:
         return invoice.text
-    return json.dumps(invoice, indent=2, sort_keys=True, ensure_ascii=False) + "\n"
+    return canonical_json(invoice) + "\n"  # = json.dumps(invoice, indent=2, sort_keys=True, ensure_ascii=False)
 
 
 class SealedInvoice(dict):

@@ -27,6 +27,7 @@ from tollcli.integrity.pseudorange_inputs import pseudorange_epochs
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
 from tollcli.integrity.sigma_models import NominalModel
+from tollcli.integrity.wls import wls_geometry
 from tollcli.io.sources import sniff_format
 from tollcli.nmea import ReadStats, iter_nmea_tables
 from tollcli.nmea.reader import check_usable
@@ -87,7 +88,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     table = charges(positions, settings.n_th)
     dated = epochs["time_utc"].dropna()
     inputs = {"log": log, "geoobjects": geo, "tariff": tariff,
-              "geoobjects_sha256": file_sha256(geo), "tariff_sha256": file_sha256(tariff)}  # fmt: skip
+              "geoobjects_sha256": geo_objects.source_sha256 or file_sha256(geo), "tariff_sha256": file_sha256(tariff)}  # fmt: skip
     if log != "-":
         inputs["log_sha256"] = file_sha256(log)
     if nav is not None:
@@ -134,9 +135,10 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
         if epochs.empty:
             continue
         meas = nmea_measurements(epochs, chunk.satellites, model, settings.sigma_m, nominal, carry=carry)
-        raim = run_raim(meas, epoch_raim)
+        geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)  # once for the epoch RAIM and every HAL
+        raim = run_raim(meas, epoch_raim, geometry=geometry)
         raim_parts.append(raim if keep_all else raim[list(KEPT_RAIM_COLUMNS)])
-        pair_parts.append(inside_pairs(epochs, meas, geo, params, row_offset=offset))
+        pair_parts.append(inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry))
         cn0_parts.append(cn0_summary(chunk.satellites, len(epochs), int(epochs["epoch"].iat[0])))
         epoch_parts.append(epochs if keep_all else epochs[list(KEPT_EPOCH_COLUMNS)])
         offset += len(epochs)

@@ -23,6 +23,7 @@ from tollcli.errors import DataError
 from tollcli.integrity.measurements import Measurements
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
+from tollcli.integrity.wls import Geometry, take_epochs
 
 VALID_STATUSES = ("valid", "excluded_valid")
 PASSAGE_GAP_S = 120.0
@@ -80,18 +81,21 @@ def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params:
 PAIR_COLUMNS = ("epoch_row", "obj", "raim_status", "test_stat", "threshold", "p_fa", "test_stat_source", "raim_valid")
 
 
-def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams, row_offset: int = 0) -> dict[str, np.ndarray]:
+def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams, row_offset: int = 0,
+                 geometry: Geometry | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """Every (epoch, geo-object) with the position inside, and the RAIM verdict under that geo-object's HAL.
 
     ``raim_valid``: RAIM-valid and, after an exclusion, the shifted position still inside.
-    ``row_offset`` is added to the epoch rows (for a chunk of a longer log).
+    ``row_offset`` is added to the epoch rows (for a chunk of a longer log). ``geometry``:
+    the WLS geometry of ``meas`` when the caller has it (the same for every HAL).
     """
     rows, obj, x, y = candidate_pairs(epochs, geo)
     if rows.size == 0:
         return {"epoch_row": np.zeros(0, np.int64), "obj": np.zeros(0, np.int64), "raim_status": np.zeros(0, object),
                 "test_stat": np.zeros(0), "threshold": np.zeros(0), "p_fa": np.zeros(0),
                 "test_stat_source": np.zeros(0, object), "raim_valid": np.zeros(0, bool)}  # fmt: skip
-    raim = run_raim(_subset(meas, rows), params, hal_m=geo.hal_m[obj])
+    raim = run_raim(_subset(meas, rows), params, hal_m=geo.hal_m[obj],
+                    geometry=take_epochs(geometry, rows) if geometry is not None else None)
     status = raim["raim_status"].to_numpy(dtype=object)
     shifted_inside = shapely.contains_xy(geo.polygons[obj], x[rows] + raim["fde_shift_e_m"].to_numpy(),
                                          y[rows] + raim["fde_shift_n_m"].to_numpy())  # fmt: skip

@@ -32,19 +32,37 @@ def fixes(epochs: pd.DataFrame, t_s: np.ndarray) -> Fixes:
 
 
 def cn0_summary(satellites: pd.DataFrame | None, n_epochs: int, first_epoch: int) -> pd.DataFrame:
-    """Per epoch row: satellites with a C/N0, their median, 80th percentile and spread (dB-Hz)."""
-    out = pd.DataFrame({"n_tracked": np.zeros(n_epochs, np.int64), "cn0_median": np.nan, "cn0_p80": np.nan, "cn0_std": np.nan})
-    if satellites is None or satellites.empty:
-        return out
-    s = satellites[np.isfinite(satellites["cn0_dbhz"].to_numpy(float)) & (satellites["cn0_dbhz"].to_numpy(float) > 0)]
-    if s.empty:
-        return out
-    g = s.groupby(s["epoch"].to_numpy() - first_epoch)["cn0_dbhz"]
-    agg = pd.DataFrame({"n_tracked": g.size(), "cn0_median": g.median(), "cn0_p80": g.quantile(0.8), "cn0_std": g.std(ddof=0)})
-    agg = agg[(agg.index >= 0) & (agg.index < n_epochs)]
-    out.loc[agg.index, ["n_tracked", "cn0_median", "cn0_p80", "cn0_std"]] = agg.to_numpy()
-    out["n_tracked"] = out["n_tracked"].astype(np.int64)
-    return out
+    """Per epoch row: satellites with a C/N0, their median, 80th percentile and spread (dB-Hz).
+
+    The percentile interpolates linearly between order statistics (pandas' and numpy's
+    default); the spread is the population standard deviation (two passes).
+    """
+    n_tracked = np.zeros(n_epochs, np.int64)
+    med, p80, std = np.full(n_epochs, np.nan), np.full(n_epochs, np.nan), np.full(n_epochs, np.nan)
+    if satellites is not None and not satellites.empty:
+        cn0 = satellites["cn0_dbhz"].to_numpy(float)
+        row = satellites["epoch"].to_numpy(np.int64) - first_epoch
+        keep = np.isfinite(cn0) & (cn0 > 0) & (row >= 0) & (row < n_epochs)
+        cn0, row = cn0[keep], row[keep]
+        order = np.lexsort((cn0, row))
+        x, r = cn0[order], row[order]
+        n_tracked = np.bincount(r, minlength=n_epochs).astype(np.int64)
+        has = np.flatnonzero(n_tracked)
+        if has.size:
+            n = n_tracked[has]
+            start = (np.cumsum(n_tracked) - n_tracked)[has]
+            half = n // 2
+            med[has] = np.where(n % 2 == 1, x[start + half], (x[start + half] + x[start + np.maximum(half - 1, 0)]) / 2.0)
+            pos = 0.8 * (n - 1)
+            lo = pos.astype(np.int64)
+            frac = pos - lo
+            low = x[start + lo]
+            high = x[start + np.minimum(lo + 1, n - 1)]
+            p80[has] = np.where(frac == 0.0, low, low + (high - low) * frac)
+            mean = np.bincount(r, weights=x, minlength=n_epochs)[has] / n
+            dev = x - np.repeat(mean, n)
+            std[has] = np.sqrt(np.bincount(r, weights=dev * dev, minlength=n_epochs)[has] / n)
+    return pd.DataFrame({"n_tracked": n_tracked, "cn0_median": med, "cn0_p80": p80, "cn0_std": std})
 
 
 def runs(flag: np.ndarray) -> list[tuple[int, int]]:

@@ -16,22 +16,27 @@ import math
 from functools import lru_cache
 
 import numpy as np
-from scipy import (
-    special,  # χ² functions; scipy.stats and optimize (slow to import) only where needed
-)
+
+
+def _special():
+    """scipy.special, imported when first needed (0.1 s): ``process`` with cached threshold rows never needs it."""
+    from scipy import special
+
+    return special
 
 
 def classic_threshold(p_fa: float, dof) -> np.ndarray:
     """Th with P(t > Th) = p_fa for t ~ χ²_dof (NaN where dof < 1)."""
     dof = np.asarray(dof, dtype=float)
     with np.errstate(invalid="ignore"):
-        return np.where(dof >= 1, special.chdtri(np.maximum(dof, 1), p_fa), np.nan)  # = stats.chi2.isf
+        return np.where(dof >= 1, _special().chdtri(np.maximum(dof, 1), p_fa), np.nan)  # = stats.chi2.isf
 
 
 @lru_cache(maxsize=4096)
 def _lambda_det_scalar(p_fa: float, p_md: float, dof: int) -> float:
     from scipy import optimize
 
+    special = _special()
     th = float(special.chdtri(dof, p_fa))
 
     def miss(lam: float) -> float:
@@ -79,6 +84,7 @@ class EtcThresholdTable:
         self.step = float(step)
         self.grid = np.arange(0.0, sqrt_lambda_max + step / 2, step)
         self._rows: dict[int, np.ndarray] = {}
+        self._p_fa_rows: dict[int, np.ndarray] = {}
 
     def _row(self, k: int) -> np.ndarray:
         row = self._rows.get(k)
@@ -87,7 +93,14 @@ class EtcThresholdTable:
             self._rows[k] = row
         return row
 
-    def __call__(self, dof, lambda_det) -> np.ndarray:
+    def _p_fa_row(self, k: int) -> np.ndarray:
+        row = self._p_fa_rows.get(k)
+        if row is None:
+            row = _stored_row(self.p_md, self.step, self.grid, k, what="pfa")
+            self._p_fa_rows[k] = row
+        return row
+
+    def _lookup(self, dof, lambda_det, row_of) -> np.ndarray:
         dof = np.asarray(dof)
         lam = np.asarray(lambda_det, dtype=float)
         out = np.full(np.broadcast(dof, lam).shape, np.nan)
@@ -98,13 +111,22 @@ class EtcThresholdTable:
             idx[ok] = np.minimum(np.floor(np.sqrt(lam[ok]) / self.step + 1e-9), self.grid.size - 1).astype(np.int64)
         for k in np.unique(dof[ok]).astype(int):
             sel = ok & (dof == k)
-            out[sel] = self._row(int(k))[idx[sel]]
+            out[sel] = row_of(int(k))[idx[sel]]
         return out
 
+    def __call__(self, dof, lambda_det) -> np.ndarray:
+        """The threshold for each (k, λ_det)."""
+        return self._lookup(dof, lambda_det, self._row)
 
-def _stored_row(p_md: float, step: float, grid: np.ndarray, k: int) -> np.ndarray:
+    def p_fa(self, dof, lambda_det) -> np.ndarray:
+        """P_FA of the threshold :meth:`__call__` gives: ``false_alarm_probability(self(dof, λ), dof)``, stored per row."""
+        return self._lookup(dof, lambda_det, self._p_fa_row)
+
+
+def _stored_row(p_md: float, step: float, grid: np.ndarray, k: int, what: str = "threshold") -> np.ndarray:
     """One table row, kept in the cache directory (``TOLLCLI_CACHE_DIR``) across processes.
 
+    ``what``: "threshold" (the ETC thresholds over the grid) or "pfa" (their P_FA).
     The file name carries every input of the row and scipy's version; a missing or
     unreadable file is recomputed (and rewritten when the directory is writable).
     """
@@ -116,7 +138,7 @@ def _stored_row(p_md: float, step: float, grid: np.ndarray, k: int) -> np.ndarra
     from tollcli.cache import cache_dir
 
     base = cache_dir()
-    name = f"etc-threshold-pmd{p_md!r}-step{step!r}-n{grid.size}-k{k}-scipy{scipy.__version__}.npy"
+    name = f"etc-{what}-pmd{p_md!r}-step{step!r}-n{grid.size}-k{k}-scipy{scipy.__version__}.npy"
     path = base / "thresholds" / name if base is not None else None
     if path is not None and path.exists():
         try:
@@ -125,7 +147,10 @@ def _stored_row(p_md: float, step: float, grid: np.ndarray, k: int) -> np.ndarra
                 return row
         except (OSError, ValueError):
             pass
-    row = etc_threshold(p_md, np.full(grid.shape, k), grid**2)
+    if what == "pfa":
+        row = false_alarm_probability(_stored_row(p_md, step, grid, k), np.full(grid.shape, k))
+    else:
+        row = etc_threshold(p_md, np.full(grid.shape, k), grid**2)
     if path is not None:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -149,7 +174,7 @@ def false_alarm_probability(threshold, dof) -> np.ndarray:
     dof = np.asarray(dof, dtype=float)
     th = np.asarray(threshold, dtype=float)
     ok = (dof >= 1) & np.isfinite(th)
-    return np.where(ok, special.chdtrc(np.where(ok, dof, 1), np.where(ok, th, 0.0)), np.nan)  # = stats.chi2.sf
+    return np.where(ok, _special().chdtrc(np.where(ok, dof, 1), np.where(ok, th, 0.0)), np.nan)  # = stats.chi2.sf
 
 
 def p_mgor_max(invoice_share_pct: float, invoice_error_pct: float) -> float:

@@ -39,29 +39,75 @@ def _epoch_seconds(epochs: pd.DataFrame) -> np.ndarray:
     return np.where(utc.notna().to_numpy(), secs, epochs["tod_s"].to_numpy(float))
 
 
+def _first_of_each(epoch: np.ndarray, constellation: np.ndarray, svid: np.ndarray) -> np.ndarray:
+    """Rows (in order) that are the first of their (epoch, constellation, svid)."""
+    if not epoch.size:
+        return np.zeros(0, np.int64)
+    const, _ = pd.factorize(constellation, use_na_sentinel=False)
+    key = (epoch - epoch.min()) * (1 << 24) + const.astype(np.int64) * (1 << 16) + (svid & 0xFFFF)
+    if epoch.max() - epoch.min() >= 1 << 38 or const.max() >= 256 or svid.min() < 0 or svid.max() > 0xFFFF:
+        key = np.unique(np.stack([epoch, const, svid], axis=1), axis=0, return_inverse=True)[1].ravel()
+    _, first = np.unique(key, return_index=True)
+    return np.sort(first)
+
+
+def _lookup(keys: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """``values`` at the place of each ``wanted`` key in ``keys`` (unique), NaN where absent."""
+    order = np.argsort(keys, kind="stable")
+    pos = np.minimum(np.searchsorted(keys[order], wanted), max(keys.size - 1, 0))
+    if not keys.size:
+        return np.full(wanted.shape, np.nan)
+    hit = keys[order][pos] == wanted
+    return np.where(hit, values[order][pos], np.nan)
+
+
 def fill_angles(satellites: pd.DataFrame, epochs: pd.DataFrame, carry: AngleCarry | None = None,
                 max_age_s: float = MAX_ANGLE_AGE_S) -> pd.DataFrame:  # fmt: skip
     """The satellite table with missing angles taken from the same satellite's latest GSV."""
     sats = satellites.copy()
-    t_of_epoch = pd.Series(_epoch_seconds(epochs), index=epochs["epoch"].to_numpy())
-    sats["t_s"] = t_of_epoch.reindex(sats["epoch"].to_numpy()).to_numpy()
+    sats["t_s"] = _lookup(epochs["epoch"].to_numpy(), _epoch_seconds(epochs), sats["epoch"].to_numpy())
     sats["constellation"] = sats["constellation"].astype(object)
     seen = np.isfinite(sats["elev_deg"]) & np.isfinite(sats["azim_deg"])
-    known = pd.concat([carry.last if carry is not None else None,
-                       sats.loc[seen, ["t_s", "constellation", "svid", "elev_deg", "azim_deg"]]], ignore_index=True)  # fmt: skip
-    known = known.astype({"t_s": float, "svid": np.int64, "elev_deg": float, "azim_deg": float, "constellation": object})
-    known = known.dropna(subset=["t_s"]).sort_values("t_s", kind="stable")
+    fresh = (seen & np.isfinite(sats["t_s"])).to_numpy()
     missing = ~seen & sats["used"].to_numpy(dtype=bool) & np.isfinite(sats["t_s"])
-    if missing.any() and len(known):
-        left = sats.loc[missing, ["t_s", "constellation", "svid"]].astype({"svid": np.int64}).reset_index()
-        filled = pd.merge_asof(left.sort_values("t_s", kind="stable"), known, on="t_s",
-                               by=["constellation", "svid"], direction="backward", tolerance=max_age_s)  # fmt: skip
-        filled = filled.set_index("index")
-        sats.loc[filled.index, "elev_deg"] = filled["elev_deg"]
-        sats.loc[filled.index, "azim_deg"] = filled["azim_deg"]
+    if missing.any():
+        known = pd.concat([carry.last if carry is not None else None, sats.loc[fresh, list(_KNOWN)]], ignore_index=True)
+        known = known.astype(_KNOWN)
+        if len(known):
+            left = sats.loc[missing, ["t_s", "constellation", "svid"]].astype({"svid": np.int64}).reset_index()
+            order = np.argsort(known["t_s"].to_numpy(), kind="stable")
+            filled = pd.merge_asof(left.sort_values("t_s", kind="stable"), known.iloc[order], on="t_s",
+                                   by=["constellation", "svid"], direction="backward", tolerance=max_age_s)  # fmt: skip
+            filled = filled.set_index("index")
+            sats.loc[filled.index, "elev_deg"] = filled["elev_deg"]
+            sats.loc[filled.index, "azim_deg"] = filled["azim_deg"]
+    elif carry is not None:  # nothing to fill: only each satellite's latest angles are kept, from fewer rows
+        idx = np.flatnonzero(fresh)
+        latest = idx[_latest_rows(sats["t_s"].to_numpy()[idx], sats["constellation"].to_numpy()[idx], sats["svid"].to_numpy()[idx])]
+        part = pd.DataFrame({c: sats[c].to_numpy()[latest] for c in _KNOWN})
+        known = pd.concat([carry.last, part], ignore_index=True).astype(_KNOWN)
     if carry is not None and len(known):
-        carry.last = known.groupby(["constellation", "svid"], as_index=False).last()
+        t = known["t_s"].to_numpy()
+        carry.last = known.iloc[_latest_rows(t, known["constellation"].to_numpy(), known["svid"].to_numpy())].reset_index(drop=True)
     return sats.drop(columns="t_s")
+
+
+#: the columns (and types) of the angles kept for later epochs
+_KNOWN = {"t_s": float, "constellation": object, "svid": np.int64, "elev_deg": float, "azim_deg": float}
+
+
+def _latest_rows(t_s: np.ndarray, constellation: np.ndarray, svid: np.ndarray) -> np.ndarray:
+    """Per (constellation, svid), the row with the latest time (of equal times, the later row), in sorted key order.
+
+    What ``DataFrame.sort_values("t_s", kind="stable").groupby([...]).last()`` picks, for
+    rows without missing values; rows without a constellation are no group, as in groupby.
+    """
+    order = np.argsort(t_s, kind="stable")
+    const, _ = pd.factorize(np.asarray(constellation, dtype=object), sort=True)  # no constellation: -1
+    key = const.astype(np.int64) * (1 << 32) + np.asarray(svid, np.int64)
+    ordered = order[const[order] >= 0]
+    _, last_rev = np.unique(key[ordered][::-1], return_index=True)  # sorted keys; the first seen backwards = the latest
+    return ordered[::-1][last_rev]
 
 
 def nmea_measurements(
@@ -77,7 +123,8 @@ def nmea_measurements(
     satellites = fill_angles(satellites, epochs, carry)
     used = satellites[satellites["used"].to_numpy(dtype=bool)]
     used = used[np.isfinite(used["elev_deg"]) & np.isfinite(used["azim_deg"])]
-    used = used.drop_duplicates(["epoch", "constellation", "svid"])
+    used = used.iloc[_first_of_each(used["epoch"].to_numpy(np.int64), used["constellation"].to_numpy(dtype=object),
+                                    used["svid"].to_numpy(np.int64))]  # = drop_duplicates on the three  # fmt: skip
     epoch_ids = epochs["epoch"].to_numpy()
     row = np.searchsorted(epoch_ids, used["epoch"].to_numpy())
     keep = (row < n_epochs) & (epoch_ids[np.minimum(row, max(n_epochs - 1, 0))] == used["epoch"].to_numpy()) if n_epochs else np.zeros(len(used), bool)
@@ -88,8 +135,7 @@ def nmea_measurements(
     shape = (n_epochs, n_slots)
 
     const = used["constellation"].to_numpy(dtype=object)
-    names = sorted(set(const))
-    clock = np.searchsorted(np.asarray(names, dtype=object), const) if names else np.zeros(0, int)
+    clock, names = pd.factorize(const, sort=True, use_na_sentinel=False)  # a receiver clock per constellation, in name order
     elev = pad(used["elev_deg"].to_numpy(float), row, slot, shape, np.nan)
     azim = pad(used["azim_deg"].to_numpy(float), row, slot, shape, np.nan)
     clock_pad = pad(clock.astype(np.int64), row, slot, shape, -1)

@@ -48,12 +48,14 @@ class RaimParams:
         if not self.hal_m > 0:
             raise ValueError(f"hal_m = {self.hal_m}: must be positive")
 
-    def etc_threshold(self, dof: np.ndarray, lambda_det: np.ndarray) -> np.ndarray:
+    def etc_threshold(self, dof: np.ndarray, lambda_det: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The ETC threshold and its P_FA for each (k, λ_det)."""
         if self.exact_threshold:
-            return design.etc_threshold(self.p_md, dof, lambda_det)
+            threshold = design.etc_threshold(self.p_md, dof, lambda_det)
+            return threshold, design.false_alarm_probability(threshold, dof)
         if self._table is None:
             self._table = design.etc_threshold_table(self.p_md)
-        return self._table(dof, lambda_det)
+        return self._table(dof, lambda_det), self._table.p_fa(dof, lambda_det)
 
 
 @dataclass
@@ -93,8 +95,7 @@ def detect(geometry: Geometry, test_stat: np.ndarray, params: RaimParams, hal_m=
     else:
         with np.errstate(divide="ignore", invalid="ignore"):
             lambda_det = np.where(np.isfinite(slope_max) & (slope_max > 0), (hal / slope_max) ** 2, np.nan)
-        threshold = params.etc_threshold(k, lambda_det)
-        p_fa = design.false_alarm_probability(threshold, k)
+        threshold, p_fa = params.etc_threshold(k, lambda_det)
         hpl = hal.copy()
         unavailable = ~np.isfinite(slope_max) | ~(threshold > 0)
     status = np.full(n, VALID, dtype=np.int8)

@@ -18,7 +18,7 @@ from tollcli.integrity.fde import exclude
 from tollcli.integrity.kalman_hit import hpl_sbas_m
 from tollcli.integrity.measurements import Measurements
 from tollcli.integrity.raim import RaimParams, detect, status_names
-from tollcli.integrity.wls import residuals_from_prefit, wls_geometry, wsse
+from tollcli.integrity.wls import Geometry, residuals_from_prefit, wls_geometry, wsse
 
 RAIM_COLUMNS = (
     "raim_mode", "n_used", "dof", "slope_max_m", "test_stat", "test_stat_source", "threshold", "lambda_det",
@@ -26,9 +26,13 @@ RAIM_COLUMNS = (
 )  # fmt: skip
 
 
-def run_raim(meas: Measurements, params: RaimParams, hal_m=None) -> pd.DataFrame:
-    """One row of RAIM results per epoch of ``meas`` (``hal_m``: scalar or per epoch)."""
-    geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
+def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geometry | None = None) -> pd.DataFrame:
+    """One row of RAIM results per epoch of ``meas`` (``hal_m``: scalar or per epoch).
+
+    ``geometry``: ``wls_geometry`` of ``meas`` when already computed (it does not depend on the HAL).
+    """
+    if geometry is None:
+        geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
     n_epochs = meas.mask.shape[0]
     if meas.dy_m is not None:
         residual, _ = residuals_from_prefit(meas.H, geometry, meas.dy_m, meas.mask)

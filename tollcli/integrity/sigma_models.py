@@ -136,14 +136,17 @@ class NominalModel:
         cn0 = np.where(np.isfinite(cn0) & (cn0 > 0), cn0, self.default_cn0_dbhz)
         const = np.asarray(constellation, dtype=object)
         var = self.clk_eph_m**2 + sigma_iono_m(elev, lat_deg, lon_deg, self.iono) ** 2 + sigma_tropo_m(elev) ** 2
-        local = np.zeros(np.broadcast(elev, cn0, const).shape)
+        shape = np.broadcast(elev, cn0, const).shape
+        local = np.zeros(shape)
+        cn0_b, const_b = np.broadcast_to(cn0, shape), np.broadcast_to(const, shape)
         for name in sorted(set(const.ravel().tolist())):  # a hash set: sorting 10^5 strings costs more
-            sel = const == name
+            sel = const_b == name
             signal = self.signals.get(str(name), "bpsk1_wide")
-            local_var = sigma_noise_dll_m(cn0, signal) ** 2 + MULTIPATH_M[signal] ** 2
+            c = cn0_b[sel]  # each constellation's measurements only (elementwise: the same values)
+            local_var = sigma_noise_dll_m(c, signal) ** 2 + MULTIPATH_M[signal] ** 2
             if self.iono == "iono-free":  # second band BPSK(10) (L5/E5a) at the same C/N0
-                local_var = KA2_L1L5 * local_var + KB2_L1L5 * (sigma_noise_dll_m(cn0, "bpsk10") ** 2 + MULTIPATH_M["bpsk10"] ** 2)
-            local = np.where(sel, local_var, local)
+                local_var = KA2_L1L5 * local_var + KB2_L1L5 * (sigma_noise_dll_m(c, "bpsk10") ** 2 + MULTIPATH_M["bpsk10"] ** 2)
+            local[sel] = local_var
         return np.sqrt(var + local)
 
 

@@ -12,7 +12,7 @@ t = rᵀΣ⁻¹r, slope_i = σ_i·√(A_E,i² + A_N,i²)/√((I − B)_ii).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -35,6 +35,11 @@ class Geometry:
     dof: np.ndarray  # (E,) k = n_meas − n_unknowns
     singular: np.ndarray  # (E,) bool: the normal matrix cannot be inverted
     weight: np.ndarray  # (E, N) 1/σ², 0 for empty slots
+
+
+def take_epochs(geometry: Geometry, rows: np.ndarray) -> Geometry:
+    """The geometry of epochs ``rows`` (repeats allowed): every array indexed on its epoch axis."""
+    return Geometry(**{f.name: getattr(geometry, f.name)[rows] for f in fields(geometry)})
 
 
 def enu_rows(elev_deg: np.ndarray, azim_deg: np.ndarray) -> np.ndarray:
