@@ -114,7 +114,9 @@ static PyObject *frame(PyObject *self, PyObject *args) {
         Py_ssize_t framed = star + 3 < e ? star + 3 : e;
         int hi = hex_value(AT(framed - 2)), lo = hex_value(AT(framed - 1));
         int is_plain = (framed - s >= 10) && HEAD(s, 0) == '$' && AT(star < n ? star : n - 1) == '*' &&
-                       n_special == 2 && star + 3 <= e && HEAD(s, 6) == ',' && hi >= 0 && lo >= 0;
+                       n_special == 2 && star + 3 <= e && HEAD(s, 6) == ',' && hi >= 0 && lo >= 0 &&
+                       HEAD(s, 1) != ',' && HEAD(s, 2) != ',' && HEAD(s, 3) != ',' && HEAD(s, 4) != ',' &&
+                       HEAD(s, 5) != ',';  /* a five-character address: "$GNG,A,..." is not one */
         given[line] = (int64_t)hi * 16 + lo;
         int64_t addr = 0;
         for (int k = 5; k >= 1; k--) addr = (addr << 8) | (int64_t)HEAD(s, k);

@@ -128,6 +128,8 @@ def split_block_numpy(data: bytes) -> BlockLines:
     hi = _hex_value(((tail >> 48) & 0xFF).astype(np.uint8))
     lo = _hex_value(((tail >> 56) & 0xFF).astype(np.uint8))
     plain &= (hi >= 0) & (lo >= 0)
+    for k in range(1, 6):  # a five-character address: "$GNG,A,..." is not one
+        plain &= ((head >> (8 * k)) & 0xFF) != _COMMA
     given = hi * 16 + lo
     end = np.where(plain, framed, end)
     start = np.where(plain | ~android, start, start - 5)  # lines left to the per-line reader keep their prefix
