@@ -127,6 +127,7 @@ ODD_LOG = [
     compose.with_checksum("GPGGA,010011.00,4806.000,X,01130.000,E,1,08,0.9,500.0,M,47.0,M,,"),
     compose.with_checksum("GPGGA,010012.00,4806.000,N,01130.000,E,1e0,08,0.9,500.0,M,47.0,M,,"),
     "$GPGGA,010013.00,4806.0",  # truncated
+    compose.with_checksum(",NGSA,A,3,05,07,,,,,,,,,,,1.6,0.9,1.3"),  # an empty address
     compose.with_checksum("GNG,A,010014.00,4806.000,N,01130.000,E,1,08,0.9,500.0,M,47.0,M,,"),  # a comma in the address
     "\x00\x01binary junk\xff",
 ]

@@ -158,10 +158,7 @@ def time_of_day_s(block, start, end) -> tuple[np.ndarray, np.ndarray]:
     """
     if kernels.compiled is None:
         return time_of_day_s_numpy(block, start, end)
-    start, end = np.ascontiguousarray(start, np.int64), np.ascontiguousarray(end, np.int64)
-    tod, ok = np.empty(start.size, np.float64), np.empty(start.size, bool)
-    kernels.compiled.time_of_day(block.buf, start, end, tod, ok)
-    return tod, ok
+    return _value_and_ok(kernels.compiled.time_of_day, block, start, end, np.float64)
 
 
 def time_of_day_s_numpy(block, start, end) -> tuple[np.ndarray, np.ndarray]:
@@ -212,10 +209,15 @@ def rmc_date_days(block, start, end) -> tuple[np.ndarray, np.ndarray]:
     """
     if kernels.compiled is None:
         return rmc_date_days_numpy(block, start, end)
+    return _value_and_ok(kernels.compiled.rmc_date, block, start, end, np.int64)
+
+
+def _value_and_ok(kernel, block, start, end, dtype) -> tuple[np.ndarray, np.ndarray]:
+    """A compiled field kernel's (value, ok) arrays for the spans."""
     start, end = np.ascontiguousarray(start, np.int64), np.ascontiguousarray(end, np.int64)
-    days, ok = np.empty(start.size, np.int64), np.empty(start.size, bool)
-    kernels.compiled.rmc_date(block.buf, start, end, days, ok)
-    return days, ok
+    value, ok = np.empty(start.size, dtype), np.empty(start.size, bool)
+    kernel(block.buf, start, end, value, ok)
+    return value, ok
 
 
 def rmc_date_days_numpy(block, start, end) -> tuple[np.ndarray, np.ndarray]:

@@ -107,7 +107,7 @@ class BulkReader:
         first_line = self.stats.lines
         kind = np.full(n, -1, np.int8)
         why: dict[int, str] = {}
-        stype = np.full(n, "", dtype=object)
+        stype = np.full(n, None, dtype=object)  # None: not yet named (an empty address is a name)
         tod = np.full(n, np.nan)
         slow = np.zeros(n, bool)
         inert = np.zeros(n, bool)  # decoded, but changes no epoch (a VTG with mode 'N')
@@ -233,7 +233,7 @@ class BulkReader:
         stats.sentences += int(counts[UNUSED] + counts[MALFORMED] + counts[DECODED])
         unused = np.flatnonzero(k == UNUSED)
         if unused.size:
-            names = [stype[i] or unpack_address(int(bl.address[i])) for i in unused]
+            names = [stype[i] if stype[i] is not None else unpack_address(int(bl.address[i])) for i in unused]
             for name in names:  # first-seen order, as the reference reader's dict
                 stats.unused_types[name] = stats.unused_types.get(name, 0) + 1
         stats.lines = first_line + cut
