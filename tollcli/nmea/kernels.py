@@ -13,22 +13,19 @@ import os
 
 
 def _installed_copy():
-    """The compiled module of the installed distribution, loaded from its file (None when absent)."""
+    """The compiled module of an installed copy further down ``sys.path``, loaded from its file (None when absent)."""
     import importlib.machinery
-    import importlib.metadata
     import importlib.util
+    import sys
 
-    try:
-        dist = importlib.metadata.distribution("tollcli")
-    except importlib.metadata.PackageNotFoundError:
-        return None
-    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        path = dist.locate_file(f"tollcli/nmea/_bulk_kernels{suffix}")
-        if os.path.exists(path):
-            spec = importlib.util.spec_from_file_location("tollcli.nmea._bulk_kernels", path)
-            module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
-            return module
+    for entry in sys.path:
+        for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+            path = os.path.join(entry or ".", "tollcli", "nmea", f"_bulk_kernels{suffix}")
+            if os.path.isfile(path):
+                spec = importlib.util.spec_from_file_location("tollcli.nmea._bulk_kernels", path)
+                module = importlib.util.module_from_spec(spec)
+                spec.loader.exec_module(module)
+                return module
     return None
 
 
