@@ -46,6 +46,7 @@ def test_chunk_size_does_not_change_the_invoice(monkeypatch, log):
     table_whole = []
     charge_log(path, GEO, TARIFF, ChargeSettings(), epoch_table=table_whole)
     monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 37)
+    monkeypatch.setattr(pipeline, "BLOCK_BYTES", 2048)  # chunks end at block ends
     chunked, _ = charge_log(path, GEO, TARIFF, ChargeSettings(), roads=ROADS)
     table_chunked = []
     charge_log(path, GEO, TARIFF, ChargeSettings(), epoch_table=table_chunked)

@@ -18,3 +18,35 @@ def cache_dir() -> Path | None:
     if value and value.lower() in ("off", "0", "none"):
         return None
     return Path(value) if value else Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tollcli"
+
+
+def cached_array(folder: str, name: str, compute, shape: tuple | None = None):
+    """A numpy array kept as ``<cache>/<folder>/<name>`` (``name`` must carry every input and version).
+
+    Read when present and readable (and of ``shape`` when given); otherwise ``compute()`` is
+    called and its result written atomically when the directory is writable.
+    """
+    import tempfile
+
+    import numpy as np
+
+    base = cache_dir()
+    path = base / folder / name if base is not None else None
+    if path is not None and path.exists():
+        try:
+            value = np.load(path, allow_pickle=False)
+            if shape is None or value.shape == shape:
+                return value
+        except (OSError, ValueError):
+            pass
+    value = np.asarray(compute())
+    if path is not None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+            with os.fdopen(fd, "wb") as fh:
+                np.save(fh, value)
+            os.replace(tmp, path)
+        except OSError:
+            pass
+    return value

@@ -38,6 +38,10 @@ def iso_from_seconds(t_s: float) -> str:
 
 def iso_utc(values) -> np.ndarray:
     """Many timestamps (tz-aware or UTC-naive; Series, array or index) → ``YYYY-MM-DDTHH:MM:SS.mmmZ`` strings."""
-    index = pd.DatetimeIndex(pd.to_datetime(values, utc=True)).tz_convert(None)
+    dtype = getattr(values, "dtype", None)
+    if isinstance(dtype, pd.DatetimeTZDtype):  # already times: only the zone to drop (no parsing pass)
+        index = pd.DatetimeIndex(values).tz_convert(None)
+    else:
+        index = pd.DatetimeIndex(pd.to_datetime(values, utc=True)).tz_convert(None)
     text = np.datetime_as_string(index.to_numpy().astype("datetime64[ms]"), unit="ms")
     return np.char.add(text.astype(str), "Z").astype(object)

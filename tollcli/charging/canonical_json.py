@@ -57,23 +57,43 @@ def _value(o, newline: str) -> str:
         elif isinstance(o, dict):
             t = dict
     if t is dict:
-        if not o:
-            return "{}"
-        try:
-            items = sorted(o.items())
-        except TypeError:
-            raise _Unusual from None
-        parts = []
-        for k, v in items:
-            if type(k) is not str:
-                raise _Unusual
-            parts.append(encode_basestring(k) + ": " + _value(v, inner))
-        return "{" + inner + ("," + inner).join(parts) + newline + "}"
+        return _dict(o, inner, newline)
     if t is list or t is tuple:
         if not o:
             return "[]"
-        return "[" + inner + ("," + inner).join([_value(v, inner) for v in o]) + newline + "]"
+        return "[" + inner + ("," + inner).join([_item(v, inner) for v in o]) + newline + "]"
     raise _Unusual
+
+
+#: encoders of the exact scalar types (the common case, without a call to _value)
+_SCALARS = {str: encode_basestring, float: _float, int: int.__repr__}
+_KEYS: dict[str, str] = {}  # encoded keys (an invoice repeats a few dozen)
+
+
+def _item(v, inner: str) -> str:
+    f = _SCALARS.get(type(v))
+    return f(v) if f is not None else _value(v, inner)
+
+
+def _dict(o: dict, inner: str, newline: str) -> str:
+    if not o:
+        return "{}"
+    try:
+        items = sorted(o.items())
+    except TypeError:
+        raise _Unusual from None
+    parts = []
+    for k, v in items:
+        if type(k) is not str:
+            raise _Unusual
+        key = _KEYS.get(k)
+        if key is None:
+            key = encode_basestring(k) + ": "
+            if len(_KEYS) < 4096:
+                _KEYS[k] = key
+        f = _SCALARS.get(type(v))
+        parts.append(key + (f(v) if f is not None else _value(v, inner)))
+    return "{" + inner + ("," + inner).join(parts) + newline + "}"
 
 
 def canonical_json(obj) -> str:

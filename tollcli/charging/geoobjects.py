@@ -23,6 +23,7 @@ per feature (``crs_metric``), so recognition can project positions the same way.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,10 +118,23 @@ def metric_crs(lines_wgs84) -> str:
 
 
 def _transformer(crs: str, inverse: bool = False):
+    """WGS-84 lon/lat → ``crs`` (or back), made once per thread (building one costs milliseconds)."""
     from pyproj import Transformer
 
-    src, dst = ("EPSG:4326", crs) if not inverse else (crs, "EPSG:4326")
-    return Transformer.from_crs(src, dst, always_xy=True)
+    cache = _TRANSFORMERS.__dict__.setdefault("by_crs", {})
+    key = (crs, inverse)
+    if key not in cache:
+        src, dst = ("EPSG:4326", crs) if not inverse else (crs, "EPSG:4326")
+        cache[key] = Transformer.from_crs(src, dst, always_xy=True)
+    return cache[key]
+
+
+def wgs84_to(crs: str):
+    """The (cached) transformer from WGS-84 lon/lat to ``crs`` (``.transform(lon, lat)`` → x, y)."""
+    return _transformer(crs)
+
+
+_TRANSFORMERS = threading.local()  # pyproj transformers are not shared between threads
 
 
 def project(geoms, crs: str, inverse: bool = False):

@@ -33,16 +33,17 @@ def _iso(ts) -> str:
     return pd.Timestamp(ts).tz_convert("UTC").strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
 
 
-def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame, geo: GeoObjects, tariff: Tariff, *,
-                  vehicle: str, vehicle_class: str, inputs: dict[str, str], parameters: dict, period) -> dict:  # fmt: skip
+def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: GeoObjects, tariff: Tariff, *,
+                  vehicle: str, vehicle_class: str, inputs: dict[str, str], parameters: dict, period,
+                  details: tuple[dict, dict] | None = None) -> dict:  # fmt: skip
     """The invoice document (a dict of JSON-ready values).
 
     Per passage: its statuses counted and its independent valid positions listed as
     evidence, each found by one grouping over all positions (no table per passage).
+    ``details``: those two already made by :func:`passage_details` (``positions`` is then not used).
     """
     index = {gid: i for i, gid in enumerate(geo.ids)}
-    statuses = _statuses(positions)
-    evidence = _evidence(positions)
+    statuses, evidence = details if details is not None else passage_details(positions)
     entry = iso_utc(charges["entry_utc"]) if len(charges) else []
     exit_ = iso_utc(charges["exit_utc"]) if len(charges) else []
     lines, not_charged, total = [], [], Decimal(0)
@@ -73,6 +74,11 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame, geo: GeoObject
         "total": str(total.quantize(Decimal(1).scaleb(-tariff.minor_unit))),
         "not_charged": not_charged,
     }
+
+
+def passage_details(positions: pd.DataFrame) -> tuple[dict, dict]:
+    """(geo-object, passage) → statuses counted, and → evidence (the independent valid positions)."""
+    return _statuses(positions), _evidence(positions)
 
 
 def _statuses(positions: pd.DataFrame) -> dict[tuple, dict[str, int]]:

@@ -7,17 +7,16 @@ import hashlib
 import os
 from dataclasses import asdict, dataclass
 
-import numpy as np
 import pandas as pd
 
 from tollcli.charging.invoice import build_invoice, file_sha256, invoice_json, seal
 from tollcli.charging.recognition import (
     charges,
-    concat_pairs,
     inside_pairs,
     load_geoobjects,
     positions_from_pairs,
 )
+from tollcli.charging.streaming import TailCharger, choose_policy, has_speeds
 from tollcli.charging.tariffs import load_tariff
 from tollcli.enforcement.findings import FindingSettings, trip_findings
 from tollcli.enforcement.trip import cn0_summary
@@ -28,6 +27,7 @@ from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
 from tollcli.integrity.sigma_models import NominalModel
 from tollcli.integrity.wls import wls_geometry
+from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
 from tollcli.io.sources import sniff_format
 from tollcli.nmea import ReadStats, iter_nmea_tables
 from tollcli.nmea.reader import check_usable
@@ -74,19 +74,25 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     stats = None
     nominal = NominalModel()
     epoch_raim = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa)
+    finding_settings = FindingSettings.for_class(settings.vehicle_class)
     if kind == "nmea":
-        epochs, per_epoch, pairs, cn0, stats = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal,
-                                                                 keep_all=epoch_table is not None)  # fmt: skip
+        charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
+        stats = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table)
+        policy, table, details, found, period = charger.finish()
+        positions = None
     else:
         epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal)
         per_epoch = run_raim(meas, epoch_raim)
-        pairs, cn0 = inside_pairs(epochs, meas, geo_objects, params), None
-    policy, why, matched = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
-    positions = positions_from_pairs(pairs, epochs["time_utc"], geo_objects, tc_s=settings.tc_s, epoch_why=why, matched_road=matched)
-    finding_settings = FindingSettings.for_class(settings.vehicle_class)
-    found = trip_findings(epochs, None, per_epoch, geo_objects, finding_settings, cn0=cn0)
-    table = charges(positions, settings.n_th)
-    dated = epochs["time_utc"].dropna()
+        pairs = inside_pairs(epochs, meas, geo_objects, params)
+        policy, why, matched = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
+        positions = positions_from_pairs(pairs, epochs["time_utc"], geo_objects, tc_s=settings.tc_s, epoch_why=why,
+                                         matched_road=matched)  # fmt: skip
+        found = trip_findings(epochs, None, per_epoch, geo_objects, finding_settings)
+        table, details = charges(positions, settings.n_th), None
+        dated = epochs["time_utc"].dropna()
+        period = (dated.min(), dated.max()) if len(dated) else None
+        if epoch_table is not None:
+            epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), per_epoch], axis=1))
     inputs = {"log": log, "geoobjects": geo, "tariff": tariff,
               "geoobjects_sha256": geo_objects.source_sha256 or file_sha256(geo), "tariff_sha256": file_sha256(tariff)}  # fmt: skip
     if log != "-":
@@ -98,13 +104,9 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     parameters = {**asdict(settings), "valid_statuses": ["valid", "excluded_valid"], "policy_used": policy}
     invoice = build_invoice(table, positions, geo_objects, tariff_doc,
                             vehicle=settings.vehicle or os.path.basename(log), vehicle_class=settings.vehicle_class,
-                            inputs=inputs, parameters=parameters,
-                            period=(dated.min(), dated.max()) if len(dated) else None)  # fmt: skip
+                            inputs=inputs, parameters=parameters, period=period, details=details)  # fmt: skip
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
-    invoice = seal(invoice)
-    if epoch_table is not None:
-        epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), per_epoch], axis=1))
-    return invoice, stats
+    return seal(invoice), stats
 
 
 #: epoch columns kept for the whole log after its chunks are read (policy checks, findings, the invoice's period)
@@ -114,62 +116,55 @@ KEPT_EPOCH_COLUMNS = ("epoch", "time_utc", "tod_s", "line", "lat_deg", "lon_deg"
 KEPT_RAIM_COLUMNS = ("raim_status", "n_used", "test_stat", "threshold")
 #: epochs per chunk: the working set of the satellite-level steps (an hour at 1 Hz)
 CHUNK_EPOCHS = 3_600
+#: bytes read at a time (a chunk ends at a block's end: tests make both small to cut logs often)
+BLOCK_BYTES = SOURCE_BLOCK_BYTES
+#: False: the charger keeps every chunk and charges the whole log at once (the reference the tests compare with)
+STREAM_ROUNDS = True
 
 
 def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams,
-                      nominal: NominalModel, keep_all: bool = False):  # fmt: skip
-    """Read an NMEA log chunk by chunk: each chunk's satellites, RAIM and geo-object pairs are done before the next.
+                      nominal: NominalModel, charger: TailCharger, epoch_table: list | None = None) -> ReadStats:  # fmt: skip
+    """Read an NMEA log chunk by chunk: each chunk's satellites, RAIM and geo-object pairs are done
+    before the next, and handed to ``charger`` with the few per-epoch columns it needs.
 
-    What is kept for the whole log is small per epoch: the epoch columns later steps use
-    (all of them with ``keep_all``), the per-epoch RAIM columns, the C/N0 summary, and the
-    (epoch, geo-object) pairs with the position inside. Memory is the chunk's, not the log's.
+    Memory is the chunk's and the charger's tail, not the log's (``epoch_table``, a list for batch
+    outputs, receives the whole per-epoch table and so grows with the log).
     """
     date = dt.date.fromisoformat(settings.date) if settings.date else None
     model = settings.sigma_model if settings.sigma_model != "input" else "nominal"
     stats = ReadStats()
     carry = AngleCarry()
-    epoch_parts, raim_parts, pair_parts, cn0_parts = [], [], [], []
+    table_parts = []
     offset = 0
-    for chunk in iter_nmea_tables(log, strict=settings.strict, date=date, stats=stats, chunk_epochs=CHUNK_EPOCHS):
+    for chunk in iter_nmea_tables(log, strict=settings.strict, date=date, stats=stats, chunk_epochs=CHUNK_EPOCHS,
+                                  block_bytes=BLOCK_BYTES):  # fmt: skip
         epochs = chunk.epochs
         if epochs.empty:
             continue
         meas = nmea_measurements(epochs, chunk.satellites, model, settings.sigma_m, nominal, carry=carry)
         geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)  # once for the epoch RAIM and every HAL
         raim = run_raim(meas, epoch_raim, geometry=geometry)
-        raim_parts.append(raim if keep_all else raim[list(KEPT_RAIM_COLUMNS)])
-        pair_parts.append(inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry))
-        cn0_parts.append(cn0_summary(chunk.satellites, len(epochs), int(epochs["epoch"].iat[0])))
-        epoch_parts.append(epochs if keep_all else epochs[list(KEPT_EPOCH_COLUMNS)])
+        pairs = inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry)
+        cn0 = cn0_summary(chunk.satellites, len(epochs), int(epochs["epoch"].iat[0]))
+        charger.add(epochs[list(KEPT_EPOCH_COLUMNS)], raim[list(KEPT_RAIM_COLUMNS)], cn0, pairs)
+        if epoch_table is not None:
+            table_parts.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}),
+                                          raim.reset_index(drop=True)], axis=1))  # fmt: skip
         offset += len(epochs)
     check_usable(stats)
-    if not epoch_parts:
+    if offset == 0:
         raise DataError(f"{log}: no epoch with a time of day")
-    epochs = pd.concat(epoch_parts, ignore_index=True)
-    per_epoch = pd.concat(raim_parts, ignore_index=True)
-    cn0 = pd.concat(cn0_parts, ignore_index=True)
-    return epochs, per_epoch, concat_pairs(pair_parts), cn0, stats
+    if epoch_table is not None:
+        epoch_table.append(pd.concat(table_parts, ignore_index=True))
+    return stats
 
 
 def _policy_checks(epochs, settings: ChargeSettings, roads: str | None):
     """The policy in force, each epoch's failed check ('' when none) and matched road (None without roads)."""
     from tollcli.integrity.map_matching import load_roads
-    from tollcli.integrity.verdict import (
-        POLICIES,
-        default_policy,
-        epoch_checks,
-        failed_check,
-    )
+    from tollcli.integrity.verdict import epoch_checks, failed_check
 
-    has_speed = "speed_mps" in epochs and bool(np.isfinite(epochs["speed_mps"].to_numpy(float)).mean() > 0.5)
-    policy = settings.policy or default_policy(has_speed, roads is not None)
-    if policy not in POLICIES:
-        raise UsageError(f"--policy {policy}: one of {', '.join(POLICIES)}")
-    needs = POLICIES[policy]
-    if "mm" in needs and roads is None:
-        raise UsageError(f"--policy {policy} needs the road network (--roads)")
-    if "speed" in needs and not has_speed:
-        raise UsageError(f"--policy {policy}: the log has no speed over ground (RMC/VTG) to check")
+    policy, needs = choose_policy(has_speeds(epochs), settings.policy, roads)
     if not needs:
         return policy, None, None
     checks = epoch_checks(epochs, load_roads(roads) if "mm" in needs else None)

@@ -41,15 +41,19 @@ def _subset(meas: Measurements, rows: np.ndarray) -> Measurements:
 
 def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(epoch row, geo-object index) for every position inside a geo-object, and the metric x, y of all rows."""
-    from pyproj import Transformer
+    from tollcli.charging.geoobjects import wgs84_to
 
     lon, lat = epochs["lon_deg"].to_numpy(float), epochs["lat_deg"].to_numpy(float)
-    x, y = Transformer.from_crs("EPSG:4326", geo.crs, always_xy=True).transform(lon, lat)
+    x, y = wgs84_to(geo.crs).transform(lon, lat)
     x, y = np.asarray(x, float), np.asarray(y, float)
     have = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
-    inside, obj = geo.tree.query(shapely.points(x[have], y[have]), predicate="within")
-    order = np.lexsort((obj, have[inside]))
-    return have[inside][order], obj[order], x, y
+    # the boxes hit, then the exact test on coordinates: the same pairs as predicate="within", without a geometry per point
+    hit, obj = geo.tree.query(shapely.points(x[have], y[have]))
+    rows = have[hit]
+    inside = shapely.contains_xy(geo.polygons[obj], x[rows], y[rows])
+    rows, obj = rows[inside], obj[inside]
+    order = np.lexsort((obj, rows))
+    return rows[order], obj[order], x, y
 
 
 def utc_seconds(time_utc: pd.Series) -> np.ndarray:
@@ -97,8 +101,10 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
     raim = run_raim(_subset(meas, rows), params, hal_m=geo.hal_m[obj],
                     geometry=take_epochs(geometry, rows) if geometry is not None else None)
     status = raim["raim_status"].to_numpy(dtype=object)
-    shifted_inside = shapely.contains_xy(geo.polygons[obj], x[rows] + raim["fde_shift_e_m"].to_numpy(),
-                                         y[rows] + raim["fde_shift_n_m"].to_numpy())  # fmt: skip
+    de, dn = raim["fde_shift_e_m"].to_numpy(), raim["fde_shift_n_m"].to_numpy()
+    moved = np.flatnonzero((de != 0) | (dn != 0))  # an unshifted position is inside: it is a candidate pair
+    shifted_inside = np.ones(rows.size, bool)
+    shifted_inside[moved] = shapely.contains_xy(geo.polygons[obj[moved]], x[rows[moved]] + de[moved], y[rows[moved]] + dn[moved])
     return {"epoch_row": rows + row_offset, "obj": obj, "raim_status": status, "test_stat": raim["test_stat"].to_numpy(),
             "threshold": raim["threshold"].to_numpy(), "p_fa": raim["p_fa"].to_numpy(),
             "test_stat_source": raim["test_stat_source"].to_numpy(dtype=object),
@@ -114,11 +120,30 @@ def positions_from_pairs(pairs: dict[str, np.ndarray], time_utc: pd.Series, geo:
                          matched_road: np.ndarray | None = None) -> pd.DataFrame:  # fmt: skip
     """The positions table of :func:`recognise` from :func:`inside_pairs` (``time_utc``: of every epoch row)."""
     if not pairs or pairs["epoch_row"].size == 0:
-        return pd.DataFrame(columns=["epoch_row", "geoobject", "time_utc", "passage", "raim_status", "test_stat",
-                                     "threshold", "p_fa", "test_stat_source", "valid", "independent", "verdict"])  # fmt: skip
-    rows, obj, status = pairs["epoch_row"], pairs["obj"], pairs["raim_status"]
+        return empty_positions()
+    rows = pairs["epoch_row"]
+    valid, verdict = pair_verdicts(pairs, geo, epoch_why, matched_road)
+    return passages({**pairs, "valid": valid, "verdict": verdict, "t_s": utc_seconds(time_utc)[rows],
+                     "time_utc": time_utc.array[rows]}, geo, tc_s, passage_gap_s)  # fmt: skip
+
+
+POSITION_COLUMNS = ("epoch_row", "geoobject", "time_utc", "passage", "raim_status", "test_stat", "threshold", "p_fa",
+                    "test_stat_source", "valid", "independent", "verdict")  # fmt: skip
+
+
+def empty_positions() -> pd.DataFrame:
+    return pd.DataFrame(columns=list(POSITION_COLUMNS))
+
+
+def pair_verdicts(pairs: dict[str, np.ndarray], geo: GeoObjects, epoch_why: np.ndarray | None = None,
+                  matched_road: np.ndarray | None = None, row_offset: int = 0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Per pair: whether it counts (``valid``) and its verdict (the RAIM status, or the policy's failed check).
+
+    ``epoch_why`` / ``matched_road`` are indexed by epoch row − ``row_offset``.
+    """
+    rows, obj = pairs["epoch_row"] - row_offset, pairs["obj"]
     valid = pairs["raim_valid"].copy()
-    verdict = status.copy()
+    verdict = pairs["raim_status"].copy()
     if epoch_why is not None:
         why = np.asarray(epoch_why, dtype=object)[rows]
         fails = valid & (why != "")
@@ -128,19 +153,28 @@ def positions_from_pairs(pairs: dict[str, np.ndarray], time_utc: pd.Series, geo:
         other = valid & (np.asarray(matched_road, dtype=object)[rows] != geo.ids[obj])
         verdict[other] = "mm_other_road"
         valid &= ~other
-    t_s = utc_seconds(time_utc)[rows]
-    # passages: consecutive inside fixes of one geo-object less than passage_gap_s apart
-    by_obj = np.lexsort((t_s, obj))
-    rows, obj, t_s, valid, status, verdict = rows[by_obj], obj[by_obj], t_s[by_obj], valid[by_obj], status[by_obj], verdict[by_obj]
-    new = np.ones(rows.size, dtype=bool)
+    return valid, verdict
+
+
+def passages(cols: dict[str, np.ndarray], geo: GeoObjects, tc_s: float = 5.0, passage_gap_s: float = PASSAGE_GAP_S,
+             first_passage: int = 0) -> pd.DataFrame:  # fmt: skip
+    """Positions (pair columns with ``valid``, ``verdict``, ``t_s``, ``time_utc``) grouped into passages and thinned.
+
+    Passages: consecutive inside fixes of one geo-object less than ``passage_gap_s`` apart, numbered
+    from ``first_passage`` in (geo-object, time) order. Rows come out in that order.
+    """
+    by_obj = np.lexsort((cols["t_s"], cols["obj"]))
+    obj, t_s, valid = cols["obj"][by_obj], cols["t_s"][by_obj], cols["valid"][by_obj]
+    new = np.ones(obj.size, dtype=bool)
     new[1:] = (obj[1:] != obj[:-1]) | (np.diff(t_s) > passage_gap_s)
-    passage = np.cumsum(new) - 1
+    passage = np.cumsum(new) - 1 + first_passage
     independent = thin_independent(t_s, passage, valid, tc_s)
     return pd.DataFrame({
-        "epoch_row": rows, "geoobject": geo.ids[obj], "time_utc": time_utc.array[rows], "passage": passage,
-        "raim_status": status, "test_stat": pairs["test_stat"][by_obj], "threshold": pairs["threshold"][by_obj],
-        "p_fa": pairs["p_fa"][by_obj], "test_stat_source": pairs["test_stat_source"][by_obj],
-        "valid": valid, "independent": independent, "verdict": verdict,
+        "epoch_row": cols["epoch_row"][by_obj], "geoobject": geo.ids[obj], "time_utc": cols["time_utc"][by_obj],
+        "passage": passage, "raim_status": cols["raim_status"][by_obj], "test_stat": cols["test_stat"][by_obj],
+        "threshold": cols["threshold"][by_obj], "p_fa": cols["p_fa"][by_obj],
+        "test_stat_source": cols["test_stat_source"][by_obj], "valid": valid, "independent": independent,
+        "verdict": cols["verdict"][by_obj],
     })  # fmt: skip
 
 
@@ -173,8 +207,34 @@ def charges(positions: pd.DataFrame, n_th: int) -> pd.DataFrame:
     if positions.empty:
         return pd.DataFrame(columns=["geoobject", "passage", "entry_utc", "exit_utc", "n_inside", "n_valid",
                                      "n_independent", "charged"])  # fmt: skip
-    grouped = positions.groupby(["geoobject", "passage"], sort=False)
-    out = grouped.agg(entry_utc=("time_utc", "min"), exit_utc=("time_utc", "max"), n_inside=("valid", "size"),
-                      n_valid=("valid", "sum"), n_independent=("independent", "sum")).reset_index()  # fmt: skip
+    out = _charges_in_order(positions)
+    if out is None:
+        grouped = positions.groupby(["geoobject", "passage"], sort=False)
+        out = grouped.agg(entry_utc=("time_utc", "min"), exit_utc=("time_utc", "max"), n_inside=("valid", "size"),
+                          n_valid=("valid", "sum"), n_independent=("independent", "sum")).reset_index()  # fmt: skip
     out["charged"] = out["n_independent"] >= n_th
     return out.sort_values(["entry_utc", "geoobject"], kind="stable").reset_index(drop=True)
+
+
+def _charges_in_order(positions: pd.DataFrame) -> pd.DataFrame | None:
+    """The grouping of :func:`charges` without pandas' groupby, for positions in passage order (as
+    :func:`passages` gives them: each passage's rows together, passages increasing); None otherwise."""
+    passage = positions["passage"].to_numpy()
+    gid = positions["geoobject"].to_numpy(dtype=object)
+    times = positions["time_utc"].array
+    if passage.dtype.kind not in "iu" or not isinstance(times, pd.arrays.DatetimeArray) or times.isna().any():
+        return None
+    edge = np.r_[True, (passage[1:] != passage[:-1]) | (gid[1:] != gid[:-1])]
+    start = np.flatnonzero(edge)
+    if np.any(np.diff(passage[start]) <= 0):  # a passage number in two places: leave it to groupby
+        return None
+    group = np.cumsum(edge) - 1
+    order = np.lexsort((times.asi8, group))  # each group's earliest first, latest last
+    first = np.searchsorted(group[order], np.arange(start.size), side="left")
+    last = np.r_[first[1:], order.size] - 1
+    sums = lambda c: np.add.reduceat(positions[c].to_numpy(bool).astype(np.int64), start)  # noqa: E731
+    return pd.DataFrame({
+        "geoobject": gid[start], "passage": passage[start], "entry_utc": times.take(order[first]),
+        "exit_utc": times.take(order[last]), "n_inside": np.diff(np.r_[start, passage.size]).astype(np.int64),
+        "n_valid": sums("valid"), "n_independent": sums("independent"),
+    })  # fmt: skip

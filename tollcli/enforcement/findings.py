@@ -75,20 +75,26 @@ class FindingSettings:
         return cls(max_speed_mps=CLASS_MAX_SPEED_MPS.get(vehicle_class, CLASS_MAX_SPEED_MPS["car"]), **overrides)
 
 
-def _finding(kind: str, t0: float, t1: float, lat0, lon0, lat1=None, lon1=None, **evidence) -> dict:
+def _finding(kind: str, rows: tuple[int, int], t0: float, t1: float, lat0, lon0, lat1=None, lon1=None, **evidence) -> dict:
+    """One finding; ``rows``: its first and last epoch rows (kept under ``_rows`` for streaming, not written)."""
     r = lambda v: None if v is None or not np.isfinite(v) else round(float(v), 7)  # noqa: E731
     clean = {k: (round(float(v), 3) if isinstance(v, (float, np.floating)) else (int(v) if isinstance(v, np.integer) else v))
              for k, v in evidence.items()}  # fmt: skip
     return {"kind": kind, "category": CATEGORY[kind], "start_utc": iso_from_seconds(t0), "end_utc": iso_from_seconds(t1),
-            "lat_deg": r(lat0), "lon_deg": r(lon0), "end_lat_deg": r(lat1), "end_lon_deg": r(lon1), "evidence": clean}  # fmt: skip
+            "lat_deg": r(lat0), "lon_deg": r(lon0), "end_lat_deg": r(lat1), "end_lon_deg": r(lon1), "evidence": clean,
+            "_rows": (int(rows[0]), int(rows[1]))}  # fmt: skip
 
 
 def trip_findings(epochs: pd.DataFrame, satellites: pd.DataFrame | None = None, raim: pd.DataFrame | None = None,
-                  geo=None, settings: FindingSettings = FindingSettings(), cn0: pd.DataFrame | None = None) -> list[dict]:  # fmt: skip
+                  geo=None, settings: FindingSettings = FindingSettings(), cn0: pd.DataFrame | None = None,
+                  keep_rows: bool = False, times_increase: bool | None = None) -> list[dict]:  # fmt: skip
     """All findings of one trip, in time order. ``raim``: per-epoch RAIM columns (same rows as ``epochs``).
 
     ``cn0``: the per-epoch C/N0 summary (:func:`~tollcli.enforcement.trip.cn0_summary`) when the
-    satellite table itself is not kept (a long log read in chunks).
+    satellite table itself is not kept (a long log read in chunks). ``keep_rows``: each finding keeps
+    its first and last epoch rows under ``_rows`` (for :mod:`tollcli.enforcement.stream`).
+    ``times_increase``: whether the trailing baselines may use time windows (default: the times of
+    ``epochs`` are all known and never go back).
     """
     epochs = epochs.reset_index(drop=True)
     if epochs.empty:
@@ -106,12 +112,15 @@ def trip_findings(epochs: pd.DataFrame, satellites: pd.DataFrame | None = None, 
     out += _time_jumps(epochs, t, settings)
     out += _speed_checks(epochs, t, fx, settings)
     summary = cn0 if cn0 is not None else cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
-    out += _cn0_checks(epochs, summary, t, fx, settings)
+    out += _cn0_checks(epochs, summary, t, fx, settings, times_increase)
     out += _fix_loss(epochs, t, fx, settings)
     out += _disagreements(epochs, t)
     if raim is not None:
         out += _raim_alarm(epochs, raim.reset_index(drop=True), t, settings)
     out.sort(key=lambda f: (f["start_utc"], f["kind"]))
+    if not keep_rows:
+        for f in out:
+            del f["_rows"]
     return out
 
 
@@ -125,7 +134,7 @@ def _gaps(fx, geo, s: FindingSettings) -> list[dict]:
     for i in hit:  # one per gap (a few per trip), not per epoch
         line_ids, reach_ids = _crossable(geo, fx.lat_deg[i], fx.lon_deg[i], fx.lat_deg[i + 1], fx.lon_deg[i + 1],
                                          s.max_speed_mps * fx.dt_s[i])  # fmt: skip
-        out.append(_finding("gap", fx.t_s[i], fx.t_s[i + 1], fx.lat_deg[i], fx.lon_deg[i], fx.lat_deg[i + 1], fx.lon_deg[i + 1],
+        out.append(_finding("gap", (fx.rows[i], fx.rows[i + 1]), fx.t_s[i], fx.t_s[i + 1], fx.lat_deg[i], fx.lon_deg[i], fx.lat_deg[i + 1], fx.lon_deg[i + 1],
                             duration_s=fx.dt_s[i], distance_m=fx.step_m[i], implied_speed_mps=fx.step_m[i] / fx.dt_s[i],
                             geoobjects_on_line=line_ids, geoobjects_reachable=reach_ids,
                             note="possibly driven, not charged"))  # fmt: skip
@@ -136,9 +145,9 @@ def _crossable(geo, lat0, lon0, lat1, lon1, reach_m: float) -> tuple[list[str], 
     """Geo-objects crossed by the straight line, and those inside the reachable ellipse (not on the line)."""
     if geo is None:
         return [], []
-    from pyproj import Transformer
+    from tollcli.charging.geoobjects import wgs84_to
 
-    tr = Transformer.from_crs("EPSG:4326", geo.crs, always_xy=True)
+    tr = wgs84_to(geo.crs)
     (x0, x1), (y0, y1) = tr.transform([lon0, lon1], [lat0, lat1])
     line = shapely.LineString([(x0, y0), (x1, y1)])
     on_line = sorted(str(geo.ids[i]) for i in geo.tree.query(line, predicate="intersects"))
@@ -156,7 +165,7 @@ def _jumps(fx, s: FindingSettings) -> list[dict]:
     with np.errstate(divide="ignore", invalid="ignore"):
         speed = fx.step_m / fx.dt_s
     hit = np.flatnonzero((fx.dt_s > 0) & (fx.dt_s <= 5.0) & (speed > s.max_speed_mps) & (fx.step_m > 50.0))
-    return [_finding("position_jump", fx.t_s[i], fx.t_s[i + 1], fx.lat_deg[i], fx.lon_deg[i], fx.lat_deg[i + 1], fx.lon_deg[i + 1],
+    return [_finding("position_jump", (fx.rows[i], fx.rows[i + 1]), fx.t_s[i], fx.t_s[i + 1], fx.lat_deg[i], fx.lon_deg[i], fx.lat_deg[i + 1], fx.lon_deg[i + 1],
                      distance_m=fx.step_m[i], dt_s=fx.dt_s[i], implied_speed_mps=speed[i], max_speed_mps=s.max_speed_mps)
             for i in hit]  # fmt: skip
 
@@ -167,7 +176,7 @@ def _time_jumps(epochs: pd.DataFrame, t: np.ndarray, s: FindingSettings) -> list
     back = np.flatnonzero(dt < -0.5)
     for i in back:
         lat, lon = _where(epochs, i + 1)
-        out.append(_finding("time_jump", t[i], t[i + 1], lat, lon, step_s=dt[i], line=int(epochs["line"].iat[i + 1]),
+        out.append(_finding("time_jump", (i, i + 1), t[i], t[i + 1], lat, lon, step_s=dt[i], line=int(epochs["line"].iat[i + 1]),
                             direction="backwards"))  # fmt: skip
     speed = epochs["speed_mps"].to_numpy(float)
     lat, lon = epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float)
@@ -176,7 +185,7 @@ def _time_jumps(epochs: pd.DataFrame, t: np.ndarray, s: FindingSettings) -> list
     with np.errstate(invalid="ignore"):
         stay = moved < 5.0 * np.maximum(speed[:-1], 1.0)  # no further than a few seconds of driving
     for i in np.flatnonzero((dt >= s.time_jump_s) & fast & stay):
-        out.append(_finding("time_jump", t[i], t[i + 1], lat[i], lon[i], lat[i + 1], lon[i + 1], step_s=dt[i], distance_m=moved[i],
+        out.append(_finding("time_jump", (i, i + 1), t[i], t[i + 1], lat[i], lon[i], lat[i + 1], lon[i + 1], step_s=dt[i], distance_m=moved[i],
                             speed_mps=speed[i], direction="forward while moving in place"))  # fmt: skip
     return out
 
@@ -187,7 +196,7 @@ def _speed_checks(epochs: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings) -
     for a, b in runs(speed > s.max_speed_mps):
         if b - a + 1 >= 3:
             lat, lon = _where(epochs, a)
-            out.append(_finding("overspeed", t[a], t[b], lat, lon, max_reported_mps=np.nanmax(speed[a : b + 1]),
+            out.append(_finding("overspeed", (a, b), t[a], t[b], lat, lon, max_reported_mps=np.nanmax(speed[a : b + 1]),
                                 max_speed_mps=s.max_speed_mps, epochs=b - a + 1))  # fmt: skip
     # Doppler (reported) speed against the speed from successive fixes, over a window
     if fx.rows.size < 3:
@@ -215,13 +224,14 @@ def _speed_checks(epochs: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings) -
         if b - a + 1 >= n:
             r0, r1 = fx.rows[a + 1], fx.rows[b + 1]
             seg = slice(a, b + 1)
-            out.append(_finding("doppler_mismatch", t[r0], t[r1], fx.lat_deg[a + 1], fx.lon_deg[a + 1], fx.lat_deg[b + 1], fx.lon_deg[b + 1],
+            out.append(_finding("doppler_mismatch", (r0, r1), t[r0], t[r1], fx.lat_deg[a + 1], fx.lon_deg[a + 1], fx.lat_deg[b + 1], fx.lon_deg[b + 1],
                                 reported_speed_mps=np.nanmean(rep[seg]), position_speed_mps=np.nanmean(pos_speed[seg]),
                                 window_s=s.doppler_window_s))  # fmt: skip
     return out
 
 
-def _cn0_checks(epochs: pd.DataFrame, summary: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings) -> list[dict]:
+def _cn0_checks(epochs: pd.DataFrame, summary: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings,
+                times_increase: bool | None = None) -> list[dict]:  # fmt: skip
     """Jamming and spoofing signs in the per-epoch C/N0 summary (:func:`~tollcli.enforcement.trip.cn0_summary`)."""
     out = []
     n = summary["n_tracked"].to_numpy(float)
@@ -233,9 +243,7 @@ def _cn0_checks(epochs: pd.DataFrame, summary: pd.DataFrame, t: np.ndarray, fx, 
     med, p80, std = (summary[c].to_numpy(float) for c in ("cn0_median", "cn0_p80", "cn0_std"))
     if not np.isfinite(med).any():
         return out
-    base_med = trailing_median(med, t, s.baseline_s)
-    base_p80 = trailing_median(p80, t, s.baseline_s)
-    base_n = trailing_median(n, t, s.baseline_s)
+    base_med, base_p80, base_n = trailing_median(np.column_stack([med, p80, n]), t, s.baseline_s, times_increase).T
     with np.errstate(invalid="ignore"):
         dropped = (base_med - med >= s.cn0_drop_db) & (base_p80 - p80 >= s.cn0_drop_db)
         # a satellite count collapse: the count falls to half (or to none) of its recent median
@@ -250,14 +258,14 @@ def _cn0_checks(epochs: pd.DataFrame, summary: pd.DataFrame, t: np.ndarray, fx, 
                           s.cn0_drop_db / 2 if kind == "cn0_collapse" else None):
             if b - a + 1 >= 2:
                 lat, lon = _where(epochs, a)
-                out.append(_finding(kind, t[a], t[b], lat, lon, baseline_cn0_dbhz=base_med[a], cn0_dbhz=np.nanmin(med[a : b + 1]) if np.isfinite(med[a : b + 1]).any() else None,
+                out.append(_finding(kind, (a, b), t[a], t[b], lat, lon, baseline_cn0_dbhz=base_med[a], cn0_dbhz=np.nanmin(med[a : b + 1]) if np.isfinite(med[a : b + 1]).any() else None,
                                     baseline_tracked=base_n[a], tracked=int(np.min(n[a : b + 1])), epochs=b - a + 1))  # fmt: skip
     with np.errstate(invalid="ignore"):
         uniform = (n >= 5) & (std < s.uniform_std_db) & (med >= s.uniform_min_dbhz)
     for a, b in runs(uniform):
         if t[b] - t[a] >= s.uniform_min_s:
             lat, lon = _where(epochs, a)
-            out.append(_finding("cn0_uniform", t[a], t[b], lat, lon, cn0_median_dbhz=np.nanmedian(med[a : b + 1]),
+            out.append(_finding("cn0_uniform", (a, b), t[a], t[b], lat, lon, cn0_median_dbhz=np.nanmedian(med[a : b + 1]),
                                 cn0_spread_db=np.nanmax(std[a : b + 1]), satellites=int(np.median(n[a : b + 1]))))  # fmt: skip
     return out
 
@@ -305,7 +313,7 @@ def _fix_loss(epochs: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings) -> li
         end_t = t[b + 1] if b + 1 < len(t) else t[b]
         if end_t - t[last[-1]] >= s.fix_loss_min_s and np.isfinite(before) and before >= s.fix_loss_speed_mps:
             lat, lon = _where(epochs, last[-1])
-            out.append(_finding("fix_lost_at_speed", t[last[-1]], end_t, lat, lon, speed_before_mps=before,
+            out.append(_finding("fix_lost_at_speed", (last[-1], min(b + 1, len(t) - 1)), t[last[-1]], end_t, lat, lon, speed_before_mps=before,
                                 duration_s=end_t - t[last[-1]], epochs_without_fix=b - a + 1))  # fmt: skip
     return out
 
@@ -318,12 +326,12 @@ def _disagreements(epochs: pd.DataFrame, t: np.ndarray) -> list[dict]:
             flag = gap >= FindingSettings.disagree_m
         for a, b in runs(flag):
             lat, lon = _where(epochs, a)
-            out.append(_finding("position_disagreement", t[a], t[b], lat, lon, max_disagreement_m=np.nanmax(gap[a : b + 1]), epochs=b - a + 1))
+            out.append(_finding("position_disagreement", (a, b), t[a], t[b], lat, lon, max_disagreement_m=np.nanmax(gap[a : b + 1]), epochs=b - a + 1))
     if "date_disagreement_days" in epochs:
         days = epochs["date_disagreement_days"].to_numpy(float)
         for a, b in runs(np.isfinite(days) & (days != 0)):
             lat, lon = _where(epochs, a)
-            out.append(_finding("date_disagreement", t[a], t[b], lat, lon, zda_minus_rmc_days=days[a], epochs=b - a + 1))
+            out.append(_finding("date_disagreement", (a, b), t[a], t[b], lat, lon, zda_minus_rmc_days=days[a], epochs=b - a + 1))
     return out
 
 
@@ -350,7 +358,7 @@ def _raim_alarm(epochs: pd.DataFrame, raim: pd.DataFrame, t: np.ndarray, s: Find
     out = []
     for a, b in runs(flag):
         lat, lon = _where(epochs, a)
-        out.append(_finding("raim_persistent_alarm", t[a], t[b], lat, lon, alarm_share=float(np.mean(alarm[a : b + 1])),
+        out.append(_finding("raim_persistent_alarm", (a, b), t[a], t[b], lat, lon, alarm_share=float(np.mean(alarm[a : b + 1])),
                             median_test_stat=float(np.nanmedian(raim["test_stat"].to_numpy(float)[a : b + 1])),
                             median_threshold=float(np.nanmedian(raim["threshold"].to_numpy(float)[a : b + 1])),
                             median_hdop=float(np.nanmedian(hdop[a : b + 1]))))  # fmt: skip

@@ -73,11 +73,23 @@ def runs(flag: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), ends.tolist()))
 
 
-def trailing_median(values: np.ndarray, t_s: np.ndarray, window_s: float) -> np.ndarray:
-    """Median of ``values`` over the ``window_s`` seconds before each epoch (excluding it); NaN when none."""
-    ok = np.isfinite(t_s).all() and np.all(np.diff(t_s) >= 0)
+def times_increase(t_s: np.ndarray) -> bool:
+    """Every time known and none going back (time windows apply)."""
+    return bool(np.isfinite(t_s).all() and np.all(np.diff(t_s) >= 0))
+
+
+def trailing_median(values: np.ndarray, t_s: np.ndarray, window_s: float, increasing: bool | None = None) -> np.ndarray:
+    """Median of ``values`` over the ``window_s`` seconds before each epoch (excluding it); NaN when none.
+
+    ``values``: one value per epoch, or a column per quantity (each column on its own).
+    ``increasing``: whether time windows apply (default :func:`times_increase` of ``t_s``).
+    """
+    ok = times_increase(t_s) if increasing is None else (increasing and times_increase(t_s))
+    frame = pd.DataFrame(np.asarray(values, float).reshape(len(t_s), -1))
     if not ok:  # times not increasing (a spoofed or broken log): a window of as many epochs as seconds
-        return pd.Series(values).shift(1).rolling(max(int(window_s), 3), min_periods=3).median().to_numpy(float)
-    s = pd.Series(values, index=pd.to_datetime(t_s, unit="s"))
-    med = s.rolling(f"{int(window_s * 1000)}ms", closed="left", min_periods=3).median()
-    return med.to_numpy(float)
+        med = frame.shift(1).rolling(max(int(window_s), 3), min_periods=3).median()
+    else:
+        frame.index = pd.to_datetime(t_s, unit="s")
+        med = frame.rolling(f"{int(window_s * 1000)}ms", closed="left", min_periods=3).median()
+    out = med.to_numpy(float)
+    return out.reshape(np.shape(values))

@@ -130,37 +130,17 @@ def _stored_row(p_md: float, step: float, grid: np.ndarray, k: int, what: str = 
     The file name carries every input of the row and scipy's version; a missing or
     unreadable file is recomputed (and rewritten when the directory is writable).
     """
-    import os
-    import tempfile
-
     import scipy
 
-    from tollcli.cache import cache_dir
+    from tollcli.cache import cached_array
 
-    base = cache_dir()
+    def compute() -> np.ndarray:
+        if what == "pfa":
+            return false_alarm_probability(_stored_row(p_md, step, grid, k), np.full(grid.shape, k))
+        return etc_threshold(p_md, np.full(grid.shape, k), grid**2)
+
     name = f"etc-{what}-pmd{p_md!r}-step{step!r}-n{grid.size}-k{k}-scipy{scipy.__version__}.npy"
-    path = base / "thresholds" / name if base is not None else None
-    if path is not None and path.exists():
-        try:
-            row = np.load(path, allow_pickle=False)
-            if row.shape == grid.shape:
-                return row
-        except (OSError, ValueError):
-            pass
-    if what == "pfa":
-        row = false_alarm_probability(_stored_row(p_md, step, grid, k), np.full(grid.shape, k))
-    else:
-        row = etc_threshold(p_md, np.full(grid.shape, k), grid**2)
-    if path is not None:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-            with os.fdopen(fd, "wb") as fh:
-                np.save(fh, row)
-            os.replace(tmp, path)
-        except OSError:
-            pass
-    return row
+    return cached_array("thresholds", name, compute, shape=grid.shape)
 
 
 @lru_cache(maxsize=16)

@@ -51,6 +51,14 @@ def _first_of_each(epoch: np.ndarray, constellation: np.ndarray, svid: np.ndarra
     return np.sort(first)
 
 
+def _compact(code: np.ndarray, names) -> tuple[np.ndarray, np.ndarray]:
+    """Codes renumbered over the names still present (kept in their order)."""
+    present = np.flatnonzero(np.bincount(code, minlength=len(names))) if code.size else np.zeros(0, np.int64)
+    remap = np.full(len(names), -1, np.int64)
+    remap[present] = np.arange(present.size)
+    return remap[code], np.asarray(names, dtype=object)[present]
+
+
 def _lookup(keys: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndarray:
     """``values`` at the place of each ``wanted`` key in ``keys`` (unique), NaN where absent."""
     order = np.argsort(keys, kind="stable")
@@ -63,14 +71,19 @@ def _lookup(keys: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndar
 
 def fill_angles(satellites: pd.DataFrame, epochs: pd.DataFrame, carry: AngleCarry | None = None,
                 max_age_s: float = MAX_ANGLE_AGE_S) -> pd.DataFrame:  # fmt: skip
-    """The satellite table with missing angles taken from the same satellite's latest GSV."""
-    sats = satellites.copy()
-    sats["t_s"] = _lookup(epochs["epoch"].to_numpy(), _epoch_seconds(epochs), sats["epoch"].to_numpy())
-    sats["constellation"] = sats["constellation"].astype(object)
-    seen = np.isfinite(sats["elev_deg"]) & np.isfinite(sats["azim_deg"])
-    fresh = (seen & np.isfinite(sats["t_s"])).to_numpy()
-    missing = ~seen & sats["used"].to_numpy(dtype=bool) & np.isfinite(sats["t_s"])
+    """The satellite table with missing angles taken from the same satellite's latest GSV.
+
+    Returned as given (not copied) when no used satellite lacks its angles.
+    """
+    t_s = _lookup(epochs["epoch"].to_numpy(), _epoch_seconds(epochs), satellites["epoch"].to_numpy())
+    elev, azim = satellites["elev_deg"].to_numpy(float), satellites["azim_deg"].to_numpy(float)
+    seen = np.isfinite(elev) & np.isfinite(azim)
+    fresh = seen & np.isfinite(t_s)
+    missing = ~seen & satellites["used"].to_numpy(dtype=bool) & np.isfinite(t_s)
     if missing.any():
+        sats = satellites.copy()
+        sats["t_s"] = t_s
+        sats["constellation"] = sats["constellation"].astype(object)
         known = pd.concat([carry.last if carry is not None else None, sats.loc[fresh, list(_KNOWN)]], ignore_index=True)
         known = known.astype(_KNOWN)
         if len(known):
@@ -81,15 +94,27 @@ def fill_angles(satellites: pd.DataFrame, epochs: pd.DataFrame, carry: AngleCarr
             filled = filled.set_index("index")
             sats.loc[filled.index, "elev_deg"] = filled["elev_deg"]
             sats.loc[filled.index, "azim_deg"] = filled["azim_deg"]
-    elif carry is not None:  # nothing to fill: only each satellite's latest angles are kept, from fewer rows
+        if carry is not None and len(known):
+            carry.last = _latest_table({c: known[c].to_numpy() for c in _KNOWN})
+        return sats.drop(columns="t_s")
+    if carry is not None:  # nothing to fill: only each satellite's latest angles are kept, from fewer rows
         idx = np.flatnonzero(fresh)
-        latest = idx[_latest_rows(sats["t_s"].to_numpy()[idx], sats["constellation"].to_numpy()[idx], sats["svid"].to_numpy()[idx])]
-        part = pd.DataFrame({c: sats[c].to_numpy()[latest] for c in _KNOWN})
-        known = pd.concat([carry.last, part], ignore_index=True).astype(_KNOWN)
-    if carry is not None and len(known):
-        t = known["t_s"].to_numpy()
-        carry.last = known.iloc[_latest_rows(t, known["constellation"].to_numpy(), known["svid"].to_numpy())].reset_index(drop=True)
-    return sats.drop(columns="t_s")
+        const = satellites["constellation"].array[idx].to_numpy(dtype=object)
+        svid = satellites["svid"].to_numpy()[idx]
+        latest = _latest_rows(t_s[idx], const, svid)
+        last = carry.last
+        known = {"t_s": t_s[idx][latest], "constellation": const[latest], "svid": svid[latest], "elev_deg": elev[idx][latest],
+                 "azim_deg": azim[idx][latest]}  # fmt: skip
+        known = {c: np.concatenate([last[c].to_numpy(), known[c]]).astype(kind) for c, kind in _KNOWN.items()}
+        if known["t_s"].size:
+            carry.last = _latest_table(known)
+    return satellites
+
+
+def _latest_table(known: dict[str, np.ndarray]) -> pd.DataFrame:
+    """The latest angles per satellite of ``known`` (columns of ``_KNOWN``) as the carried table."""
+    rows = _latest_rows(known["t_s"], known["constellation"], known["svid"])
+    return pd.DataFrame({c: pd.Series(known[c][rows], dtype=kind) for c, kind in _KNOWN.items()})
 
 
 #: the columns (and types) of the angles kept for later epochs
@@ -123,19 +148,23 @@ def nmea_measurements(
     satellites = fill_angles(satellites, epochs, carry)
     used = satellites[satellites["used"].to_numpy(dtype=bool)]
     used = used[np.isfinite(used["elev_deg"]) & np.isfinite(used["azim_deg"])]
-    used = used.iloc[_first_of_each(used["epoch"].to_numpy(np.int64), used["constellation"].to_numpy(dtype=object),
-                                    used["svid"].to_numpy(np.int64))]  # = drop_duplicates on the three  # fmt: skip
+    # constellation names coded once, in name order (a receiver clock per constellation, in name order)
+    code_all, names = pd.factorize(used["constellation"].to_numpy(dtype=object), sort=True, use_na_sentinel=False)
+    first = _first_of_each(used["epoch"].to_numpy(np.int64), code_all, used["svid"].to_numpy(np.int64))
+    used, code_all = used.iloc[first], code_all[first]  # = drop_duplicates on the three
     epoch_ids = epochs["epoch"].to_numpy()
     row = np.searchsorted(epoch_ids, used["epoch"].to_numpy())
     keep = (row < n_epochs) & (epoch_ids[np.minimum(row, max(n_epochs - 1, 0))] == used["epoch"].to_numpy()) if n_epochs else np.zeros(len(used), bool)
-    used, row = used[keep], row[keep]
-    order = np.argsort(row, kind="stable")
-    used, row = used.iloc[order], row[order]
+    order = np.flatnonzero(keep)[np.argsort(row[keep], kind="stable")]
+    used, row, clock = used.iloc[order], row[order], code_all[order]
     slot, n_slots = slots(row, n_epochs)
     shape = (n_epochs, n_slots)
 
-    const = used["constellation"].to_numpy(dtype=object)
-    clock, names = pd.factorize(const, sort=True, use_na_sentinel=False)  # a receiver clock per constellation, in name order
+    clock, names = _compact(clock, names)  # the constellations of this chunk's used satellites
+    if len(names) and not pd.isna(names).any():  # coded for the σ model and the labels (no string compared)
+        const = pd.Categorical.from_codes(clock, categories=pd.Index(names, dtype=object))
+    else:
+        const = names[clock] if len(names) else np.empty(0, object)
     elev = pad(used["elev_deg"].to_numpy(float), row, slot, shape, np.nan)
     azim = pad(used["azim_deg"].to_numpy(float), row, slot, shape, np.nan)
     clock_pad = pad(clock.astype(np.int64), row, slot, shape, -1)

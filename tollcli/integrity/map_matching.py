@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from tollcli.charging.geoobjects import feature_geometry, metric_crs, project, read_features
+from tollcli.charging.geoobjects import feature_geometry, metric_crs, project, read_features, wgs84_to
 from tollcli.errors import DataError
 
 
@@ -49,6 +49,35 @@ class MatchParams:
     min_speed_mps: float = 2.0
     connect_tol_m: float = 1.0
     reset_s: float = 30.0
+
+
+@dataclass(frozen=True)
+class MatchState:
+    """What the matching carries into a later stretch of the same log (see :func:`match_with_trace`)."""
+
+    current: int = -1  # road index the topology rule holds (-1: none)
+    last_t: float = -np.inf  # time of the last epoch with a candidate before the stretch (s)
+    last_trusted: float = np.nan  # road index of the last trusted match (NaN: none)
+
+
+@dataclass(frozen=True)
+class MatchTrace:
+    """Where the matching's state changes, to restart it exactly at a later row of the same table."""
+
+    run_start: np.ndarray  # first row of each run of equal best roads
+    run_end: np.ndarray  # last row of each run
+    before: list  # (current, last_t) before each run, and after the last one
+    trusted_fill: np.ndarray  # per row: road index of the last trusted match up to it (NaN: none)
+    state_in: MatchState
+
+    def restart(self, row: int) -> tuple[int, MatchState]:
+        """The row at or before ``row`` where matching can restart, and the state before it."""
+        k = int(np.searchsorted(self.run_end, row, side="left"))  # first run ending at or after row
+        if k < self.run_start.size and self.run_start[k] < row:
+            row = int(self.run_start[k])  # inside a run: restart at its start
+        current, last_t = self.before[k]
+        trusted = self.trusted_fill[row - 1] if row > 0 else self.state_in.last_trusted
+        return row, MatchState(int(current), float(last_t), float(trusted))
 
 
 def load_roads(path: str, connect_tol_m: float = 1.0) -> Roads:
@@ -93,13 +122,21 @@ def match(epochs: pd.DataFrame, roads: Roads, params: MatchParams = MatchParams(
     an untrusted fix keeps the current road when it is within reach (else it is unmatched), so a
     detected fault cannot drag the match onto a road the vehicle is not on.
     """
-    from pyproj import Transformer
+    return match_with_trace(epochs, roads, params, trusted)[0]
 
+
+def match_with_trace(epochs: pd.DataFrame, roads: Roads, params: MatchParams = MatchParams(), trusted: np.ndarray | None = None,
+                     state: MatchState = MatchState()) -> tuple[pd.DataFrame, MatchTrace]:  # fmt: skip
+    """:func:`match` for a stretch of a log that starts in ``state``, and the trace to restart it later.
+
+    Matching rows ``r…`` of a table in :meth:`MatchTrace.restart`'s state gives what matching the
+    whole table gives for those rows.
+    """
     from tollcli.times import epoch_seconds
 
     n = len(epochs)
     lon, lat = epochs["lon_deg"].to_numpy(float), epochs["lat_deg"].to_numpy(float)
-    x, y = (np.asarray(v, float) for v in Transformer.from_crs("EPSG:4326", roads.crs, always_xy=True).transform(lon, lat))
+    x, y = (np.asarray(v, float) for v in wgs84_to(roads.crs).transform(lon, lat))
     course = epochs["course_deg"].to_numpy(float) if "course_deg" in epochs else np.full(n, np.nan)
     speed = epochs["speed_mps"].to_numpy(float) if "speed_mps" in epochs else np.full(n, np.nan)
     have = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
@@ -121,9 +158,10 @@ def match(epochs: pd.DataFrame, roads: Roads, params: MatchParams = MatchParams(
     best[e[order][first]] = ri[order][first]
     best_pair[e[order][first]] = order[first]
     decide = best if trusted is None else np.where(np.asarray(trusted, bool), best, -1)
-    chosen = _topology(decide, e, ri, epoch_seconds(epochs), roads, params)
+    chosen, runs = _topology(decide, e, ri, epoch_seconds(epochs), roads, params, state)
+    fill = np.full(n, np.nan)
     if trusted is not None:
-        chosen = _carry_current(chosen, np.asarray(trusted, bool), e, ri)
+        chosen, fill = _carry_current(chosen, np.asarray(trusted, bool), e, ri, state.last_trusted)
     # the chosen pair's geometry (a lookup per (epoch, road))
     key = e.astype(np.int64) * (len(roads.ids) + 1) + ri
     lookup = pd.Series(np.arange(e.size), index=key)
@@ -142,12 +180,17 @@ def match(epochs: pd.DataFrame, roads: Roads, params: MatchParams = MatchParams(
     proj = shapely.line_interpolate_point(roads.lines[np.maximum(chosen, 0)], np.nan_to_num(out["along_m"].to_numpy()))
     out["matched_x_m"] = np.where(ok, shapely.get_x(proj), np.nan)
     out["matched_y_m"] = np.where(ok, shapely.get_y(proj), np.nan)
-    return out
+    return out, MatchTrace(*runs, trusted_fill=fill, state_in=state)
 
 
-def _carry_current(chosen: np.ndarray, trusted: np.ndarray, e: np.ndarray, ri: np.ndarray) -> np.ndarray:
-    """Untrusted epochs take the last trusted match when that road is among their candidates."""
+def _carry_current(chosen: np.ndarray, trusted: np.ndarray, e: np.ndarray, ri: np.ndarray,
+                   last_trusted: float = np.nan) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Untrusted epochs take the last trusted match when that road is among their candidates.
+
+    Also returns, per epoch, that last trusted match (NaN: none yet; ``last_trusted`` before the first).
+    """
     filled = pd.Series(np.where(trusted & (chosen >= 0), chosen, np.nan)).ffill().to_numpy()
+    filled = np.where(np.isnan(filled), last_trusted, filled)  # only the leading epochs are still NaN
     rows = np.flatnonzero(~trusted & np.isfinite(filled))
     out = chosen.copy()
     out[~trusted] = -1
@@ -155,23 +198,30 @@ def _carry_current(chosen: np.ndarray, trusted: np.ndarray, e: np.ndarray, ri: n
         road = filled[rows].astype(np.int64)
         ok = pd.MultiIndex.from_arrays([rows, road]).isin(pd.MultiIndex.from_arrays([e, ri]))
         out[rows[ok]] = road[ok]
-    return out
+    return out, filled
 
 
-def _topology(best: np.ndarray, e: np.ndarray, ri: np.ndarray, t_s: np.ndarray, roads: Roads, params: MatchParams) -> np.ndarray:
-    """Apply the connectivity rule to the per-epoch best roads (a loop over road changes)."""
+def _topology(best: np.ndarray, e: np.ndarray, ri: np.ndarray, t_s: np.ndarray, roads: Roads, params: MatchParams,
+              state: MatchState = MatchState()) -> tuple[np.ndarray, tuple]:  # fmt: skip
+    """Apply the connectivity rule to the per-epoch best roads (a loop over road changes).
+
+    Also returns the runs (first rows, last rows) and the state (current road, last time) before each
+    run and after the last.
+    """
     chosen = best.copy()
     candidates = pd.Series(True, index=pd.MultiIndex.from_arrays([e, ri])) if e.size else None
     idx = np.flatnonzero(best >= 0)
     if idx.size == 0:
-        return chosen
+        return chosen, (np.zeros(0, np.int64), np.zeros(0, np.int64), [(state.current, state.last_t)])
     # runs of constant best road among epochs with a candidate, split where fixes pause > reset_s
     brk = np.concatenate([[True], (best[idx][1:] != best[idx][:-1]) | (np.diff(t_s[idx]) > params.reset_s)])
     starts = np.flatnonzero(brk)
     ends = np.concatenate([starts[1:], [idx.size]])
-    current = -1
-    last_t = -np.inf
+    current = state.current
+    last_t = state.last_t
+    before = []
     for s0, s1 in zip(starts, ends):
+        before.append((current, last_t))
         rows = idx[s0:s1]
         road = best[rows[0]]
         if t_s[rows[0]] - last_t > params.reset_s:
@@ -186,4 +236,5 @@ def _topology(best: np.ndarray, e: np.ndarray, ri: np.ndarray, t_s: np.ndarray, 
             if not keep.all():
                 current = road
         last_t = t_s[rows[-1]]
-    return chosen
+    before.append((current, last_t))
+    return chosen, (idx[starts], idx[ends - 1], before)

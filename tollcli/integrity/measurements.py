@@ -47,14 +47,19 @@ def pad(values: np.ndarray, epoch_row: np.ndarray, slot: np.ndarray, shape: tupl
 
 
 def sv_labels(constellation: np.ndarray, svid: np.ndarray) -> np.ndarray:
-    """RINEX-style satellite names: ('GPS', 5) → 'G05' (each distinct satellite formatted once)."""
+    """RINEX-style satellite names: ('GPS', 5) → 'G05' (each distinct satellite formatted once).
+
+    ``constellation``: names, or a ``pandas.Categorical`` of them (without missing values).
+    """
     import pandas as pd
 
-    const = np.asarray(constellation, dtype=object)
     svid = np.asarray(svid).astype(np.int64)
-    if const.size == 0:
+    if len(constellation) == 0:
         return np.empty(0, dtype=object)
-    codes, names = pd.factorize(const, use_na_sentinel=False)
+    if hasattr(constellation, "categories"):  # a pandas.Categorical: already coded
+        codes, names = np.asarray(constellation.codes), list(constellation.categories)
+    else:
+        codes, names = pd.factorize(np.asarray(constellation, dtype=object), use_na_sentinel=False)
     key = codes.astype(np.int64) * 1_000_000 + svid
     uniq, inverse = np.unique(key, return_inverse=True)
     labels = np.array([f"{CONSTELLATION_LETTER.get(names[k // 1_000_000], 'X')}{k % 1_000_000:02d}" for k in uniq.tolist()],

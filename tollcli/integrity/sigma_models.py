@@ -63,6 +63,14 @@ def _psd(kind: str, f: np.ndarray, rate: int) -> np.ndarray:
 
 @lru_cache(maxsize=None)
 def _dll_integrals(signal: str) -> tuple[float, float, float, float]:
+    """The four spectrum integrals of the DLL variance (10 ms each: kept in the cache directory)."""
+    from tollcli.cache import cached_array
+
+    name = f"dll-{'-'.join(map(str, SIGNALS[signal]))}-numpy{np.__version__}.npy"
+    return tuple(float(v) for v in cached_array("sigma", name, lambda: _integrate(signal), shape=(4,)))
+
+
+def _integrate(signal: str) -> tuple[float, float, float, float]:
     kind, bandwidth, spacing_chips, rate = SIGNALS[signal]
     f = np.linspace(-bandwidth / 2, bandwidth / 2, 200_001)
     df = f[1] - f[0]
@@ -130,17 +138,25 @@ class NominalModel:
     signals: dict[str, str] = field(default_factory=lambda: dict(DEFAULT_SIGNALS))
 
     def sigma_m(self, elev_deg, cn0_dbhz, constellation, lat_deg, lon_deg) -> np.ndarray:
-        """σ_PSR per measurement; arrays broadcast (``constellation`` an array of names)."""
+        """σ_PSR per measurement; arrays broadcast (``constellation`` an array of names, or a
+        ``pandas.Categorical`` of them: its codes are used, no string is compared)."""
         elev = np.asarray(elev_deg, dtype=float)
         cn0 = np.asarray(cn0_dbhz, dtype=float)
         cn0 = np.where(np.isfinite(cn0) & (cn0 > 0), cn0, self.default_cn0_dbhz)
-        const = np.asarray(constellation, dtype=object)
+        if hasattr(constellation, "categories"):
+            code, names = np.asarray(constellation.codes), [str(c) for c in constellation.categories]
+            present = [names[k] for k in np.flatnonzero(np.bincount(code[code >= 0], minlength=len(names)))]
+            const, of = code, {name: names.index(name) for name in present}
+        else:
+            const = np.asarray(constellation, dtype=object)
+            present = set(const.ravel().tolist())  # a hash set: sorting 10^5 strings costs more
+            of = {name: name for name in present}
         var = self.clk_eph_m**2 + sigma_iono_m(elev, lat_deg, lon_deg, self.iono) ** 2 + sigma_tropo_m(elev) ** 2
         shape = np.broadcast(elev, cn0, const).shape
         local = np.zeros(shape)
         cn0_b, const_b = np.broadcast_to(cn0, shape), np.broadcast_to(const, shape)
-        for name in sorted(set(const.ravel().tolist())):  # a hash set: sorting 10^5 strings costs more
-            sel = const_b == name
+        for name in sorted(present):
+            sel = const_b == of[name]
             signal = self.signals.get(str(name), "bpsk1_wide")
             c = cn0_b[sel]  # each constellation's measurements only (elementwise: the same values)
             local_var = sigma_noise_dll_m(c, signal) ** 2 + MULTIPATH_M[signal] ** 2

@@ -78,8 +78,17 @@ def detrended_standard_error(v: np.ndarray, n: int) -> np.ndarray:
     return sd / np.sqrt(m)
 
 
-def speed_integrity(epochs: pd.DataFrame, params: SpeedParams = SpeedParams()) -> pd.DataFrame:
-    """Per-epoch speed-integrity columns for an epoch table (``speed_mps``, ``lat_deg``/``lon_deg``, time)."""
+def nominal_step_s(t_s: np.ndarray) -> float:
+    """The log's epoch interval: the median step between epoch times (s; NaN with fewer than two)."""
+    return float(np.nanmedian(np.diff(t_s))) if len(t_s) > 1 and np.isfinite(np.diff(t_s)).any() else float("nan")
+
+
+def speed_integrity(epochs: pd.DataFrame, params: SpeedParams = SpeedParams(), step_s: float | None = None) -> pd.DataFrame:
+    """Per-epoch speed-integrity columns for an epoch table (``speed_mps``, ``lat_deg``/``lon_deg``, time).
+
+    A window is regular when it spans N epoch intervals; ``step_s`` is that interval (default
+    :func:`nominal_step_s` of the table; a log read in chunks gives the one of its first chunk).
+    """
     from tollcli.geodesy import great_circle_distance_m
     from tollcli.times import epoch_seconds
 
@@ -105,7 +114,8 @@ def speed_integrity(epochs: pd.DataFrame, params: SpeedParams = SpeedParams()) -
         sigma_h = np.where(np.isfinite(sigma_h) & (sigma_h > 0), sigma_h, params.position_sigma_m)
         sigma_pos = np.sqrt(2.0) * sigma_h / span
         tol = params.k_sigma * np.sqrt(speed_error**2 + sigma_pos**2)
-        regular = np.abs(span - n * np.nanmedian(np.diff(t))) < 0.5 if len(t) > 1 else np.zeros(len(t), bool)
+        step = nominal_step_s(t) if step_s is None else step_s
+        regular = np.abs(span - n * step) < 0.5 if len(t) > 1 else np.zeros(len(t), bool)
     have = np.isfinite(avg) & np.isfinite(pos_speed) & regular
     status = np.full(len(epochs), "no_data", dtype=object)
     with np.errstate(invalid="ignore"):

@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.integrity.fuzzy_mm import alarm, integrity_scale
-from tollcli.integrity.map_matching import MatchParams, Roads, match
+from tollcli.integrity.map_matching import MatchParams, MatchState, MatchTrace, Roads, match_with_trace
 from tollcli.integrity.speed import SpeedParams, speed_integrity, trapezoid_average
 
 POLICIES = {"raim": (), "raim+speed": ("speed",), "raim+mm": ("mm",), "all": ("speed", "mm")}
@@ -75,12 +75,21 @@ def mm_integrity(epochs: pd.DataFrame, matched: pd.DataFrame, window: int = 5, r
 def epoch_checks(epochs: pd.DataFrame, roads: Roads | None, speed_params: SpeedParams = SpeedParams(),
                  match_params: MatchParams = MatchParams(), mm_window: int = 5) -> pd.DataFrame:  # fmt: skip
     """The speed and map-matching columns for every epoch (map matching only with ``roads``)."""
-    out = speed_integrity(epochs, speed_params)
+    return epoch_checks_traced(epochs, roads, speed_params, match_params, mm_window)[0]
+
+
+def epoch_checks_traced(epochs: pd.DataFrame, roads: Roads | None, speed_params: SpeedParams = SpeedParams(),
+                        match_params: MatchParams = MatchParams(), mm_window: int = 5, step_s: float | None = None,
+                        match_state: MatchState = MatchState()) -> tuple[pd.DataFrame, MatchTrace | None]:  # fmt: skip
+    """:func:`epoch_checks` for a stretch of a log: the epoch interval given (``step_s``), the matching
+    started in ``match_state``, and its trace (None without roads)."""
+    out = speed_integrity(epochs, speed_params, step_s=step_s)
+    trace = None
     if roads is not None:
         trusted = epochs["raim_status"].astype(str).isin(["valid", "excluded_valid"]).to_numpy() if "raim_status" in epochs else None
-        matched = match(epochs, roads, match_params, trusted)
+        matched, trace = match_with_trace(epochs, roads, match_params, trusted, match_state)
         out = pd.concat([out, matched, mm_integrity(epochs, matched, mm_window)], axis=1)
-    return out
+    return out, trace
 
 
 def failed_check(checks: pd.DataFrame, policy: str) -> np.ndarray:
