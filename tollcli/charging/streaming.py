@@ -191,6 +191,8 @@ class TailCharger:
         frontier = n if final else n - LOOKAHEAD_ROWS  # tail rows before it are committed this round
         done = self.committed - self.start
         if frontier <= done:
+            if final:  # everything committed already: close what is open
+                self.passages.add({}, None)
             return
         t = epoch_seconds(tail)
         if self.policy is None:
