@@ -151,6 +151,7 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
             table_parts.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}),
                                           raim.reset_index(drop=True)], axis=1))  # fmt: skip
         offset += len(epochs)
+        del chunk, epochs, meas, geometry, raim, pairs, cn0  # freed before the next chunk is read, not after
     check_usable(stats)
     if offset == 0:
         raise DataError(f"{log}: no epoch with a time of day")
