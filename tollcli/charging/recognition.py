@@ -60,7 +60,16 @@ def utc_seconds(time_utc: pd.Series) -> np.ndarray:
     """A tz-aware UTC column → float seconds since 1970 (DataError if any time is missing)."""
     if time_utc.isna().any():
         raise DataError("some epochs have no date (a log without RMC/ZDA): give --date")
-    return time_utc.dt.tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64) / 1000.0
+    return utc_seconds_or_nan(time_utc.array)
+
+
+def utc_seconds_or_nan(times) -> np.ndarray:
+    """tz-aware UTC times → float seconds since 1970 at millisecond resolution (NaN for a missing time)."""
+    if not len(times):
+        return np.zeros(0)
+    ms = pd.DatetimeIndex(times).tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64) / 1000.0
+    missing = pd.isna(times)
+    return np.where(missing, np.nan, ms) if np.any(missing) else ms
 
 
 def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams,

@@ -41,6 +41,7 @@ from tollcli.charging.recognition import (
     concat_pairs,
     pair_verdicts,
     passages,
+    utc_seconds_or_nan,
 )
 from tollcli.enforcement.findings import FindingSettings, trip_findings
 from tollcli.enforcement.trip import times_increase
@@ -159,7 +160,7 @@ class TailCharger:
 
     def add(self, epochs: pd.DataFrame, raim: pd.DataFrame, cn0: pd.DataFrame, pairs: dict[str, np.ndarray]) -> None:
         """One chunk: its kept epoch columns, per-epoch RAIM columns, C/N0 summary and geo-object pairs."""
-        part = pd.concat([epochs.reset_index(drop=True), raim.reset_index(drop=True).add_prefix("raim:"),
+        part = pd.concat([epochs.reset_index(drop=True).add_prefix("epoch:"), raim.reset_index(drop=True).add_prefix("raim:"),
                           cn0.reset_index(drop=True).add_prefix("cn0:")], axis=1)  # fmt: skip
         self.epochs = part if self.epochs is None else pd.concat([self.epochs, part], ignore_index=True)
         dated = epochs["time_utc"].dropna()
@@ -194,9 +195,10 @@ class TailCharger:
             if final:  # everything committed already: close what is open
                 self.passages.add({}, None)
             return
-        t = epoch_seconds(tail)
+        epochs, raim, cn0 = (_columns(tail, prefix) for prefix in ("epoch:", "raim:", "cn0:"))
+        t = epoch_seconds(epochs)
         if self.policy is None:
-            self.policy, self.needs = choose_policy(has_speeds(tail), self.settings.policy, self.roads_path)
+            self.policy, self.needs = choose_policy(has_speeds(epochs), self.settings.policy, self.roads_path)
             if "mm" in self.needs:
                 from tollcli.integrity.map_matching import load_roads
 
@@ -204,11 +206,8 @@ class TailCharger:
             from tollcli.integrity.speed import nominal_step_s
 
             self.step_s = nominal_step_s(t)
-        why, matched, trace = self._checks(tail)
-        self._commit_positions(tail, done, frontier, final, why, matched)
-        epochs = tail[[c for c in tail.columns if ":" not in c]]
-        raim = tail[[c for c in tail.columns if c.startswith("raim:")]].rename(columns=lambda c: c[5:])
-        cn0 = tail[[c for c in tail.columns if c.startswith("cn0:")]].rename(columns=lambda c: c[4:])
+        why, matched, trace = self._checks(epochs, raim)
+        self._commit_positions(epochs, done, frontier, final, why, matched)
         self.increasing = self.increasing and times_increase(t)
         found = trip_findings(epochs, None, raim, self.geo, self.finding_settings, cn0=cn0, keep_rows=True,
                               times_increase=self.increasing)  # fmt: skip
@@ -222,26 +221,26 @@ class TailCharger:
         self.committed = self.start + frontier
         if final:
             return
-        keep = self._keep_from(tail, t, frontier, still_open)
+        keep = self._keep_from(epochs, t, frontier, still_open)
         if trace is not None:
             keep, self.match_state = trace.restart(keep)
         if keep > 0:
             self.epochs = tail.iloc[keep:].reset_index(drop=True)
             self.start += keep
 
-    def _checks(self, tail: pd.DataFrame):
+    def _checks(self, epochs: pd.DataFrame, raim: pd.DataFrame):
         """Per tail row: the policy's failed check ('' when none), the matched road, and the matching trace."""
         if not self.needs:
             return None, None, None
         from tollcli.integrity.verdict import epoch_checks_traced, failed_check
 
-        epochs = tail[[c for c in tail.columns if ":" not in c]].assign(raim_status=tail["raim:raim_status"].to_numpy())
+        epochs = epochs.assign(raim_status=raim["raim_status"].to_numpy())
         checks, trace = epoch_checks_traced(epochs, self.roads if "mm" in self.needs else None, step_s=self.step_s,
                                             match_state=self.match_state)  # fmt: skip
         matched = checks["matched_road"].astype(str).to_numpy(dtype=object) if "mm" in self.needs else None
         return failed_check(checks, self.policy), matched, trace
 
-    def _commit_positions(self, tail, done: int, frontier: int, final: bool, why, matched) -> None:
+    def _commit_positions(self, epochs: pd.DataFrame, done: int, frontier: int, final: bool, why, matched) -> None:
         if self.any_pairs and self.undated:
             raise DataError("some epochs have no date (a log without RMC/ZDA): give --date")
         pending = concat_pairs(self.pending) if self.pending else {}
@@ -256,20 +255,20 @@ class TailCharger:
                 pairs = {k: v[now] for k, v in pending.items()}
                 valid, verdict = pair_verdicts(pairs, self.geo, why, matched, row_offset=self.start)
                 rows = pairs["epoch_row"] - self.start
-                times = tail["time_utc"].array[rows]
+                times = epochs["time_utc"].array[rows]
                 cols = {**{k: pairs[k] for k in PAIR_COLUMNS}, "valid": valid, "verdict": verdict,
-                        "t_s": _utc_s(times), "time_utc": times}  # fmt: skip
+                        "t_s": utc_seconds_or_nan(times), "time_utc": times}  # fmt: skip
         if final:
             self.passages.add(cols, None)
             return
-        t_front = _utc_s(tail["time_utc"].array[[frontier]])[0]
+        t_front = utc_seconds_or_nan(epochs["time_utc"].array[[frontier]])[0]
         self.passages.add(cols, t_front if np.isfinite(t_front) else -np.inf)
 
     @staticmethod
-    def _keep_from(tail: pd.DataFrame, t: np.ndarray, frontier: int, open_starts: list[int]) -> int:
+    def _keep_from(epochs: pd.DataFrame, t: np.ndarray, frontier: int, open_starts: list[int]) -> int:
         """The first tail row the next round needs (module docstring)."""
-        valid = tail["fix_valid"].to_numpy(bool) if "fix_valid" in tail else np.ones(len(tail), bool)
-        lat, lon = tail["lat_deg"].to_numpy(float), tail["lon_deg"].to_numpy(float)
+        valid = epochs["fix_valid"].to_numpy(bool) if "fix_valid" in epochs else np.ones(len(epochs), bool)
+        lat, lon = epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float)
         fix_rows = np.flatnonzero(valid & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(t))
         targets = [frontier, *open_starts]
         before = fix_rows[fix_rows < frontier]
@@ -286,10 +285,6 @@ class TailCharger:
         return max(keep, 0)
 
 
-def _utc_s(times) -> np.ndarray:
-    """tz-aware UTC times → float seconds since 1970 at millisecond resolution (NaN for NaT)."""
-    if not len(times):
-        return np.zeros(0)
-    ms = pd.DatetimeIndex(times).tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64)
-    missing = pd.isna(times)
-    return np.where(missing, np.nan, ms / 1000.0) if np.any(missing) else ms / 1000.0
+def _columns(tail: pd.DataFrame, prefix: str) -> pd.DataFrame:
+    """One of the tail's three tables (epoch columns, RAIM columns, C/N0 summary), its names without the prefix."""
+    return tail[[c for c in tail.columns if c.startswith(prefix)]].rename(columns=lambda c: c[len(prefix) :])
