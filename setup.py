@@ -9,8 +9,8 @@ from setuptools import Extension, setup
 setup(
     ext_modules=[
         Extension(
-            "tollcli.nmea._bulk_kernels",
-            ["tollcli/nmea/_bulk_kernels.c"],
+            "tollcli.readers.nmea._bulk_kernels",
+            ["tollcli/readers/nmea/_bulk_kernels.c"],
             extra_compile_args=["-O2"],
             optional=True,
         )

@@ -16,8 +16,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from tollcli.batch.run import expand_inputs, run_batch
-from tollcli.charging.pipeline import ChargeSettings
+from tollcli.job.batch import expand_inputs, run_batch
+from tollcli.job.pipeline import ChargeSettings
 
 REPO = Path(__file__).resolve().parents[1]
 

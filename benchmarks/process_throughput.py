@@ -28,7 +28,7 @@ from pathlib import Path
 
 import tollcli as tollcli_package
 from tollcli.charging.geoobjects import build_geoobjects
-from tollcli.nmea.compose import straight_drive
+from tollcli.readers.nmea.compose import straight_drive
 
 START = (42.6987, 2.8956)
 COURSE = math.radians(45.0)

@@ -21,10 +21,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tollcli.integrity.gsdc import gsdc_epochs, read_gsdc_derived
-from tollcli.integrity.measurements import Measurements
+from tollcli.gnss.gsdc_positions import gsdc_epochs
+from tollcli.gnss.measurements import Measurements
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
+from tollcli.readers.gsdc import read_gsdc_derived
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "gsdc2021" / "Pixel4_derived.csv"
 

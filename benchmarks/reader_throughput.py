@@ -1,7 +1,7 @@
 """NMEA reader throughput against plain pynmea2, and peak memory against log size.
 
 Speed: the same synthetic multi-constellation log (RMC, VTG, GGA, 2×GSA, 3×GSV,
-GST per epoch) is read by ``tollcli.nmea.iter_nmea_tables`` (full decoding into
+GST per epoch) is read by ``tollcli.readers.nmea.iter_nmea_tables`` (full decoding into
 epoch and satellite tables) with the bulk path (the default, with its compiled
 kernels), the bulk path with its numpy kernels only (an install without a C
 compiler), and the per-line reference path, and by ``pynmea2.parse`` on every line (sentence objects only, no
@@ -23,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from tollcli.nmea import ReadStats, compose, iter_nmea_tables, kernels
+from tollcli.readers.nmea import ReadStats, compose, iter_nmea_tables, kernels
 
 BYTES_PER_EPOCH = 562  # of compose.straight_drive, measured
 
@@ -73,7 +73,7 @@ def peak_rss_mb(path: Path) -> float:
     """Peak RSS of a fresh process that reads ``path`` through the chunked reader."""
     code = (
         "import resource, sys\n"
-        "from tollcli.nmea import iter_nmea_tables\n"
+        "from tollcli.readers.nmea import iter_nmea_tables\n"
         "n = 0\n"
         "for chunk in iter_nmea_tables(sys.argv[1]):\n"
         "    n += len(chunk.epochs)\n"

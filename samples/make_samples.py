@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 from tollcli.charging.geoobjects import build_geoobjects
-from tollcli.nmea.compose import straight_drive
+from tollcli.readers.nmea.compose import straight_drive
 
 HERE = Path(__file__).resolve().parent
 GEO = HERE.parent / "geoobjects"

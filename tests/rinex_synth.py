@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from tollcli.geodesy import OMEGA_EARTH_RADPS, geodetic2ecef
-from tollcli.integrity.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
-from tollcli.integrity.broadcast import WEEK_S, kepler_position_clock
-from tollcli.integrity.pseudorange_wls import C_MPS, local_angles
+from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
+from tollcli.gnss.orbits import WEEK_S, kepler_position_clock
+from tollcli.gnss.pseudorange_wls import C_MPS, local_angles
 
 GPS_EPOCH = dt.datetime(1980, 1, 6)
 ALPHA = (1.1176e-08, 1.4901e-08, -5.9605e-08, -1.1921e-07)

@@ -6,11 +6,12 @@ import json
 from decimal import Decimal
 
 import pytest
-
 from conftest import run_cli
 from test_process import GEO, TARIFF, _drive
-from tollcli.charging.audit import audit_with_truth, driven_from_truth, risk_report, wilson
+
+from tollcli.charging.audit import audit_with_truth, driven_from_truth, risk_report
 from tollcli.charging.recognition import load_geoobjects
+from tollcli.stats import wilson
 
 
 def _inv(lines, total, vehicle="v", not_charged=()):
@@ -64,8 +65,9 @@ def test_risk_report_bounds_and_revenue_at_risk():
 
 def test_cli_process_then_audit_the_parallel_road_drive(tmp_path):
     drive = tmp_path / "parallel.nmea"
-    from tollcli.nmea import compose
     import math
+
+    from tollcli.readers.nmea import compose
 
     c = math.radians(-45.0)
     lat = 42.6987 + 80.0 * math.cos(c) / 111_132.0

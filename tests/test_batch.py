@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 from conftest import REPO, SAMPLES, run_cli
 
-from tollcli.batch.run import expand_inputs, run_batch
-from tollcli.charging.pipeline import ChargeSettings
+from tollcli.job.batch import expand_inputs, run_batch
+from tollcli.job.pipeline import ChargeSettings
 
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
 TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")

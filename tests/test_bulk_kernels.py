@@ -1,4 +1,4 @@
-"""The compiled kernels of the bulk reader (``tollcli/nmea/_bulk_kernels.c``) against their numpy versions.
+"""The compiled kernels of the bulk reader (``tollcli/readers/nmea/_bulk_kernels.c``) against their numpy versions.
 
 The numpy kernels are the reference (test_bulk_reader checks the whole bulk path
 against the per-line reader); the compiled ones must give the same arrays, element
@@ -15,8 +15,8 @@ from conftest import SAMPLES, shared
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tollcli.nmea import bulk_fields, bulk_lines, kernels, read_nmea
-from tollcli.nmea.fields import num
+from tollcli.readers.nmea import bulk_fields, bulk_lines, kernels, read_nmea
+from tollcli.readers.nmea.fields import num
 
 FRAME = ("start", "end", "plain", "checksum_ok", "given", "computed", "address", "commas", "first_comma", "n_fields")
 needs_compiled = pytest.mark.skipif(kernels.compiled is None, reason="compiled kernels not built")
@@ -25,7 +25,7 @@ needs_compiled = pytest.mark.skipif(kernels.compiled is None, reason="compiled k
 def test_the_install_built_the_compiled_kernels():
     """`pip install .` compiles them (a C compiler and Python's headers are on this machine and in CI)."""
     assert kernels.compiled is not None, "compiled kernels not built (see README: pip install needs a C compiler)"
-    assert kernels.compiled.__name__ == "tollcli.nmea._bulk_kernels"
+    assert kernels.compiled.__name__ == "tollcli.readers.nmea._bulk_kernels"
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:

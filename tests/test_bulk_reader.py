@@ -1,7 +1,7 @@
 """The bulk NMEA reader against the per-line reference reader: the same tables, statistics and errors.
 
 The reference path (``engine="reference"``) reads one line at a time with the
-converters of ``tollcli.nmea.fields`` and was checked against gpsd's own decoding
+converters of ``tollcli.readers.nmea.fields`` and was checked against gpsd's own decoding
 (test_real_logs). The bulk path must give the same tables on every log: float
 columns bit for bit (``pos_disagreement_m`` to 1e-12, numpy's cos and hypot may
 differ from math's in the last bit), the same statistics, the same first problem.
@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tollcli.errors import DataError
-from tollcli.nmea import ReadStats, bulk_reader, compose, read_nmea
+from tollcli.readers.nmea import ReadStats, bulk_reader, compose, read_nmea
 
 
 def _read(path, engine, **options):

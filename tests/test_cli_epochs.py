@@ -8,10 +8,10 @@ import json
 
 import pandas as pd
 import pytest
-
 from conftest import SAMPLES, run_cli, shared
+
 from tollcli import __version__
-from tollcli.nmea import compose
+from tollcli.readers.nmea import compose
 
 SAMPLE = str(SAMPLES / "straight-drive.nmea")
 

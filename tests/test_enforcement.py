@@ -8,8 +8,8 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
-
 from conftest import REPO, SAMPLES, run_cli
+
 from tollcli.charging.geoobjects import build_geoobjects
 from tollcli.geodesy import enu_shift2geodetic
 from tollcli.simulate.drive import SimConfig, simulate
@@ -201,10 +201,11 @@ GPSD_FINDINGS = {
 
 def test_findings_on_every_gpsd_log_are_the_judged_ones():
     from conftest import shared
+
     from tollcli.enforcement.findings import trip_findings
-    from tollcli.integrity.log_table import iter_integrity
     from tollcli.integrity.raim import RaimParams
-    from tollcli.nmea import ReadStats
+    from tollcli.job.log_integrity import iter_integrity
+    from tollcli.readers.nmea import ReadStats
 
     folder = shared("gpsd")
     logs = sorted(folder.glob("*.log"))
@@ -249,7 +250,7 @@ def _rewrite(path, t0: str, t1: str, change) -> None:
 
 
 def _rmc_elsewhere(line):
-    from tollcli.nmea.compose import with_checksum
+    from tollcli.readers.nmea.compose import with_checksum
 
     fields = line[1 : line.index("*")].split(",")
     fields[3] = f"{float(fields[3]) + 0.06:.7f}"  # 0.06 arc-minutes north: 111 m
@@ -257,7 +258,7 @@ def _rmc_elsewhere(line):
 
 
 def _zda_next_day(line):
-    from tollcli.nmea.compose import with_checksum
+    from tollcli.readers.nmea.compose import with_checksum
 
     fields = line[1 : line.index("*")].split(",")
     return [line, with_checksum(f"GNZDA,{fields[1]},03,03,2026,00,00")]  # RMC says 02 March

@@ -20,10 +20,10 @@ from tollcli.charging.geoobjects import build_geoobjects, check_geoobjects
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
 from tollcli.errors import TollError
-from tollcli.integrity.from_nmea import nmea_measurements
+from tollcli.gnss.nmea_measurements import nmea_measurements
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
-from tollcli.nmea import compose, read_nmea
+from tollcli.readers.nmea import compose, read_nmea
 
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "60"))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=list(HealthCheck), derandomize=EXAMPLES <= 200)

@@ -7,10 +7,11 @@ import json
 import numpy as np
 import pytest
 import shapely
-
 from conftest import run_cli
-from tollcli.charging.geoobjects import build_geoobjects, check_geoobjects, metric_crs, project
+
+from tollcli.charging.geoobjects import build_geoobjects, check_geoobjects
 from tollcli.errors import DataError
+from tollcli.spatial import metric_crs, project
 
 LAT0, LON0 = 42.70, 2.90
 M_PER_DEG_LAT = 111_132.0

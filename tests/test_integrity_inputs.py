@@ -8,15 +8,17 @@ import io
 import numpy as np
 import pandas as pd
 import pytest
-
 from conftest import shared
+
 from tollcli.geodesy import enu_rotation, geodetic2ecef
-from tollcli.integrity.from_nmea import AngleCarry, nmea_measurements
-from tollcli.integrity.gsdc import gps_millis_to_utc, gsdc_epochs, read_gsdc_derived
+from tollcli.gnss.gsdc_positions import gsdc_epochs
+from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
+from tollcli.gnss.sigma_models import NominalModel
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
-from tollcli.integrity.sigma_models import NominalModel
-from tollcli.nmea import compose, read_nmea
+from tollcli.readers.gps_time import gps_millis_to_utc
+from tollcli.readers.gsdc import read_gsdc_derived
+from tollcli.readers.nmea import compose, read_nmea
 
 
 def _tables(lines):

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from tollcli.geodesy import enu_rotation, geodetic2ecef
+from tollcli.gnss.wls import observation_matrix, wls_geometry
 from tollcli.integrity.kalman_hit import K_H_SBAS, hit, hpl_sbas_m
-from tollcli.integrity.wls import observation_matrix, wls_geometry
 from tollcli.simulate.drive import SimConfig, simulate
 from tollcli.simulate.route import straight
 

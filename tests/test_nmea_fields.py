@@ -5,8 +5,8 @@ import math
 
 import pytest
 
-from tollcli.nmea import fields
-from tollcli.nmea.satellite_ids import satellite_id
+from tollcli.readers.nmea import fields
+from tollcli.readers.nmea.satellite_ids import satellite_id
 
 
 def test_checksum_known_sentence():

@@ -13,8 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tollcli.errors import DataError
-from tollcli.nmea import compose, iter_nmea_tables, read_nmea
-from tollcli.nmea.dates import DateCarry, resolve_days
+from tollcli.readers.nmea import compose, iter_nmea_tables, read_nmea
+from tollcli.readers.nmea.dates import DateCarry, resolve_days
 
 
 def _read(lines: list[str], **kw):

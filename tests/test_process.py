@@ -8,12 +8,12 @@ import math
 
 import numpy as np
 import pytest
-
 from conftest import REPO, SAMPLES, run_cli, shared
+
 from tollcli.charging.recognition import charges, load_geoobjects, recognise, thin_independent
-from tollcli.integrity.from_nmea import nmea_measurements
+from tollcli.gnss.nmea_measurements import nmea_measurements
 from tollcli.integrity.raim import RaimParams
-from tollcli.nmea import compose, read_nmea
+from tollcli.readers.nmea import compose, read_nmea
 
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
 TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")

@@ -20,17 +20,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from tollcli.charging import geoobject_store, pipeline
+from tollcli.charging import geoobject_store
 from tollcli.charging.canonical_json import canonical_json
 from tollcli.charging.invoice import invoice_json, seal
-from tollcli.charging.pipeline import ChargeSettings, charge_log
 from tollcli.charging.recognition import inside_pairs, load_geoobjects
 from tollcli.enforcement.trip import cn0_summary
-from tollcli.integrity import design, from_nmea
-from tollcli.integrity.measurements import CONSTELLATION_LETTER, sv_labels
+from tollcli.gnss import nmea_measurements
+from tollcli.gnss.measurements import CONSTELLATION_LETTER, sv_labels
+from tollcli.gnss.wls import wls_geometry
+from tollcli.integrity import design
 from tollcli.integrity.raim import RaimParams
-from tollcli.integrity.wls import wls_geometry
-from tollcli.nmea import read_nmea
+from tollcli.job import pipeline
+from tollcli.job.pipeline import ChargeSettings, charge_log
+from tollcli.readers.nmea import read_nmea
 
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
 TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
@@ -179,7 +181,7 @@ def test_latest_angles_per_satellite_are_groupby_last():
                               "constellation": rng.choice(np.array(["GPS", "Galileo", None, "BeiDou"], dtype=object), n),
                               "svid": rng.integers(1, 5, n).astype(np.int64), "elev_deg": rng.random(n), "azim_deg": rng.random(n)})  # fmt: skip
         expected = known.sort_values("t_s", kind="stable").groupby(["constellation", "svid"], as_index=False).last()
-        rows = from_nmea._latest_rows(known["t_s"].to_numpy(), known["constellation"].to_numpy(), known["svid"].to_numpy())
+        rows = nmea_measurements._latest_rows(known["t_s"].to_numpy(), known["constellation"].to_numpy(), known["svid"].to_numpy())
         got = known.iloc[rows][expected.columns].reset_index(drop=True)
         pd.testing.assert_frame_equal(got, expected, check_dtype=False)
 
@@ -190,7 +192,7 @@ def test_first_of_each_satellite_is_drop_duplicates():
         n = 500
         t = pd.DataFrame({"epoch": rng.integers(0, 20, n), "constellation": rng.choice(np.array(["GPS", "Galileo", None], dtype=object), n),
                           "svid": rng.integers(0, svid_max, n) % 7})  # fmt: skip
-        rows = from_nmea._first_of_each(t["epoch"].to_numpy(np.int64), t["constellation"].to_numpy(), t["svid"].to_numpy(np.int64))
+        rows = nmea_measurements._first_of_each(t["epoch"].to_numpy(np.int64), t["constellation"].to_numpy(), t["svid"].to_numpy(np.int64))
         assert rows.tolist() == np.flatnonzero(~t.duplicated(["epoch", "constellation", "svid"]).to_numpy()).tolist()
 
 
@@ -222,7 +224,7 @@ def test_stored_p_fa_rows_are_those_of_the_thresholds(tmp_path, monkeypatch):
 
 def test_process_does_not_import_scipy_special_with_cached_rows(tmp_path):
     """The χ² functions are only needed to build the cached rows: a second process imports no scipy.special."""
-    code = ("import sys\nfrom tollcli.charging.pipeline import ChargeSettings, charge_log\n"
+    code = ("import sys\nfrom tollcli.job.pipeline import ChargeSettings, charge_log\n"
             f"charge_log({str(SAMPLES / 'straight-drive.nmea')!r}, {GEO!r}, {TARIFF!r}, ChargeSettings())\n"
             "print('scipy.special' in sys.modules)\n")  # fmt: skip
     env = {**os.environ, "TOLLCLI_CACHE_DIR": str(tmp_path)}
@@ -234,7 +236,7 @@ def test_process_does_not_import_scipy_special_with_cached_rows(tmp_path):
 def test_shared_geometry_gives_the_same_pairs():
     """inside_pairs with the chunk's WLS geometry (computed once) = recomputing it for the pairs' epochs."""
     tables = read_nmea(SAMPLES / "sim" / "urban-fault" / "drive.nmea")
-    meas = from_nmea.nmea_measurements(tables.epochs, tables.satellites)
+    meas = nmea_measurements.nmea_measurements(tables.epochs, tables.satellites)
     geo = load_geoobjects(GEO)
     params = RaimParams(fde=True)
     shared = inside_pairs(tables.epochs, meas, geo, params, geometry=wls_geometry(meas.H, meas.sigma_m, meas.mask))

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from tollcli.gnss.measurements import Measurements
+from tollcli.gnss.wls import observation_matrix, residuals_from_prefit, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
-from tollcli.integrity.measurements import Measurements
 from tollcli.integrity.raim import EXCLUDED, FAULT, RaimParams, detect
 from tollcli.integrity.run import run_raim
-from tollcli.integrity.wls import observation_matrix, residuals_from_prefit, wls_geometry, wsse
 
 
 def _scene(seed: int, n_epochs: int, n_sats: int, n_clocks: int = 1):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import tracemalloc
 
-from tollcli.nmea import compose, iter_nmea_tables
+from tollcli.readers.nmea import compose, iter_nmea_tables
 
 
 def _peak_bytes(path, epochs_per_chunk: int) -> tuple[int, int]:

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pynmea2
 import pytest
-
 from conftest import SHARED_DATA, shared
 from gpsd_chk import gpsd_fixes, our_fixes
-from tollcli.nmea import read_nmea
+
+from tollcli.readers.nmea import read_nmea
 
 GPSD = SHARED_DATA / "gpsd"
 GPSD_LOGS = sorted(GPSD.glob("*.log")) if GPSD.exists() else []

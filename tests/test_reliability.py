@@ -11,10 +11,10 @@ import sys
 import time
 
 import pytest
-
 from conftest import REPO, SAMPLES, run_cli
-from tollcli.charging.pipeline import content_sha256
-from tollcli.nmea import compose
+
+from tollcli.job.pipeline import content_sha256
+from tollcli.readers.nmea import compose
 
 
 @pytest.fixture

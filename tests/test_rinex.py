@@ -7,14 +7,14 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-
 from conftest import run_cli
 from rinex_synth import make_rinex
+
 from tollcli.geodesy import enu_rotation, geodetic2ecef
-from tollcli.integrity.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
-from tollcli.integrity.broadcast import MU_GPS, OMEGA_E, kepler_position_clock
+from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
+from tollcli.gnss.orbits import MU_GPS, OMEGA_E, kepler_position_clock
+from tollcli.gnss.rinex_positions import rinex_epochs
 from tollcli.integrity.raim import RaimParams
-from tollcli.integrity.rinex import rinex_epochs
 from tollcli.integrity.run import run_raim
 
 A_GPS = 26_559_700.0
@@ -87,8 +87,9 @@ def test_rinex_round_trip_recovers_the_receiver(tmp_path):
 def test_rinex_fault_is_excluded(tmp_path):
     obs, nav, rows = make_rinex(tmp_path, n_epochs=3, noise_m=0.5, seed=3)
     faulty = [(k, sv, pr + (80.0 if sv == "G11" else 0.0), c) for k, sv, pr, c in rows]
-    from rinex_synth import write_obs
     import datetime as dt
+
+    from rinex_synth import write_obs
 
     write_obs(obs, faulty, dt.datetime(2024, 5, 6, 8, 0, 0))
     epochs, meas = rinex_epochs(str(obs), str(nav), sigma_model="constant", sigma_m=1.0)

@@ -4,7 +4,8 @@ import json
 import runpy
 
 from conftest import SAMPLES
-from tollcli.nmea import read_nmea
+
+from tollcli.readers.nmea import read_nmea
 
 
 def test_samples_are_reproducible(tmp_path, monkeypatch):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tollcli.integrity import sigma_models as sm
+from tollcli.gnss import sigma_models as sm
 
 PERPIGNAN = (42.6987, 2.8956)
 

@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import REPO, run_cli
 from scipy import stats
 
-from conftest import REPO, run_cli
 from tollcli.integrity.truth_check import horizontal_error_m
-from tollcli.nmea.reader import read_nmea
+from tollcli.readers.nmea.reader import read_nmea
 from tollcli.simulate.drive import SimConfig, simulate
 from tollcli.simulate.route import straight
 

@@ -1,4 +1,4 @@
-"""``process`` on a sliding tail (tollcli.charging.streaming): the same invoice as the whole log at once,
+"""``process`` on a sliding tail (tollcli.job.streaming): the same invoice as the whole log at once,
 in memory that does not grow with the log.
 
 The reference is the same charger with ``rounds=False`` (every chunk kept, everything done once at
@@ -18,14 +18,14 @@ from conftest import REPO, SAMPLES
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tollcli.charging import pipeline, streaming
 from tollcli.charging.geoobjects import build_geoobjects
 from tollcli.charging.invoice import invoice_json
-from tollcli.charging.pipeline import ChargeSettings, charge_log
 from tollcli.charging.recognition import _charges_in_order, charges, passages
 from tollcli.enforcement.trip import trailing_median
 from tollcli.integrity.map_matching import MatchParams, load_roads, match_with_trace
-from tollcli.nmea import read_nmea
+from tollcli.job import pipeline, streaming
+from tollcli.job.pipeline import ChargeSettings, charge_log
+from tollcli.readers.nmea import read_nmea
 
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
 TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
@@ -63,7 +63,7 @@ def test_streamed_invoice_is_the_whole_log_invoice(monkeypatch, log, roads):
 
 def test_rounds_do_happen_and_the_tail_stays_short(tmp_path, monkeypatch):
     """A round after every chunk, and what the tail keeps is bounded by the chunk and the context, not the log."""
-    from tollcli.nmea.compose import straight_drive
+    from tollcli.readers.nmea.compose import straight_drive
 
     log = tmp_path / "drive.nmea"
     log.write_text("\n".join(straight_drive(3_000)) + "\n")

@@ -22,8 +22,8 @@ import numpy as np
 import shapely
 
 from tollcli.cache import cache_dir
-from tollcli.charging.geoobjects import feature_geometry, project, read_features
 from tollcli.errors import DataError
+from tollcli.spatial import feature_geometry, project, read_features
 
 CACHE_FORMAT = 1
 
@@ -95,7 +95,7 @@ def _parse(path: str) -> GeoObjects:
     crss = {p.get("crs_metric") for p in props}
     crs = crss.pop() if len(crss) == 1 and None not in crss else None
     if crs is None:
-        from tollcli.charging.geoobjects import metric_crs
+        from tollcli.spatial import metric_crs
 
         crs = metric_crs(polys)
     metric = project(polys, crs)

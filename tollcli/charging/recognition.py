@@ -20,10 +20,10 @@ import pandas as pd
 import shapely
 
 from tollcli.errors import DataError
-from tollcli.integrity.measurements import Measurements
+from tollcli.gnss.measurements import Measurements
+from tollcli.gnss.wls import Geometry, take_epochs
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
-from tollcli.integrity.wls import Geometry, take_epochs
 
 VALID_STATUSES = ("valid", "excluded_valid")
 PASSAGE_GAP_S = 120.0
@@ -41,7 +41,7 @@ def _subset(meas: Measurements, rows: np.ndarray) -> Measurements:
 
 def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(epoch row, geo-object index) for every position inside a geo-object, and the metric x, y of all rows."""
-    from tollcli.charging.geoobjects import wgs84_to
+    from tollcli.spatial import wgs84_to
 
     lon, lat = epochs["lon_deg"].to_numpy(float), epochs["lat_deg"].to_numpy(float)
     x, y = wgs84_to(geo.crs).transform(lon, lat)

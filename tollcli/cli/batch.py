@@ -8,11 +8,11 @@ from typing import Annotated, Optional
 
 import typer
 
-from tollcli.batch.run import expand_inputs, run_batch
-from tollcli.charging.pipeline import ChargeSettings
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
 from tollcli.errors import EXIT_DATA, EXIT_PARTIAL
+from tollcli.job.batch import expand_inputs, run_batch
+from tollcli.job.pipeline import ChargeSettings
 
 
 def batch(

@@ -11,8 +11,8 @@ from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
 from tollcli.errors import UsageError
 from tollcli.io.writers import TableWriter, format_for
-from tollcli.nmea import ReadStats, iter_nmea_tables
-from tollcli.nmea.reader import check_partial, check_usable
+from tollcli.readers.nmea import ReadStats, iter_nmea_tables
+from tollcli.readers.nmea.reader import check_partial, check_usable
 
 
 def epochs(
@@ -57,7 +57,7 @@ def epochs(
                 advance(len(chunk.epochs))
         check_usable(stats)
         if stats.epochs == 0:
-            from tollcli.nmea.tables import epoch_frame, satellite_frame
+            from tollcli.readers.nmea.tables import epoch_frame, satellite_frame
 
             epoch_writer.write(epoch_frame(None))
             if sat_writer is not None:

@@ -12,13 +12,13 @@ import typer
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
 from tollcli.errors import UsageError
-from tollcli.integrity.log_table import iter_integrity
+from tollcli.gnss.sigma_models import SIGMA_MODELS, NominalModel
 from tollcli.integrity.raim import RaimParams
-from tollcli.integrity.sigma_models import SIGMA_MODELS, NominalModel
 from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for
-from tollcli.nmea import ReadStats
-from tollcli.nmea.reader import check_partial, check_usable
+from tollcli.job.log_integrity import iter_integrity
+from tollcli.readers.nmea import ReadStats
+from tollcli.readers.nmea.reader import check_partial, check_usable
 
 FORMATS = ("auto", "nmea", "gsdc-derived", "rinex")
 

@@ -8,12 +8,12 @@ from typing import Annotated, Optional
 import typer
 
 from tollcli.charging.invoice import invoice_csv, invoice_json
-from tollcli.charging.pipeline import ChargeSettings, charge_log
 from tollcli.cli import options as opt
 from tollcli.cli.console import invoice_tables, show, warn
 from tollcli.errors import UsageError
 from tollcli.io.writers import write_text_atomic
-from tollcli.nmea.reader import check_partial
+from tollcli.job.pipeline import ChargeSettings, charge_log
+from tollcli.readers.nmea.reader import check_partial
 
 
 def process(

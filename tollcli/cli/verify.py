@@ -7,9 +7,9 @@ from typing import Annotated
 
 import typer
 
-from tollcli.charging.verify import verify_invoice
 from tollcli.cli import options as opt
 from tollcli.cli.console import warn
+from tollcli.job.verify import verify_invoice
 
 
 def verify(

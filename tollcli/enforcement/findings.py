@@ -145,7 +145,7 @@ def _crossable(geo, lat0, lon0, lat1, lon1, reach_m: float) -> tuple[list[str], 
     """Geo-objects crossed by the straight line, and those inside the reachable ellipse (not on the line)."""
     if geo is None:
         return [], []
-    from tollcli.charging.geoobjects import wgs84_to
+    from tollcli.spatial import wgs84_to
 
     tr = wgs84_to(geo.crs)
     (x0, x1), (y0, y1) = tr.transform([lon0, lon1], [lat0, lat1])

@@ -19,10 +19,10 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from tollcli.charging.geoobjects import feature_geometry, metric_crs, project, read_features
 from tollcli.enforcement.trip import fixes
-from tollcli.times import epoch_seconds, iso_from_seconds, nearest_index
 from tollcli.errors import DataError
+from tollcli.spatial import feature_geometry, metric_crs, project, read_features
+from tollcli.times import epoch_seconds, iso_from_seconds, nearest_index
 
 
 @dataclass(frozen=True)

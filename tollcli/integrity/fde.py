@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tollcli.gnss.wls import REDUNDANCY_EPS, Geometry, wls_geometry
 from tollcli.integrity.raim import EXCLUDED, FAULT, VALID, Detection, RaimParams, detect
-from tollcli.integrity.wls import REDUNDANCY_EPS, Geometry, wls_geometry
 
 
 @dataclass

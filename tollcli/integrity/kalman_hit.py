@@ -104,7 +104,7 @@ def hit(east_m: np.ndarray, north_m: np.ndarray, speed_mps: np.ndarray, t_s: np.
 
 
 def hpl_sbas_m(geometry, sigma_m: np.ndarray) -> np.ndarray:
-    """K_H · d_major per epoch from a batched WLS geometry (``tollcli.integrity.wls.Geometry``) and σ (E, N)."""
+    """K_H · d_major per epoch from a batched WLS geometry (``tollcli.gnss.wls.Geometry``) and σ (E, N)."""
     A = geometry.A[:, :2, :]
     var = np.where(geometry.weight > 0, np.nan_to_num(sigma_m), 0.0) ** 2
     cov = np.einsum("eun,en,evn->euv", A, var, A)

@@ -27,8 +27,8 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from tollcli.charging.geoobjects import feature_geometry, metric_crs, project, read_features, wgs84_to
 from tollcli.errors import DataError
+from tollcli.spatial import feature_geometry, metric_crs, project, read_features, wgs84_to
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tollcli.gnss.wls import Geometry
 from tollcli.integrity import design
-from tollcli.integrity.wls import Geometry
 
 STATUSES = ("valid", "fault_detected", "excluded_valid", "unavailable", "unmonitored", "insufficient")
 VALID, FAULT, EXCLUDED, UNAVAILABLE, UNMONITORED, INSUFFICIENT = range(6)

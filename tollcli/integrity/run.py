@@ -14,11 +14,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from tollcli.gnss.measurements import Measurements
+from tollcli.gnss.wls import Geometry, residuals_from_prefit, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
 from tollcli.integrity.kalman_hit import hpl_sbas_m
-from tollcli.integrity.measurements import Measurements
 from tollcli.integrity.raim import RaimParams, detect, status_names
-from tollcli.integrity.wls import Geometry, residuals_from_prefit, wls_geometry, wsse
 
 RAIM_COLUMNS = (
     "raim_mode", "n_used", "dof", "slope_max_m", "test_stat", "test_stat_source", "threshold", "lambda_det",

@@ -81,7 +81,7 @@ def check_against_truth(epochs: pd.DataFrame, truth: pd.DataFrame, tolerance_s: 
     n_fail = int(failure.sum())
     n_undetected = int(np.sum(failure & valid))
     p_md = float(epochs["p_md"].iloc[0]) if "p_md" in epochs and len(epochs) else float("nan")
-    from tollcli.charging.audit import wilson
+    from tollcli.stats import wilson
 
     low, high = wilson(n_undetected, n_fail)
     return {

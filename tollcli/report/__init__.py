@@ -1,1 +1,4 @@
-"""For people: figures (matplotlib) and a self-contained HTML audit page of a charging run."""
+"""For people: figures (matplotlib) and a self-contained HTML audit page of a charging run.
+
+Uses the job and every room below it.
+"""

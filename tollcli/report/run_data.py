@@ -14,15 +14,15 @@ import numpy as np
 import pandas as pd
 
 from tollcli.charging.audit import load_invoice
-from tollcli.charging.geoobjects import read_features
-from tollcli.charging.pipeline import settings_from_invoice
 from tollcli.charging.recognition import GeoObjects, load_geoobjects
 from tollcli.errors import DataError
-from tollcli.integrity.log_table import iter_integrity
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.truth_check import check_against_truth, errors_against_truth
 from tollcli.io.sources import read_table, sniff_format
-from tollcli.nmea import ReadStats
+from tollcli.job.log_integrity import iter_integrity
+from tollcli.job.pipeline import settings_from_invoice
+from tollcli.readers.nmea import ReadStats
+from tollcli.spatial import read_features
 
 
 @dataclass

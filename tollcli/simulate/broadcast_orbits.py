@@ -12,8 +12,9 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError
-from tollcli.integrity.broadcast import kepler_position_clock
-from tollcli.integrity.rinex import NAMES, _ephemerides, _load
+from tollcli.gnss.orbits import kepler_position_clock
+from tollcli.gnss.rinex_positions import nearest_ephemerides
+from tollcli.readers.rinex import NAMES, load_rinex
 
 LETTER = {"gps": "G", "galileo": "E"}
 
@@ -32,14 +33,14 @@ class BroadcastOrbits:
         t = np.asarray(t_s, dtype=float)
         t = t if per_satellite else np.broadcast_to(t[..., None], t.shape + (self.sv.size,))
         mid = float(np.nanmedian(t))
-        eph, have = _ephemerides(self.nav, self.sv, np.full(self.sv.size, mid))
+        eph, have = nearest_ephemerides(self.nav, self.sv, np.full(self.sv.size, mid))
         pos, _ = kepler_position_clock(eph, t, self.names == "Galileo")
         return np.where(have[:, None], pos, np.nan)
 
 
 def load_orbits(path: str, constellations: list[str]) -> BroadcastOrbits:
     """The satellites of ``path`` that belong to ``constellations`` (``gps``, ``galileo``)."""
-    nav = _load(path, "navigation")
+    nav = load_rinex(path, "navigation")
     letters = {LETTER[c] for c in constellations}
     table = nav.to_dataframe().reset_index().dropna(subset=["sqrtA"])
     sv = np.array(sorted({str(s) for s in table["sv"] if str(s)[:1] in letters}), dtype=object)

@@ -24,10 +24,10 @@ import numpy as np
 import pandas as pd
 
 from tollcli.geodesy import ecef2geodetic, enu_rotation, enu_shift2geodetic
-from tollcli.integrity.sigma_models import NominalModel
-from tollcli.integrity.wls import observation_matrix, wls_geometry
-from tollcli.integrity.pseudorange_wls import line_of_sight as line_of_sight_ecef
-from tollcli.integrity.pseudorange_wls import solve_positions
+from tollcli.gnss.pseudorange_wls import line_of_sight as line_of_sight_ecef
+from tollcli.gnss.pseudorange_wls import solve_positions
+from tollcli.gnss.sigma_models import NominalModel
+from tollcli.gnss.wls import observation_matrix, wls_geometry
 from tollcli.simulate.constellations import nominal, stacked
 from tollcli.simulate.errors import FaultPlan, fault_epochs, gauss_markov
 from tollcli.simulate.route import Trajectory

@@ -17,8 +17,8 @@ from collections.abc import Iterator
 import numpy as np
 import pandas as pd
 
-from tollcli.integrity.gsdc import LEAP_SECONDS
-from tollcli.nmea import compose
+from tollcli.readers.gps_time import LEAP_SECONDS
+from tollcli.readers.nmea import compose
 
 TALKER = {"GPS": "GP", "Galileo": "GA"}
 SYSTEM_ID = {"GPS": 1, "Galileo": 3}

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from tollcli.charging.geoobjects import feature_geometry, metric_crs, project, read_features
 from tollcli.errors import DataError
 from tollcli.geodesy import enu_shift2geodetic
+from tollcli.spatial import feature_geometry, metric_crs, project, read_features
 
 PERPIGNAN = (42.0 + 41.0 / 60.0, 2.0 + 53.0 / 60.0)  # the thesis's user location [42°41', 2°53']
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tollcli.geodesy import geodetic2ecef
-from tollcli.integrity.pseudorange_wls import C_MPS, local_angles, sagnac
+from tollcli.gnss.pseudorange_wls import C_MPS, local_angles, sagnac
 
 
 def receiver_ecef(lat_deg, lon_deg, height_m) -> np.ndarray:
@@ -19,7 +19,7 @@ def sky(sats, t_s: np.ndarray, lat_deg, lon_deg, height_m) -> dict[str, np.ndarr
     ``sats`` is anything with ``ecef(t_s, per_satellite)`` (a nominal constellation, or
     broadcast orbits); ``t_s`` are reception times on its time scale. The
     geometric range includes the Earth's rotation during the flight (Sagnac), as
-    the WLS of :mod:`tollcli.integrity.pseudorange_wls` models it.
+    the WLS of :mod:`tollcli.gnss.pseudorange_wls` models it.
     """
     rx = receiver_ecef(lat_deg, lon_deg, height_m)
     t = np.asarray(t_s, dtype=float)

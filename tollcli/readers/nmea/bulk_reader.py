@@ -2,17 +2,17 @@
 
 Per block (≈ 2 MB of whole lines):
 
-1. :func:`~tollcli.nmea.bulk_lines.split_block` frames every line and verifies the
+1. :func:`~tollcli.readers.nmea.bulk_lines.split_block` frames every line and verifies the
    checksums of the plain ones with array operations;
-2. :mod:`~tollcli.nmea.bulk_sentences` decodes GGA, RMC, VTG, GSA, GSV, GST, GRS,
+2. :mod:`~tollcli.readers.nmea.bulk_sentences` decodes GGA, RMC, VTG, GSA, GSV, GST, GRS,
    GLL and ZDA in bulk; lines it cannot read plainly, other lines and the rarer
    sentence types (GNS, GBS) go through the reference reader's per-line classifier
    and converters, which also decide what is malformed;
 3. epochs are cut where the time of day changes (as the reference assembler does),
    the last, possibly unfinished epoch is carried into the next block;
-4. :mod:`~tollcli.nmea.bulk_epochs` assembles the common epochs in bulk; an epoch
+4. :mod:`~tollcli.readers.nmea.bulk_epochs` assembles the common epochs in bulk; an epoch
    with anything else is fed, sentence by sentence, to the reference
-   :class:`~tollcli.nmea.assembler.EpochAssembler`.
+   :class:`~tollcli.readers.nmea.assembler.EpochAssembler`.
 
 The result is the reference reader's, table for table: ``tests/test_bulk_reader.py``
 compares both on every gpsd log. Should the time stamps of a block ever fall outside
@@ -24,16 +24,11 @@ from __future__ import annotations
 import numpy as np
 
 from tollcli.errors import DataError
-from tollcli.nmea import bulk_epochs, bulk_sentences
-from tollcli.nmea.assembler import EpochAssembler
-from tollcli.nmea.bulk_lines import (
-    BlockLines,
-    pack_address,
-    split_block,
-    type_code,
-    unpack_address,
-)
-from tollcli.nmea.fields import time_of_day_s
+from tollcli.readers.nmea import bulk_epochs, bulk_sentences
+from tollcli.readers.nmea.assembler import EpochAssembler
+from tollcli.readers.nmea.bulk_lines import BlockLines, pack_address, split_block, type_code, unpack_address
+from tollcli.readers.nmea.fields import time_of_day_s
+from tollcli.readers.nmea.line_reader import HANDLED_TYPES, classify_line, feed_lines
 
 #: line kinds
 BLANK, COMMENT, NOT_NMEA, NO_CHECKSUM, BAD_CHECKSUM, UNUSED, MALFORMED, DECODED = range(8)
@@ -54,8 +49,6 @@ class BulkReader:
     """Feed it blocks of whole lines with :meth:`feed`; it returns finished epochs as arrays."""
 
     def __init__(self, stats, strict: bool, name: str):
-        from tollcli.nmea.reader import HANDLED_TYPES
-
         self.stats = stats
         self.strict = strict
         self.name = name
@@ -88,13 +81,11 @@ class BulkReader:
 
     # ------------------------------------------------------------------ reference path
     def _reference_feed(self, data: bytes, final: bool) -> dict[str, np.ndarray]:
-        from tollcli.nmea.reader import _feed_lines
-
         if self.reference is None:
             self.reference = EpochAssembler()
             self.reference._next_epoch = self.next_epoch
         lines = data.decode("latin-1").replace("\r", "").split("\n") if data else []
-        _feed_lines(lines, self.reference, self.stats, self.strict, self.name)
+        feed_lines(lines, self.reference, self.stats, self.strict, self.name)
         if final:
             self.reference.finish()
         self.slow_epochs += self.reference.n_ready
@@ -178,8 +169,6 @@ class BulkReader:
 
     def _per_line(self, bl: BlockLines, lines, first_line, kind, why, stype, tod, slow, inert, parsed) -> None:
         """Classify and check lines one by one, as the reference reader does (the rare ones)."""
-        from tollcli.nmea.reader import classify_line
-
         scratch = EpochAssembler()
         for i in lines:
             k, reason, address, fields = classify_line(bl.text(i))
@@ -274,12 +263,10 @@ class BulkReader:
         if slow_ids.size:
             parts.append(self._reference_epochs(bl, first_line, dec, local, slow_ids, ep_global, parsed))
             self.slow_epochs += slow_ids.size
-        return _merge(parts)
+        return merge_arrays(parts)
 
     def _reference_epochs(self, bl, first_line, dec, local, epoch_ids, ep_global, parsed):
         """The given epochs assembled sentence by sentence by the reference assembler."""
-        from tollcli.nmea.reader import classify_line
-
         asm = EpochAssembler()
         wanted = np.zeros(int(local.max()) + 1, bool)
         wanted[epoch_ids] = True
@@ -318,7 +305,7 @@ def _first_timed(local: np.ndarray, tod: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-def _merge(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+def merge_arrays(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     """Concatenate epoch arrays from both paths, in epoch order."""
     parts = [p for p in parts if p["epoch"].size or p["sat_epoch"].size]
     if len(parts) == 1:

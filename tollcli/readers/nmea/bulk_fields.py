@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tollcli.nmea import kernels
+from tollcli.readers.nmea import kernels
 
 NAN = np.nan
 MAX_WIDTH = 18  # characters; longer fields go to the per-line path

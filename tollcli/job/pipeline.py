@@ -16,21 +16,21 @@ from tollcli.charging.recognition import (
     load_geoobjects,
     positions_from_pairs,
 )
-from tollcli.charging.streaming import TailCharger, choose_policy, has_speeds
 from tollcli.charging.tariffs import load_tariff
 from tollcli.enforcement.findings import FindingSettings, trip_findings
 from tollcli.enforcement.trip import cn0_summary
 from tollcli.errors import DataError, UsageError
-from tollcli.integrity.from_nmea import AngleCarry, nmea_measurements
-from tollcli.integrity.pseudorange_inputs import pseudorange_epochs
+from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
+from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+from tollcli.gnss.sigma_models import NominalModel
+from tollcli.gnss.wls import wls_geometry
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
-from tollcli.integrity.sigma_models import NominalModel
-from tollcli.integrity.wls import wls_geometry
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
 from tollcli.io.sources import sniff_format
-from tollcli.nmea import ReadStats, iter_nmea_tables
-from tollcli.nmea.reader import check_usable
+from tollcli.job.streaming import TailCharger, choose_policy, has_speeds
+from tollcli.readers.nmea import ReadStats, iter_nmea_tables
+from tollcli.readers.nmea.reader import check_usable
 
 
 @dataclass

@@ -1,10 +1,10 @@
 """Decode the common sentences of a block in bulk: one function per type, arrays in, arrays out.
 
-Each decoder takes the block (:class:`~tollcli.nmea.bulk_lines.BlockLines`) and the
+Each decoder takes the block (:class:`~tollcli.readers.nmea.bulk_lines.BlockLines`) and the
 indices of its lines of that type, and returns a dict of arrays (one row per line)
 with an ``ok`` mask. A line that is not ``ok`` is re-read by the per-line reader,
 which either finds it malformed or reads it (its epoch is then assembled per line).
-Fields and rules are those of :mod:`tollcli.nmea.assembler`, which documents them.
+Fields and rules are those of :mod:`tollcli.readers.nmea.assembler`, which documents them.
 """
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from tollcli.nmea import bulk_fields as bf
-from tollcli.nmea.bulk_lines import BlockLines, pack_address, talker_code
-from tollcli.nmea.fields import KMH_MPS, KNOT_MPS
-from tollcli.nmea.satellite_ids import (
+from tollcli.readers.nmea import bulk_fields as bf
+from tollcli.readers.nmea.bulk_lines import BlockLines, pack_address, talker_code
+from tollcli.readers.nmea.fields import KMH_MPS, KNOT_MPS
+from tollcli.readers.nmea.satellite_ids import (
     CONSTELLATIONS,
     SYSTEM_ID_CONSTELLATION,
     TALKER_CONSTELLATION,

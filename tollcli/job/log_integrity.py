@@ -9,12 +9,12 @@ import pandas as pd
 
 from tollcli.errors import UsageError
 from tollcli.geodesy import enu_shift2geodetic
-from tollcli.integrity.from_nmea import AngleCarry, nmea_measurements
-from tollcli.integrity.pseudorange_inputs import pseudorange_epochs
+from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
+from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+from tollcli.gnss.sigma_models import NominalModel
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
-from tollcli.integrity.sigma_models import NominalModel
-from tollcli.nmea import ReadStats, iter_nmea_tables
+from tollcli.readers.nmea import ReadStats, iter_nmea_tables
 
 
 @dataclass

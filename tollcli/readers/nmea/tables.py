@@ -45,7 +45,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from tollcli.nmea.assembler import FLOAT_COLUMNS
+from tollcli.readers.nmea.assembler import FLOAT_COLUMNS
 
 EPOCH_COLUMNS = (
     "epoch", "time_utc", "tod_s", "line", "lat_deg", "lon_deg", "alt_m", "geoid_sep_m",

@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from tollcli.geodesy import OMEGA_EARTH_RADPS, ecef2geodetic, enu_rotation
-from tollcli.integrity.wls import wls_geometry
+from tollcli.gnss.wls import wls_geometry
 
 C_MPS = 299_792_458.0
 ITERATIONS = 12

@@ -13,9 +13,9 @@ from __future__ import annotations
 import os
 
 from tollcli.charging.invoice import file_sha256, invoice_json
-from tollcli.charging.pipeline import charge_log, content_sha256, settings_from_invoice
 from tollcli.errors import DataError
 from tollcli.io.sources import read_json
+from tollcli.job.pipeline import charge_log, content_sha256, settings_from_invoice
 
 INPUTS = (("log", "log"), ("geoobjects", "geo-objects"), ("tariff", "tariff"), ("nav", "navigation file"), ("roads", "road network"))
 

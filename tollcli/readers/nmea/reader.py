@@ -14,7 +14,7 @@ from __future__ import annotations
 import datetime as _dt
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import BinaryIO
 
 import numpy as np
@@ -28,70 +28,16 @@ from tollcli.io.sources import (
     open_binary,
     source_name,
 )
-from tollcli.nmea.assembler import EpochAssembler
-from tollcli.nmea.dates import DateCarry, resolve_days, to_time_utc_ms
-from tollcli.nmea.fields import checksum
-from tollcli.nmea.tables import epoch_frame, satellite_frame
+from tollcli.readers.nmea.assembler import EpochAssembler
+from tollcli.readers.nmea.bulk_reader import BulkReader, merge_arrays
+from tollcli.readers.nmea.dates import DateCarry, resolve_days, to_time_utc_ms
+from tollcli.readers.nmea.line_reader import ReadStats, feed_lines
+from tollcli.readers.nmea.tables import epoch_frame, satellite_frame
 
 #: epochs per chunk handed downstream
 CHUNK_EPOCHS = 20_000
 #: epochs held back waiting for a date (RMC/ZDA) before giving up on dating them
 MAX_UNDATED_EPOCHS = 100_000
-ANDROID_PREFIX = "NMEA,"
-
-
-@dataclass
-class ReadStats:
-    """What happened to every line of a log."""
-
-    source: str = ""
-    lines: int = 0
-    sentences: int = 0  # checksum-verified NMEA sentences
-    decoded: int = 0  # of which decoded into epochs
-    unused: int = 0  # valid sentences of types the reader does not use (proprietary, AIS, ...)
-    comments: int = 0
-    blank: int = 0
-    bad_checksum: int = 0
-    no_checksum: int = 0
-    malformed: int = 0
-    not_nmea: int = 0
-    epochs: int = 0
-    satellite_rows: int = 0
-    undated_epochs: int = 0
-    first_problem: str = ""
-    unused_types: dict[str, int] = field(default_factory=dict)
-
-    @property
-    def skipped(self) -> int:
-        """Lines that could not be used: the count ``--strict`` refuses."""
-        return self.bad_checksum + self.no_checksum + self.malformed + self.not_nmea
-
-    def summary(self) -> str:
-        """One line for stderr."""
-        parts = [
-            f"{self.lines} lines",
-            f"{self.sentences} NMEA sentences",
-            f"{self.epochs} epochs",
-            f"{self.satellite_rows} satellite rows",
-        ]
-        skipped = [
-            (self.bad_checksum, "bad checksum"),
-            (self.no_checksum, "no checksum"),
-            (self.malformed, "malformed"),
-            (self.not_nmea, "not NMEA"),
-        ]
-        detail = ", ".join(f"{n} {what}" for n, what in skipped if n)
-        text = f"{self.source}: " + ", ".join(parts)
-        if self.skipped:
-            text += f"; skipped {self.skipped} lines ({detail})"
-        if self.undated_epochs:
-            text += f"; {self.undated_epochs} epochs without a date (no RMC/ZDA; use --date)"
-        return text
-
-    def as_dict(self) -> dict:
-        out = {k: getattr(self, k) for k in self.__dataclass_fields__}
-        out["skipped"] = self.skipped
-        return out
 
 
 @dataclass
@@ -129,7 +75,7 @@ def iter_nmea_tables(
     ``date``: the UTC date of the first epoch, for logs without RMC/ZDA.
     ``block_bytes``: bytes read at a time (chunks are cut at block ends).
     ``stats`` (optional) is filled in as lines are read.
-    ``engine``: ``"bulk"`` (the fast path, :mod:`tollcli.nmea.bulk_reader`) or
+    ``engine``: ``"bulk"`` (the fast path, :mod:`tollcli.readers.nmea.bulk_reader`) or
     ``"reference"`` (one line at a time; the bulk path is tested against it).
     """
     stats = stats if stats is not None else ReadStats()
@@ -152,7 +98,7 @@ def iter_nmea_tables(
     asm = EpochAssembler()
     try:
         for lines in iter_text_blocks(stream, name, block_bytes):
-            _feed_lines(lines, asm, stats, strict, name)
+            feed_lines(lines, asm, stats, strict, name)
             if asm.n_ready >= chunk_epochs:
                 yield from _emit(asm.take(), pending, carry, stats, final=False)
         asm.finish()
@@ -163,8 +109,6 @@ def iter_nmea_tables(
 
 
 def _bulk_chunks(stream, name, stats, strict, chunk_epochs, block_bytes, pending, carry) -> Iterator[NmeaTables]:
-    from tollcli.nmea.bulk_reader import BulkReader, _merge
-
     bulk = BulkReader(stats, strict, name)
     ready: list[dict[str, np.ndarray]] = []
     n_ready = 0
@@ -174,87 +118,12 @@ def _bulk_chunks(stream, name, stats, strict, chunk_epochs, block_bytes, pending
             ready.append(arrays)
             n_ready += arrays["epoch"].size
         if n_ready >= chunk_epochs:
-            yield from _emit(_merge(ready), pending, carry, stats, final=False)
+            yield from _emit(merge_arrays(ready), pending, carry, stats, final=False)
             ready, n_ready = [], 0
     arrays = bulk.finish()
     if arrays is not None:
         ready.append(arrays)
-    yield from _emit(_merge(ready), pending, carry, stats, final=True)
-
-
-HANDLED_TYPES = frozenset(EpochAssembler().handled_types())
-
-
-def classify_line(line: str) -> tuple[str, str, str, list[str]]:
-    """What one raw line is: ``(kind, why, address, fields)``.
-
-    ``kind``: ``blank``, ``comment``, ``not_nmea``, ``no_checksum``, ``bad_checksum``
-    (``why`` says what is wrong), ``unused`` (a valid sentence the reader does not
-    use) or ``sentence`` (a valid sentence of a type the assembler reads; ``fields``
-    are those after the address).
-    """
-    line = line.strip()
-    if not line:
-        return "blank", "", "", []
-    if line[0] == "#":
-        return "comment", "", "", []
-    if line.startswith(ANDROID_PREFIX):
-        line = line[len(ANDROID_PREFIX) :]
-    star = line.rfind("*")
-    end = star if star >= 0 else len(line)
-    start = max(line.rfind("$", 0, end), line.rfind("!", 0, end))  # '!': encapsulated (AIS) sentences
-    if start < 0:
-        return "not_nmea", "not an NMEA sentence", "", []
-    if star < 0:
-        return "no_checksum", "no checksum (truncated sentence?)", "", []
-    body = line[start + 1 : star]
-    try:
-        expected = int(line[star + 1 : star + 3], 16)
-    except ValueError:
-        return "no_checksum", "unreadable checksum", "", []
-    got = checksum(body)
-    if got != expected:
-        return "bad_checksum", f"bad checksum (*{expected:02X} given, {got:02X} computed)", "", []
-    fields = body.split(",")
-    address = fields[0]
-    if len(address) != 5 or address[0] == "P" or address[2:] not in HANDLED_TYPES:
-        return "unused", "", address, []
-    return "sentence", "", address, fields[1:]
-
-
-def _feed_lines(lines: list[str], asm: EpochAssembler, stats: ReadStats, strict: bool, name: str) -> None:
-    """Classify, verify and decode one block of lines, one line at a time (the reference path)."""
-    line_no = stats.lines
-    for line in lines:
-        line_no += 1
-        kind, why, address, fields = classify_line(line)
-        if kind == "sentence":
-            stats.sentences += 1
-            try:
-                asm.feed(address[:2], address[2:], fields, line_no)
-            except (ValueError, IndexError, OverflowError) as exc:
-                _problem(stats, "malformed", line_no, f"malformed {address}: {exc}", strict, name)
-                continue
-            stats.decoded += 1
-        elif kind == "unused":
-            stats.sentences += 1
-            stats.unused += 1
-            stats.unused_types[address] = stats.unused_types.get(address, 0) + 1
-        elif kind == "blank":
-            stats.blank += 1
-        elif kind == "comment":
-            stats.comments += 1
-        else:
-            _problem(stats, kind, line_no, why, strict, name)
-    stats.lines = line_no
-
-
-def _problem(stats: ReadStats, kind: str, line_no: int, why: str, strict: bool, name: str) -> None:
-    if strict:
-        raise DataError(f"{name}:{line_no}: {why}")
-    setattr(stats, kind, getattr(stats, kind) + 1)
-    if not stats.first_problem:
-        stats.first_problem = f"line {line_no}: {why}"
+    yield from _emit(merge_arrays(ready), pending, carry, stats, final=True)
 
 
 def _emit(

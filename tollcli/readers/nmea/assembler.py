@@ -17,6 +17,10 @@ GRS with NMEA 4.10 system id *s* goes with the GSA of system *s*; otherwise the
 The assembler only appends finished epochs to column buffers (plain lists, one
 per column); :meth:`take` hands them over as numpy arrays and empties them, so
 memory is bounded by the chunk size, not the log length.
+
+Why this file is long: it is the reference decoder, one method per sentence type
+over one shared epoch state; split, the rules of which source wins for each
+quantity (above) would be scattered over files that must change together.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ import math
 
 import numpy as np
 
-from tollcli.nmea.fields import (
+from tollcli.readers.nmea.fields import (
     KMH_MPS,
     KNOT_MPS,
     NAN,
@@ -37,7 +41,7 @@ from tollcli.nmea.fields import (
     rmc_date_days,
     time_of_day_s,
 )
-from tollcli.nmea.satellite_ids import (
+from tollcli.readers.nmea.satellite_ids import (
     CONSTELLATIONS,
     SYSTEM_ID_CONSTELLATION,
     TALKER_CONSTELLATION,

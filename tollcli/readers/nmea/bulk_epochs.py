@@ -1,4 +1,4 @@
-"""Assemble epochs from sentences decoded in bulk, with the rules of :mod:`tollcli.nmea.assembler`.
+"""Assemble epochs from sentences decoded in bulk, with the rules of :mod:`tollcli.readers.nmea.assembler`.
 
 The bulk path assembles the common epoch: at most one GGA, RMC, VTG, GST, GLL and
 ZDA, any number of GSA and GSV, each satellite reported once per epoch. Epochs outside that
@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tollcli.nmea.assembler import FLOAT_COLUMNS
-from tollcli.nmea.satellite_ids import CONSTELLATIONS
+from tollcli.readers.nmea.assembler import FLOAT_COLUMNS
+from tollcli.readers.nmea.satellite_ids import CONSTELLATIONS
 
 SENTENCE_TYPES = ("GGA", "RMC", "VTG", "GSA", "GSV", "GST", "GLL", "ZDA", "GRS")
 SAT_FIELDS = ("sat_row", "sat_k", "sat_const", "sat_svid", "sat_prn", "sat_signal", "sat_elev", "sat_azim", "sat_cn0")

@@ -23,10 +23,10 @@ from dataclasses import asdict, dataclass
 from decimal import Decimal
 
 from tollcli.charging.invoice import file_sha256, invoice_json
-from tollcli.charging.pipeline import ChargeSettings, charge_log
 from tollcli.enforcement.locate import vehicle_from_log, vehicle_from_path
 from tollcli.errors import DataError, UsageError
 from tollcli.io.writers import TableWriter, write_text_atomic
+from tollcli.job.pipeline import ChargeSettings, charge_log
 
 LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv")
 
@@ -144,7 +144,8 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
             outcomes.append(run_one(job))
             tick(1)
     else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed as done_first
+        from concurrent.futures import ProcessPoolExecutor
+        from concurrent.futures import as_completed as done_first
 
         with ProcessPoolExecutor(max_workers=workers) as pool:
             for fut in done_first([pool.submit(run_one, job) for job in jobs]):

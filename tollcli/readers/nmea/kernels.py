@@ -20,9 +20,9 @@ def _installed_copy():
 
     for entry in sys.path:
         for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-            path = os.path.join(entry or ".", "tollcli", "nmea", f"_bulk_kernels{suffix}")
+            path = os.path.join(entry or ".", "tollcli", "readers", "nmea", f"_bulk_kernels{suffix}")
             if os.path.isfile(path):
-                spec = importlib.util.spec_from_file_location("tollcli.nmea._bulk_kernels", path)
+                spec = importlib.util.spec_from_file_location("tollcli.readers.nmea._bulk_kernels", path)
                 module = importlib.util.module_from_spec(spec)
                 spec.loader.exec_module(module)
                 return module
@@ -32,7 +32,7 @@ def _installed_copy():
 compiled = None
 if os.environ.get("TOLLCLI_KERNELS", "").lower() != "numpy":
     try:
-        from tollcli.nmea import _bulk_kernels as compiled
+        from tollcli.readers.nmea import _bulk_kernels as compiled
     except ImportError:  # not built here: the installed copy's, else the numpy kernels
         try:
             compiled = _installed_copy()

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tollcli.nmea import kernels
-from tollcli.nmea.bulk_fields import byte_windows
+from tollcli.readers.nmea import kernels
+from tollcli.readers.nmea.bulk_fields import byte_windows
 
 _NL, _CR, _DOLLAR, _BANG, _STAR, _COMMA = 10, 13, 36, 33, 42, 44
 

@@ -17,10 +17,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from tollcli.integrity.measurements import Measurements, pad, slots, sv_labels
-from tollcli.integrity.sigma_models import NominalModel, sigma_for
-from tollcli.integrity.wls import observation_matrix
-
+from tollcli.gnss.measurements import Measurements, pad, slots, sv_labels
+from tollcli.gnss.sigma_models import NominalModel, sigma_for
+from tollcli.gnss.wls import observation_matrix
 
 MAX_ANGLE_AGE_S = 30.0
 

@@ -1,4 +1,4 @@
-"""The Google Smartphone Decimeter Challenge "derived" CSV: WLS positions and RAIM inputs.
+"""WLS positions and RAIM measurements from the Google Smartphone Decimeter Challenge "derived" CSV.
 
 Per satellite-signal row the file gives the satellite's ECEF position at signal
 transmission time (in the ECEF frame of that time), its clock bias and the
@@ -8,8 +8,9 @@ modelled delays. Corrected pseudorange (the data set's own definition):
 
 With ``isrbM`` removed one receiver clock serves every constellation and signal.
 The position is the iterated, Sagnac-corrected WLS of
-:mod:`tollcli.integrity.pseudorange_wls`, batched over epochs. Every signal (L1 and L5 of one
-satellite) is its own measurement; duplicated rows count once.
+:mod:`tollcli.gnss.pseudorange_wls`, batched over epochs. Every signal (L1 and L5 of one
+satellite) is its own measurement; duplicated rows count once. The file is read
+by :mod:`tollcli.readers.gsdc`.
 """
 
 from __future__ import annotations
@@ -17,43 +18,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from tollcli.errors import DataError
-from tollcli.integrity.measurements import Measurements, pad, slots, sv_labels
-from tollcli.integrity.pseudorange_wls import final_geometry, solve_positions
-from tollcli.integrity.sigma_models import NominalModel, sigma_for
-
-GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ms")
-#: GPS − UTC in seconds from each date on (leap seconds since 1980)
-LEAP_SECONDS = [
-    ("1981-07-01", 1), ("1982-07-01", 2), ("1983-07-01", 3), ("1985-07-01", 4), ("1988-01-01", 5),
-    ("1990-01-01", 6), ("1991-01-01", 7), ("1992-07-01", 8), ("1993-07-01", 9), ("1994-07-01", 10),
-    ("1996-01-01", 11), ("1997-07-01", 12), ("1999-01-01", 13), ("2006-01-01", 14), ("2009-01-01", 15),
-    ("2012-07-01", 16), ("2015-07-01", 17), ("2017-01-01", 18),
-]  # fmt: skip
-ANDROID_CONSTELLATION = {1: "GPS", 2: "SBAS", 3: "GLONASS", 4: "QZSS", 5: "BeiDou", 6: "Galileo", 7: "NavIC"}
-REQUIRED = ("millisSinceGpsEpoch", "constellationType", "svid", "signalType", "xSatPosM", "ySatPosM", "zSatPosM",
-            "satClkBiasM", "rawPrM", "rawPrUncM", "isrbM", "ionoDelayM", "tropoDelayM")  # fmt: skip
-
-
-def gps_millis_to_utc(millis: np.ndarray) -> np.ndarray:
-    """GPS milliseconds since 1980-01-06 → UTC ``datetime64[ms]`` (leap seconds removed)."""
-    gps = GPS_EPOCH + np.asarray(millis, dtype=np.int64).astype("timedelta64[ms]")
-    leap = np.zeros(gps.shape, dtype=np.int64)
-    for date, seconds in LEAP_SECONDS:
-        leap = np.where(gps >= np.datetime64(date, "ms") + np.timedelta64(seconds, "s"), seconds, leap)
-    return gps - leap.astype("timedelta64[s]")
-
-
-def read_gsdc_derived(path) -> pd.DataFrame:
-    """The derived CSV with the columns the WLS needs, checked."""
-    try:
-        table = pd.read_csv(path)
-    except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: not a readable CSV ({exc})") from None
-    missing = [c for c in REQUIRED if c not in table.columns]
-    if missing:
-        raise DataError(f"{path}: not a GSDC derived file, missing columns {', '.join(missing)}")
-    return table
+from tollcli.gnss.measurements import Measurements, pad, slots, sv_labels
+from tollcli.gnss.pseudorange_wls import final_geometry, solve_positions
+from tollcli.gnss.sigma_models import NominalModel, sigma_for
+from tollcli.readers.gps_time import gps_millis_to_utc
+from tollcli.readers.gsdc import ANDROID_CONSTELLATION
 
 
 def gsdc_epochs(

@@ -1,9 +1,9 @@
 """RINEX 3 observation + navigation files → WLS positions and RAIM measurements (GPS, Galileo).
 
-* Observations (georinex): code pseudorange on L1/E1 (``C1C``, else ``C1X``/``C1P``
+* Observations (:mod:`tollcli.readers.rinex`): code pseudorange on L1/E1 (``C1C``, else ``C1X``/``C1P``
   for Galileo/GPS) and its C/N0 (``S1…``); receiver time from the file (GPS time).
 * Orbits and clocks: the broadcast ephemeris of each satellite nearest in time
-  (:mod:`tollcli.integrity.broadcast`) at the transmission time
+  (:mod:`tollcli.gnss.orbits`) at the transmission time
   t_tx = t_rx − pr/c − dt_sv, iterated.
 * Corrections inside the WLS: satellite clock (+ c·dt_sv, with relativity and
   group delay), Klobuchar ionosphere from the navigation header (GPSA/GPSB),
@@ -13,65 +13,20 @@
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError, UsageError
-from tollcli.integrity.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
-from tollcli.integrity.gsdc import gps_millis_to_utc
-from tollcli.integrity.broadcast import EPHEMERIS_FIELDS, WEEK_S, kepler_position_clock
-from tollcli.integrity.measurements import Measurements, pad, slots
-from tollcli.integrity.pseudorange_wls import C_MPS, final_geometry, solve_positions
-from tollcli.integrity.sigma_models import NominalModel, sigma_for
-
-GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ns")
-CODES = {"G": ("C1C", "C1P", "C1W"), "E": ("C1C", "C1X", "C1B")}
-NAMES = {"G": "GPS", "E": "Galileo"}
+from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
+from tollcli.gnss.measurements import Measurements, pad, slots
+from tollcli.gnss.orbits import EPHEMERIS_FIELDS, WEEK_S, kepler_position_clock
+from tollcli.gnss.pseudorange_wls import C_MPS, final_geometry, solve_positions
+from tollcli.gnss.sigma_models import NominalModel, sigma_for
+from tollcli.readers.gps_time import gps_millis_to_utc, gps_seconds
+from tollcli.readers.rinex import load_rinex, observations
 
 
-def gps_seconds(times: np.ndarray) -> np.ndarray:
-    """datetime64 (GPS time scale) → seconds since 1980-01-06."""
-    return (np.asarray(times, dtype="datetime64[ns]") - GPS_EPOCH).astype(np.int64) / 1e9
-
-
-def _load(path: str, what: str):
-    try:
-        import georinex
-    except ImportError:  # pragma: no cover - a dependency of the package
-        raise UsageError("reading RINEX needs georinex (pip install georinex)") from None
-    try:
-        with warnings.catch_warnings():  # georinex's own xarray deprecations are not the user's business
-            warnings.simplefilter("ignore", FutureWarning)
-            warnings.simplefilter("ignore", DeprecationWarning)
-            return georinex.load(path, use={"G", "E"})
-    except FileNotFoundError:
-        raise UsageError(f"{path}: no such file") from None
-    except Exception as exc:  # georinex raises many kinds on bad files
-        raise DataError(f"{path}: not a readable RINEX {what} file ({type(exc).__name__}: {exc})") from None
-
-
-def observations(obs) -> pd.DataFrame:
-    """One row per (epoch, satellite) with a pseudorange: time, sv, pr_m, cn0_dbhz."""
-    frames = []
-    for system, codes in CODES.items():
-        svs = [s for s in obs.sv.values if str(s).startswith(system)]
-        code = next((c for c in codes if c in obs and np.isfinite(obs[c].sel(sv=svs).values).any()), None) if svs else None
-        if code is None:
-            continue
-        pr = obs[code].sel(sv=svs).to_pandas()
-        snr_name = "S" + code[1:]
-        snr = obs[snr_name].sel(sv=svs).to_pandas() if snr_name in obs else pr * np.nan
-        table = pd.DataFrame({"pr_m": pr.stack(future_stack=True), "cn0_dbhz": snr.stack(future_stack=True)}).reset_index()
-        frames.append(table.rename(columns={table.columns[0]: "time", table.columns[1]: "sv"}))
-    if not frames:
-        raise DataError("no GPS or Galileo L1/E1 code observations (C1C/C1X/C1P) in the observation file")
-    rows = pd.concat(frames, ignore_index=True)
-    return rows[np.isfinite(rows["pr_m"])].sort_values(["time", "sv"], kind="stable").reset_index(drop=True)
-
-
-def _ephemerides(nav, sv: np.ndarray, t_s: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def nearest_ephemerides(nav, sv: np.ndarray, t_s: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Per query, the fields of the satellite's ephemeris with the nearest clock reference time."""
     table = nav.to_dataframe().reset_index().dropna(subset=["sqrtA"])
     if table.empty:
@@ -99,12 +54,12 @@ def rinex_epochs(obs_path: str, nav_path: str, sigma_model: str = "nominal", sig
     """WLS position per epoch (an epoch table) and the RAIM measurements at that position."""
     if sigma_model == "input":
         raise UsageError("--sigma-model input: RINEX observations carry no per-measurement σ; use nominal or constant")
-    obs, nav = _load(obs_path, "observation"), _load(nav_path, "navigation")
+    obs, nav = load_rinex(obs_path, "observation"), load_rinex(nav_path, "navigation")
     rows = observations(obs)
     t_rx = gps_seconds(rows["time"].to_numpy())
     sv = rows["sv"].to_numpy(str)
     pr = rows["pr_m"].to_numpy(float)
-    eph, have = _ephemerides(nav, sv, t_rx)
+    eph, have = nearest_ephemerides(nav, sv, t_rx)
     galileo = np.char.startswith(sv, "E")
     t_tx = t_rx - pr / C_MPS
     for _ in range(3):

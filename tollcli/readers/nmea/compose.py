@@ -11,7 +11,7 @@ import datetime as _dt
 import math
 from collections.abc import Iterator, Sequence
 
-from tollcli.nmea.fields import KNOT_MPS, checksum
+from tollcli.readers.nmea.fields import KNOT_MPS, checksum
 
 
 def with_checksum(body: str) -> str:

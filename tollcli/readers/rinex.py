@@ -1,0 +1,56 @@
+"""RINEX 3 observation and navigation files (georinex), read into tables.
+
+* :func:`load_rinex`: a file as georinex's dataset (GPS and Galileo), with clear errors.
+* :func:`observations`: one row per (epoch, satellite) with the L1/E1 code
+  pseudorange (``C1C``, else ``C1X``/``C1P``…) and its C/N0; receiver time in GPS time.
+
+Positions and RAIM measurements are made from them in :mod:`tollcli.gnss.rinex_positions`.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pandas as pd
+
+from tollcli.errors import DataError, UsageError
+
+CODES = {"G": ("C1C", "C1P", "C1W"), "E": ("C1C", "C1X", "C1B")}
+NAMES = {"G": "GPS", "E": "Galileo"}
+
+
+def load_rinex(path: str, what: str):
+    """georinex's dataset of a RINEX ``what`` ("observation" or "navigation") file, GPS and Galileo only."""
+    try:
+        import georinex
+    except ImportError:  # pragma: no cover - a dependency of the package
+        raise UsageError("reading RINEX needs georinex (pip install georinex)") from None
+    try:
+        with warnings.catch_warnings():  # georinex's own xarray deprecations are not the user's business
+            warnings.simplefilter("ignore", FutureWarning)
+            warnings.simplefilter("ignore", DeprecationWarning)
+            return georinex.load(path, use={"G", "E"})
+    except FileNotFoundError:
+        raise UsageError(f"{path}: no such file") from None
+    except Exception as exc:  # georinex raises many kinds on bad files
+        raise DataError(f"{path}: not a readable RINEX {what} file ({type(exc).__name__}: {exc})") from None
+
+
+def observations(obs) -> pd.DataFrame:
+    """One row per (epoch, satellite) with a pseudorange: time, sv, pr_m, cn0_dbhz."""
+    frames = []
+    for system, codes in CODES.items():
+        svs = [s for s in obs.sv.values if str(s).startswith(system)]
+        code = next((c for c in codes if c in obs and np.isfinite(obs[c].sel(sv=svs).values).any()), None) if svs else None
+        if code is None:
+            continue
+        pr = obs[code].sel(sv=svs).to_pandas()
+        snr_name = "S" + code[1:]
+        snr = obs[snr_name].sel(sv=svs).to_pandas() if snr_name in obs else pr * np.nan
+        table = pd.DataFrame({"pr_m": pr.stack(future_stack=True), "cn0_dbhz": snr.stack(future_stack=True)}).reset_index()
+        frames.append(table.rename(columns={table.columns[0]: "time", table.columns[1]: "sv"}))
+    if not frames:
+        raise DataError("no GPS or Galileo L1/E1 code observations (C1C/C1X/C1P) in the observation file")
+    rows = pd.concat(frames, ignore_index=True)
+    return rows[np.isfinite(rows["pr_m"])].sort_values(["time", "sv"], kind="stable").reset_index(drop=True)
