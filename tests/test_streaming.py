@@ -252,3 +252,22 @@ def test_tail_charger_on_random_episodes_and_cuts(tmp_path_factory, seed, cuts):
     assert sorted(got[2][0].values(), key=str) == sorted(want[2][0].values(), key=str)
     assert got[3] == want[3]
     assert got[4] == want[4]
+
+
+def test_an_epoch_without_speed_streamed_is_the_whole_log(tmp_path, monkeypatch):
+    """A speed missing in one early epoch: the streamed invoice is still the whole log's (the gap stays local)."""
+    from tollcli.readers.nmea.fields import checksum
+
+    lines = (SAMPLES / "sim" / "rural-clean" / "drive.nmea").read_text().splitlines()
+    at = [i for i, line in enumerate(lines) if line[3:6] == "RMC"][3]
+    for i, fields in ((at, (7,)), (at + 1, (5, 7))):  # the epoch's RMC and VTG
+        f = lines[i][1 : lines[i].rfind("*")].split(",")
+        for k in fields:
+            f[k] = ""
+        body = ",".join(f)
+        lines[i] = f"${body}*{checksum(body):02X}"
+    log = tmp_path / "drive.nmea"
+    log.write_text("\n".join(lines) + "\n")
+    whole = _whole(monkeypatch, str(log))
+    assert invoice_json(_streamed(monkeypatch, str(log))) == invoice_json(whole)
+    assert len(whole["lines"]) == 2

@@ -45,19 +45,26 @@ def trapezoid_average(x: np.ndarray, n: int) -> np.ndarray:
     out = np.full(x.shape, np.nan)
     if x.size <= n:
         return out
-    c = np.concatenate([[0.0], np.cumsum(x)])
     end = np.arange(n, x.size)
-    inner = c[end + 1] - c[end - n]  # x_{e−n} … x_e
+    inner = _window_sums(x, n)[n:]  # x_{e−n} … x_e (NaN where one of them is missing)
     out[n:] = (inner - 0.5 * (x[end - n] + x[end])) / n
     return out
 
 
 def _window_sums(x: np.ndarray, n: int) -> np.ndarray:
-    c = np.concatenate([[0.0], np.cumsum(x)])
+    """Σ of the n + 1 samples ending at each index; NaN before the first full window and for every
+    window holding a missing (non-finite) sample — and only those: a gap touches the windows it is in."""
+    x = np.asarray(x, dtype=float)
+    missing = ~np.isfinite(x)
+    c = np.concatenate([[0.0], np.cumsum(np.where(missing, 0.0, x))])
     out = np.full(x.shape, np.nan)
     if x.size > n:
         end = np.arange(n, x.size)
-        out[n:] = c[end + 1] - c[end - n]
+        sums = c[end + 1] - c[end - n]
+        if missing.any():
+            k = np.concatenate([[0], np.cumsum(missing)])
+            sums = np.where(k[end + 1] - k[end - n] > 0, np.nan, sums)
+        out[n:] = sums
     return out
 
 
