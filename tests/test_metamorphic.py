@@ -86,3 +86,66 @@ def test_an_epoch_without_speed_changes_no_passage_it_is_not_in(tmp_path, log):
     got = _lines_by_object(after)
     for g, line in later.items():
         assert got.get(g) == line
+
+
+# ---------------------------------------------------------------- line endings (issue: a CR-only log read as one line)
+from conftest import SHARED_DATA  # noqa: E402
+from tollcli.readers.nmea import ReadStats, read_nmea  # noqa: E402
+
+GPSD = SHARED_DATA / "gpsd"
+
+
+def _text_lines(path: Path) -> list[bytes] | None:
+    """The log's lines when it is all text (sentences, comments, blanks), else None (binary protocols mixed in)."""
+    lines = path.read_bytes().replace(b"\r\n", b"\n").split(b"\n")
+    if any(line and line[:1] not in b"$!#" or b"\r" in line for line in lines):
+        return None
+    return lines
+
+
+def _text_logs() -> list[Path]:
+    logs = [ROOT / "samples" / "straight-drive.nmea", *SIM]
+    if GPSD.exists():
+        logs += [p for p in sorted(GPSD.glob("*.log")) if _text_lines(p) is not None]
+    return logs
+
+
+def _tables(data: bytes, tmp_path: Path, name: str):
+    path = tmp_path / name
+    path.write_bytes(data)
+    stats = ReadStats()
+    tables = read_nmea(str(path), stats=stats, block_bytes=4096)
+    counts = {k: v for k, v in stats.as_dict().items() if k != "source"}
+    return tables, counts
+
+
+def test_text_logs_cover_the_real_receivers():
+    if not GPSD.exists():
+        pytest.skip("real data not available: ../shared/data/gpsd")
+    assert len(_text_logs()) >= 40
+
+
+@pytest.mark.parametrize("log", _text_logs(), ids=lambda p: p.name)
+def test_every_line_ending_gives_the_same_tables(tmp_path, log):
+    """LF, CR LF, CR alone and a mix of the three: the same epochs, satellites and counts (line numbers too)."""
+    lines = _text_lines(log)
+    if lines and lines[-1] == b"":
+        lines = lines[:-1]
+    reference, counts = _tables(b"\n".join(lines) + b"\n", tmp_path, "lf.nmea")
+    # mixed: never a CR right before a blank line ended by CR LF — CR CR LF is one line end (some receivers write it)
+    ends = {"crlf": [b"\r\n"], "cr": [b"\r"], "mixed": [b"\r", b"\n", b"\r\n", b"\n"]}
+    for kind, cycle in ends.items():
+        data = b"".join(line + cycle[i % len(cycle)] for i, line in enumerate(lines))
+        tables, got = _tables(data, tmp_path, f"{kind}.nmea")
+        assert got == counts, kind
+        pd.testing.assert_frame_equal(tables.epochs, reference.epochs, obj=f"{kind} epochs")
+        pd.testing.assert_frame_equal(tables.satellites, reference.satellites, obj=f"{kind} satellites")
+
+
+@pytest.mark.parametrize("log", SIM[:2], ids=lambda p: p.parent.name)
+def test_a_cr_log_is_charged_as_the_lf_log(tmp_path, log):
+    cr = tmp_path / "drive-cr.nmea"
+    cr.write_bytes(log.read_bytes().replace(b"\n", b"\r"))
+    before, after = _charge(log), _charge(cr)
+    assert after["lines"] and [line["fee"] for line in after["lines"]] == [line["fee"] for line in before["lines"]]
+    assert after["total"] == before["total"]

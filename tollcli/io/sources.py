@@ -5,6 +5,7 @@ from __future__ import annotations
 import gzip
 import io
 import os
+import re
 import sys
 import zlib
 from collections.abc import Iterator
@@ -49,10 +50,32 @@ def open_binary(source: str | os.PathLike | BinaryIO) -> BinaryIO:
     return buffered  # type: ignore[return-value]
 
 
+_CR_BEFORE_LF = re.compile(rb"\r+(?=\n)")
+_CR_LINE_END = re.compile(rb"\r(?=[$!#\r])")
+
+
+def normalize_line_ends(data: bytes) -> bytes:
+    """Line ends as line feeds: CR LF (and CR CR LF) → LF; a lone CR before a sentence (``$``, ``!``), a
+    comment (``#``) or another line end → LF. Data without lone CRs is returned as it is (the readers drop
+    the CR of CR LF themselves); a CR inside binary bytes that starts no sentence is left alone.
+    """
+    if b"\r" not in data:
+        return data
+    import numpy as np
+
+    byte = np.frombuffer(data, np.uint8)
+    cr = np.flatnonzero(byte[:-1] == 13)  # a CR as the very last byte waits for what follows it
+    if not (byte[cr + 1] != 10).any():
+        return data
+    return _CR_LINE_END.sub(b"\n", _CR_BEFORE_LF.sub(b"", data))
+
+
 def iter_byte_blocks(stream: BinaryIO, name: str, block_bytes: int = BLOCK_BYTES) -> Iterator[bytes]:
     """Yield blocks of complete lines as bytes, each without its last line feed.
 
-    Memory is bounded by ``block_bytes`` plus the longest line.
+    A line ends with LF, CR LF or a lone CR (:func:`normalize_line_ends`): a log written with
+    any of them, or a mix, gives the same lines. Memory is bounded by ``block_bytes`` plus the
+    longest line.
     """
     rest = b""
     while True:
@@ -62,7 +85,7 @@ def iter_byte_blocks(stream: BinaryIO, name: str, block_bytes: int = BLOCK_BYTES
             raise DataError(f"{name}: cannot read compressed data ({exc})") from None
         if not block:
             break
-        data = rest + block
+        data = normalize_line_ends(rest + block)  # a CR at the very end waits in ``rest`` for what follows it
         cut = data.rfind(b"\n")
         if cut < 0:
             if len(data) > 4 * block_bytes:  # no line end in sight: binary junk
