@@ -70,3 +70,67 @@ def test_missing_fee_names_what_is_missing(tmp_path):
         t.fee("A9-1", "motorway", "bus", dt.datetime(2024, 5, 6, tzinfo=UTC))
     with pytest.raises(DataError, match="road class 'cycleway'"):
         t.fee("A9-1", "cycleway", "car", dt.datetime(2024, 5, 6, tzinfo=UTC))
+
+
+# ---------------------------------------------------------------- typos never change a fee silently
+MINIMAL = 'currency = "EUR"\nminor_unit = 2\n\n[road_class.motorway]\ncar = 1.20\n'
+
+
+@pytest.mark.parametrize("text, line, key", [
+    ('currency = "EUR"\ntimezon = "Europe/Paris"\n[road_class.motorway]\ncar = 1\n', 2, "timezon"),
+    ('curency = "EUR"\n[road_class.motorway]\ncar = 1\n', 1, "curency"),
+    (MINIMAL + '\n[[band]]\nname = "peak"\nstart = "07:00"\nend = "09:00"\nfactr = 1.5\n', 11, "factr"),
+    (MINIMAL + '[roadclass.trunk]\ncar = 1\n', 6, "roadclass"),
+])  # fmt: skip
+def test_an_unknown_key_is_an_error_naming_it_and_its_line(tmp_path, text, line, key):
+    with pytest.raises(DataError) as err:
+        _tariff(tmp_path, text)
+    message = str(err.value)
+    assert f"t.toml:{line}:" in message and repr(key) in message and "\n" not in message
+
+
+def test_a_misspelt_day_is_an_error(tmp_path):
+    with pytest.raises(DataError, match=r"t.toml:10: band peak: days .* 'MONkey'"):
+        _tariff(tmp_path, MINIMAL + '[[band]]\nname = "peak"\nstart = "07:00"\nend = "09:00"\ndays = ["MONkey"]\nfactor = 2\n')
+    ok = _tariff(tmp_path, MINIMAL + '[[band]]\nname = "peak"\nstart = "07:00"\nend = "09:00"\ndays = ["Monday", "TUE"]\nfactor = 2\n')
+    assert ok.bands[0].days == frozenset({0, 1})
+
+
+def test_the_minor_unit_must_be_the_currency_s(tmp_path):
+    with pytest.raises(DataError, match=r"t.toml:2: minor_unit 2 does not fit JPY, whose minor unit is 0"):
+        _tariff(tmp_path, 'currency = "JPY"\nminor_unit = 2\n[road_class.motorway]\ncar = 120\n')
+    yen = _tariff(tmp_path, 'currency = "JPY"\nminor_unit = 0\n[road_class.motorway]\ncar = 120.5\n')
+    assert yen.fee("x", "motorway", "car", dt.datetime(2026, 3, 2, tzinfo=UTC))[0] == Decimal("121")
+
+
+def test_fees_keep_every_digit_until_the_one_rounding(tmp_path):
+    """28-digit arithmetic would round 0.004999…9 (33 digits) up to 0.005 and then to 0.01: it must be 0.00."""
+    t = _tariff(tmp_path, 'currency = "EUR"\n[road_class.motorway]\ncar = 0.00499999999999999999999999999999\n'
+                          'van = 0.00333333333333333333333333333333\n'
+                          '[[band]]\nname = "b"\nstart = "00:00"\nend = "12:00"\nfactor = 1.5\n')  # fmt: skip
+    night, noon = dt.datetime(2026, 3, 2, 1, tzinfo=UTC), dt.datetime(2026, 3, 2, 13, tzinfo=UTC)
+    assert t.fee("x", "motorway", "car", noon)[0] == Decimal("0.00")
+    assert t.fee("x", "motorway", "van", night)[0] == Decimal("0.00")  # × 1.5 = 0.004999…95
+    assert t.fee("x", "motorway", "car", night)[0] == Decimal("0.01")  # × 1.5 = 0.0074999…
+
+
+def test_a_huge_fee_is_a_one_line_error(tmp_path):
+    with pytest.raises(DataError, match="not below"):
+        _tariff(tmp_path, 'currency = "EUR"\n[road_class.motorway]\ncar = 1e26\n')
+
+
+def test_reordered_keys_give_the_same_fees(tmp_path):
+    """The example tariff with its keys, tables and bands in another order charges the same at every hour of a week."""
+    text = EXAMPLE.read_text()
+    blocks = text.split("\n\n")
+    head, rest = blocks[0].splitlines(), blocks[1:]
+    reordered = "\n".join([head[0], *reversed(head[1:])]) + "\n\n" + "\n\n".join(
+        "\n".join([b.splitlines()[0], *reversed(b.splitlines()[1:])]) for b in reversed(rest)) + "\n"  # fmt: skip
+    a, b = load_tariff(str(EXAMPLE)), _tariff(tmp_path, reordered)
+    assert reordered != text
+    start = dt.datetime(2024, 5, 6, tzinfo=UTC)
+    for hour in range(0, 7 * 24):
+        when = start + dt.timedelta(hours=hour, minutes=17)
+        for vc in ("car", "van", "truck"):
+            for rc in ("motorway", "expressway"):
+                assert a.fee("g", rc, vc, when) == b.fee("g", rc, vc, when)

@@ -24,6 +24,10 @@ Decimal (``1.20`` stays exactly 1.20), never as binary floats. Example::
 
 Bands may not overlap (an entry time must have one factor); outside every band
 the factor is 1.
+
+A typo must never change a fee silently: an unknown key, day or currency minor unit
+is an error naming the key and its line. A fee keeps every digit the file gives until
+the one rounding (half-up, to the currency's minor unit); fees are below 10^12.
 """
 
 from __future__ import annotations
@@ -31,12 +35,50 @@ from __future__ import annotations
 import datetime as dt
 import tomllib
 from dataclasses import dataclass
-from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
+import re
+from decimal import MAX_EMAX, MIN_EMIN, ROUND_HALF_UP, Decimal, InvalidOperation, localcontext
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from tollcli.errors import DataError, UsageError
 
 DAYS = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")
+DAY_NAMES = ("monday", "tuesday", "wednesday", "thursday", "friday", "saturday", "sunday")
+TOP_KEYS = ("currency", "minor_unit", "timezone", "road_class", "geoobject", "band")
+BAND_KEYS = ("name", "start", "end", "days", "factor")
+#: fees (and band factors) are below this: invoice totals stay exact in Decimal's 28 digits
+MAX_FEE = Decimal("1e12")
+MAX_FACTOR = Decimal(100)
+#: ISO 4217 currencies whose minor unit is not 2 (the others have cents)
+MINOR_UNITS = {
+    **dict.fromkeys(("BIF", "CLP", "DJF", "GNF", "ISK", "JPY", "KMF", "KRW", "PYG", "RWF", "UGX", "UYI", "VND", "VUV",
+                     "XAF", "XOF", "XPF"), 0),
+    **dict.fromkeys(("BHD", "IQD", "JOD", "KWD", "LYD", "OMR", "TND"), 3),
+    **dict.fromkeys(("CLF", "UYW"), 4),
+}  # fmt: skip
+
+
+def line_of(text: str, key: str, after: int = 0) -> int:
+    """The 1-based line of the file where ``key`` is set or opened as a table (0 when not found)."""
+    pattern = re.compile(rf"""^\s*(\[\[?\s*)?["']?{re.escape(key)}["']?\s*(=|\]|\.)""")
+    for number, line in enumerate(text.splitlines(), 1):
+        if number > after and pattern.match(line):
+            return number
+    return 0
+
+
+def _where(path: str, text: str, key: str, after: int = 0) -> str:
+    number = line_of(text, key, after)
+    return f"{path}:{number}" if number else path
+
+
+def exact_fee(amount: Decimal, factor: Decimal, minor_unit: int) -> Decimal:
+    """``amount × factor`` rounded once, half-up, to ``minor_unit`` decimals (no rounding before: the product is exact)."""
+    quantum = Decimal(1).scaleb(-minor_unit)
+    digits = len(amount.as_tuple().digits) + len(factor.as_tuple().digits)
+    whole = max(0, amount.adjusted() + factor.adjusted() + 2)
+    with localcontext() as ctx:
+        ctx.prec, ctx.Emax, ctx.Emin = digits + whole + minor_unit + 2, MAX_EMAX, MIN_EMIN
+        return (amount * factor).quantize(quantum, rounding=ROUND_HALF_UP)
 
 
 @dataclass(frozen=True)
@@ -78,11 +120,10 @@ class Tariff:
         local = entry_utc.astimezone(ZoneInfo(self.timezone))
         band = next((b for b in self.bands if b.holds(local)), None)
         factor = band.factor if band else Decimal(1)
-        quantum = Decimal(1).scaleb(-self.minor_unit)
-        return (table[vehicle_class] * factor).quantize(quantum, rounding=ROUND_HALF_UP), band.name if band else ""
+        return exact_fee(table[vehicle_class], factor, self.minor_unit), band.name if band else ""
 
 
-def _money(value, where: str) -> Decimal:
+def _money(value, where: str, limit: Decimal = MAX_FEE) -> Decimal:
     if isinstance(value, bool) or not isinstance(value, (int, Decimal, str)):
         raise DataError(f"{where}: a fee must be a number, got {value!r}")
     try:
@@ -91,6 +132,8 @@ def _money(value, where: str) -> Decimal:
         raise DataError(f"{where}: not a number: {value!r}") from None
     if not amount.is_finite() or amount < 0:
         raise DataError(f"{where}: a fee must be a finite amount ≥ 0, got {value}")
+    if amount >= limit:
+        raise DataError(f"{where}: {value} is not below {limit:,f}")
     return amount
 
 
@@ -115,27 +158,43 @@ def _fee_tables(section, name: str, path: str) -> dict[str, dict[str, Decimal]]:
     return out
 
 
-def _bands(items, path: str) -> tuple[Band, ...]:
+def _day(value) -> int | None:
+    """0 … 6 for mon … sun (three letters or the whole English name, any case); None for anything else."""
+    text = str(value).strip().lower()
+    if text in DAYS:
+        return DAYS.index(text)
+    return DAY_NAMES.index(text) if text in DAY_NAMES else None
+
+
+def _bands(items, path: str, text: str = "") -> tuple[Band, ...]:
     if items is None:
         return ()
     if not isinstance(items, list):
         raise DataError(f"{path}: [[band]] must be an array of tables")
     bands = []
     for i, item in enumerate(items):
-        where = f"{path}: band {item.get('name', i + 1) if isinstance(item, dict) else i + 1}"
+        header = _nth_band_line(text, i)
+        where = f"{path}:{header}: band {item.get('name', i + 1) if isinstance(item, dict) else i + 1}" if header else \
+            f"{path}: band {item.get('name', i + 1) if isinstance(item, dict) else i + 1}"  # fmt: skip
         if not isinstance(item, dict):
             raise DataError(f"{where}: must be a table")
+        for key in item:
+            if key not in BAND_KEYS:
+                raise DataError(f"{_where(path, text, key, header)}: band {item.get('name', i + 1)}: unknown key {key!r} "
+                                f"(a band has {', '.join(BAND_KEYS)})")  # fmt: skip
         for key in ("start", "end", "factor"):
             if key not in item:
                 raise DataError(f"{where}: missing {key}")
         days = item.get("days", list(DAYS))
-        if not isinstance(days, list) or any(str(d).lower()[:3] not in DAYS for d in days):
-            raise DataError(f"{where}: days must be a list of mon … sun")
+        if not isinstance(days, list) or not days or any(_day(d) is None for d in days):
+            bad = next((d for d in days if _day(d) is None), None) if isinstance(days, list) else days
+            raise DataError(f"{_where(path, text, 'days', header)}: band {item.get('name', i + 1)}: days must be a list of "
+                            f"mon … sun (or monday … sunday), got {bad!r}")  # fmt: skip
         start, end = _minutes(item["start"], where), _minutes(item["end"], where)
         if start == end:
             raise DataError(f"{where}: start and end are equal")
         bands.append(Band(str(item.get("name", f"band{i + 1}")), start, end,
-                          frozenset(DAYS.index(str(d).lower()[:3]) for d in days), _money(item["factor"], f"{where} factor")))  # fmt: skip
+                          frozenset(_day(d) for d in days), _money(item["factor"], f"{where} factor", MAX_FACTOR)))  # fmt: skip
     # no two bands may hold the same minute of the week
     week = {}
     for band in bands:
@@ -149,21 +208,38 @@ def _bands(items, path: str) -> tuple[Band, ...]:
     return tuple(bands)
 
 
+def _nth_band_line(text: str, index: int) -> int:
+    """The line of the ``index``-th ``[[band]]`` header (0 when not found)."""
+    headers = [n for n, line in enumerate(text.splitlines(), 1) if re.match(r"^\s*\[\[\s*band\s*\]\]", line)]
+    return headers[index] if index < len(headers) else 0
+
+
 def load_tariff(path: str) -> Tariff:
     """Read and validate a tariff file (DataError naming the file and the key on problems)."""
     try:
         with open(path, "rb") as fh:
-            doc = tomllib.load(fh, parse_float=Decimal)
+            raw = fh.read()
+        text = raw.decode("utf-8")
+        doc = tomllib.loads(text, parse_float=Decimal)
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise UsageError(f"{path}: is a directory, expected a tariff file") from None
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: not a TOML tariff ({exc})") from None
+    for key in doc:
+        if key not in TOP_KEYS:
+            raise DataError(f"{_where(path, text, key)}: unknown key {key!r} (a tariff has {', '.join(TOP_KEYS)})")
     currency = doc.get("currency")
     if not isinstance(currency, str) or len(currency) != 3 or not currency.isalpha():
         raise DataError(f"{path}: currency must be an ISO 4217 code such as \"EUR\"")
     minor = doc.get("minor_unit", 2)
     if not isinstance(minor, int) or isinstance(minor, bool) or not 0 <= minor <= 4:
-        raise DataError(f"{path}: minor_unit must be an integer 0…4")
+        raise DataError(f"{_where(path, text, 'minor_unit')}: minor_unit must be an integer 0…4")
+    iso_minor = MINOR_UNITS.get(currency.upper(), 2)
+    if minor != iso_minor:
+        raise DataError(f"{_where(path, text, 'minor_unit')}: minor_unit {minor} does not fit {currency.upper()}, "
+                        f"whose minor unit is {iso_minor} (ISO 4217)")  # fmt: skip
     timezone = doc.get("timezone", "UTC")
     try:
         ZoneInfo(str(timezone))
@@ -173,4 +249,4 @@ def load_tariff(path: str) -> Tariff:
     geoobject = _fee_tables(doc.get("geoobject"), "geoobject", path)
     if not road_class and not geoobject:
         raise DataError(f"{path}: no fees: give [road_class.<name>] or [geoobject.<id>] tables")
-    return Tariff(currency.upper(), minor, str(timezone), road_class, geoobject, _bands(doc.get("band"), path), path)
+    return Tariff(currency.upper(), minor, str(timezone), road_class, geoobject, _bands(doc.get("band"), path, text), path)
