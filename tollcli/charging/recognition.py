@@ -201,6 +201,7 @@ def thin_independent(t_s: np.ndarray, group: np.ndarray, valid: np.ndarray, tc_s
     g, t = group[idx], t_s[idx] - t_s[idx].min()
     key = g * (t.max() + 2 * tc_s + 1.0) + t  # groups one after another on one axis, times kept exact
     nxt = np.searchsorted(key, key + tc_s - 1e-9, side="left")
+    nxt = np.maximum(nxt, np.arange(idx.size) + 1)  # always a step forward: the chain ends whatever T_c
     nxt = np.where((nxt < idx.size) & (g[np.minimum(nxt, idx.size - 1)] == g), nxt, -1)
     first = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
     cur = first

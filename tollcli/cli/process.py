@@ -32,7 +32,7 @@ def process(
     fde: opt.Fde = False,
     sigma_model: opt.SigmaModel = "nominal",
     sigma: opt.Sigma = 5.0,
-    tc: Annotated[float, typer.Option("--tc", help="Correlation time: independent positions are at least this far apart, s.", min=0.0)] = 5.0,
+    tc: Annotated[float, typer.Option("--tc", help="Correlation time: independent positions are at least this far apart, s (≥ 0.1).", min=0.1)] = 5.0,
     n_th: Annotated[int, typer.Option("--n-th", help="Charge when at least this many valid independent positions fell inside.", min=1)] = 1,
     strict: opt.Strict = False,
     date: opt.DateOpt = None,

@@ -39,6 +39,7 @@ import shapely
 from shapely import affinity
 
 from tollcli.enforcement.trip import cn0_summary, fixes, runs, trailing_median
+from tollcli.errors import UsageError
 from tollcli.geodesy import great_circle_distance_m
 from tollcli.times import epoch_seconds, iso_from_seconds
 
@@ -72,7 +73,13 @@ class FindingSettings:
 
     @classmethod
     def for_class(cls, vehicle_class: str, **overrides) -> "FindingSettings":
-        return cls(max_speed_mps=CLASS_MAX_SPEED_MPS.get(vehicle_class, CLASS_MAX_SPEED_MPS["car"]), **overrides)
+        """The settings of a vehicle class (its top speed); an unknown class is an error unless the top speed is given."""
+        if "max_speed_mps" in overrides:
+            return cls(**overrides)
+        if vehicle_class not in CLASS_MAX_SPEED_MPS:
+            raise UsageError(f"unknown vehicle class {vehicle_class!r}: one of {', '.join(CLASS_MAX_SPEED_MPS)} "
+                             "(or give its top speed, --max-speed)")  # fmt: skip
+        return cls(max_speed_mps=CLASS_MAX_SPEED_MPS[vehicle_class], **overrides)
 
 
 def _finding(kind: str, rows: tuple[int, int], t0: float, t1: float, lat0, lon0, lat1=None, lon1=None, **evidence) -> dict:

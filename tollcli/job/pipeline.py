@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 import hashlib
+import math
 import os
 from dataclasses import asdict, dataclass
 
@@ -52,6 +53,35 @@ class ChargeSettings:
     policy: str | None = None  # which checks a position must pass (None: the strictest the inputs support)
 
 
+#: the shortest correlation time accepted, s (a 10 Hz receiver's epoch interval)
+MIN_TC_S = 0.1
+
+
+def check_settings(settings: ChargeSettings, tariff=None) -> None:
+    """UsageError for settings the CLI would refuse, wherever they come from (options, an invoice to verify, batch)."""
+    def bad(name: str, value, rule: str):
+        raise UsageError(f"{name} = {value!r}: {rule}")
+
+    number = (int, float)
+    if not isinstance(settings.tc_s, number) or not math.isfinite(settings.tc_s) or settings.tc_s < MIN_TC_S:
+        bad("tc_s (--tc)", settings.tc_s, f"the correlation time must be a number ≥ {MIN_TC_S} s")
+    if not isinstance(settings.n_th, int) or isinstance(settings.n_th, bool) or settings.n_th < 1:
+        bad("n_th (--n-th)", settings.n_th, "the threshold must be a whole number ≥ 1")
+    for name in ("p_md", "p_fa"):
+        value = getattr(settings, name)
+        if not isinstance(value, number) or not 0 < value < 1:
+            bad(f"{name} (--{name.replace('_', '-')})", value, "a probability strictly between 0 and 1")
+    if not isinstance(settings.sigma_m, number) or not math.isfinite(settings.sigma_m) or settings.sigma_m <= 0:
+        bad("sigma_m (--sigma)", settings.sigma_m, "a standard deviation > 0 m")
+    if not isinstance(settings.vehicle_class, str) or not settings.vehicle_class:
+        bad("vehicle_class (--vehicle-class)", settings.vehicle_class, "a vehicle class of the tariff")
+    if tariff is not None:
+        classes = sorted({vc for table in (*tariff.road_class.values(), *tariff.geoobject.values()) for vc in table})
+        if settings.vehicle_class not in classes:
+            bad("vehicle_class (--vehicle-class)", settings.vehicle_class,
+                f"not a vehicle class of the tariff {tariff.source} ({', '.join(classes)})")
+
+
 def content_sha256(invoice: dict) -> str:
     """SHA-256 of the invoice's canonical JSON without its own ``content_sha256``."""
     body = {k: v for k, v in invoice.items() if k != "content_sha256"}
@@ -68,8 +98,9 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    geo_objects = load_geoobjects(geo)
     tariff_doc = load_tariff(tariff)
+    check_settings(settings, tariff_doc)
+    geo_objects = load_geoobjects(geo)
     kind = sniff_format(log)
     stats = None
     nominal = NominalModel()
