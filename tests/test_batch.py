@@ -84,3 +84,80 @@ def test_every_log_bad_is_a_data_error(tmp_path):
     result = run_cli("batch", str(tmp_path / "a.nmea"), "--geo", GEO, "--tariff", TARIFF, "-o", str(tmp_path / "o"))
     assert result.returncode == 1
     assert run_cli("batch", str(tmp_path / "nothing-*.nmea"), "--geo", GEO, "--tariff", TARIFF, "-o", str(tmp_path / "o")).returncode == 2
+
+
+# ---------------------------------------------------------------- outputs unique per input, resume only when current
+def _invoices(out: Path) -> list[Path]:
+    return sorted((out / "invoices").rglob("*.json"))
+
+
+def test_logs_with_the_same_name_on_different_days_keep_their_own_invoices(tmp_path):
+    """day1/TRK-042.nmea, day2/TRK-042.nmea, truck1.day1.nmea, truck1.day2.nmea: four logs, four invoices, stable on rerun."""
+    src = SAMPLES / "sim"
+    for day, sim in (("day1", "rural-clean"), ("day2", "urban-clean")):
+        (tmp_path / day).mkdir()
+        shutil.copy(src / sim / "drive.nmea", tmp_path / day / "TRK-042.nmea")
+    shutil.copy(src / "urban-fault" / "drive.nmea", tmp_path / "truck1.day1.nmea")
+    shutil.copy(src / "rural-fault" / "drive.nmea", tmp_path / "truck1.day2.nmea")
+    logs = expand_inputs([str(tmp_path / "day1"), str(tmp_path / "day2"), str(tmp_path / "truck1.day1.nmea"),
+                          str(tmp_path / "truck1.day2.nmea")])  # fmt: skip
+    out = tmp_path / "out"
+    first = run_batch(logs, GEO, TARIFF, ChargeSettings(), str(out))
+    assert (first["done"], first["skipped"]) == (4, 0)
+    invoices = _invoices(out)
+    assert len(invoices) == 4 and len({json.loads(p.read_text())["inputs"]["log"] for p in invoices}) == 4
+    assert len(list((out / "epochs").rglob("*.parquet"))) == 4
+    again = run_batch(logs, GEO, TARIFF, ChargeSettings(), str(out))
+    assert (again["done"], again["skipped"]) == (0, 4) and _invoices(out) == invoices
+    # a later day's log of the same name added to the same OUTDIR: the earlier invoices stay as they are
+    (tmp_path / "day3").mkdir()
+    shutil.copy(src / "urban-fault" / "drive.nmea", tmp_path / "day3" / "TRK-042.nmea")
+    later = run_batch([*logs, str(tmp_path / "day3" / "TRK-042.nmea")], GEO, TARIFF, ChargeSettings(), str(out))
+    assert (later["done"], later["skipped"]) == (1, 4) and len(_invoices(out)) == 5
+
+
+def test_resume_redoes_a_log_when_the_tariff_or_a_setting_changed(tmp_path):
+    log = tmp_path / "TRK-1.nmea"
+    shutil.copy(SAMPLES / "sim" / "rural-clean" / "drive.nmea", log)
+    out = tmp_path / "out"
+    assert run_batch([str(log)], GEO, TARIFF, ChargeSettings(), str(out))["done"] == 1
+    dear = tmp_path / "dear.toml"
+    dear.write_text(Path(TARIFF).read_text().replace("car = 0.95", "car = 9.50"))
+    redo = run_batch([str(log)], GEO, str(dear), ChargeSettings(), str(out))
+    assert redo["done"] == 1 and redo["totals"] == {"EUR": "23.76"}
+    assert run_batch([str(log)], GEO, str(dear), ChargeSettings(), str(out))["skipped"] == 1
+    assert run_batch([str(log)], GEO, str(dear), ChargeSettings(vehicle_class="truck"), str(out))["done"] == 1
+    assert run_batch([str(log)], GEO, str(dear), ChargeSettings(vehicle_class="truck", n_th=2), str(out))["done"] == 1
+
+
+@pytest.mark.parametrize("vehicle", ["../../escaped", "/abs/escaped", "..", ".hidden", "a/b\\c"])
+def test_a_vehicle_id_from_a_log_never_writes_outside_outdir(tmp_path, vehicle):
+    log = tmp_path / "logs" / "TRK-7.nmea"
+    log.parent.mkdir()
+    log.write_bytes(f"# vehicle: {vehicle}\n".encode() + (SAMPLES / "sim" / "rural-clean" / "drive.nmea").read_bytes())
+    out = tmp_path / "deep" / "er" / "out"
+    summary = run_batch([str(log)], GEO, TARIFF, ChargeSettings(), str(out))
+    assert summary["done"] == 1 and summary["outcomes"][0]["vehicle"] == vehicle
+    written = [p for p in tmp_path.rglob("*") if p.is_file() and "logs" not in p.parts]
+    assert written and all(out in p.parents for p in written), written
+    invoice = json.loads(next(out.glob("invoices/*/*.json")).read_text())
+    assert invoice["vehicle"] == vehicle
+
+
+def test_a_log_that_crashes_the_tool_is_reported_and_the_others_go_on(tmp_path, monkeypatch):
+    from tollcli.job import batch
+
+    good, bad = tmp_path / "good.nmea", tmp_path / "bad.nmea"
+    shutil.copy(SAMPLES / "sim" / "rural-clean" / "drive.nmea", good)
+    shutil.copy(SAMPLES / "sim" / "urban-clean" / "drive.nmea", bad)
+    real = batch.charge_log
+
+    def flaky(log, *args, **kwargs):
+        if log.endswith("bad.nmea"):
+            raise RuntimeError("boom")
+        return real(log, *args, **kwargs)
+
+    monkeypatch.setattr(batch, "charge_log", flaky)
+    summary = run_batch([str(bad), str(good)], GEO, TARIFF, ChargeSettings(), str(tmp_path / "out"))
+    assert (summary["done"], summary["failed"]) == (1, 1)
+    assert "internal error (RuntimeError: boom)" in (tmp_path / "out" / "failed" / "bad.txt").read_text()

@@ -9,7 +9,16 @@ Layout of OUTDIR:
 ``summary.json``                          every log's outcome, totals per currency (sorted: the same bytes
                                           whatever the worker count or scheduler)
 
-A log whose invoice exists and records the log's current SHA-256 is skipped unless ``force``.
+``<log name>`` is the file name without its log suffix (``truck1.day2.nmea`` → ``truck1.day2``); when two
+logs would write the same files (``day1/TRK-042.nmea``, ``day2/TRK-042.nmea``), the one whose invoice is
+already there (or the first by path) keeps the name and the others get ``<log name>~<8 hex digits of their
+folder's path>``: every log has its own outputs, stable from run to run. Vehicle ids and names are data,
+never paths: they are percent-encoded into one folder or file name (``../x`` → ``..%2Fx``).
+
+A log is skipped (unless ``force``) only when its invoice exists and records the same log (path and
+SHA-256), the same geo-object, tariff and road files (SHA-256), every setting and the tool version.
+A log that fails in any way — bad data or an error of the tool — is reported in ``failed/`` and the
+summary; it never stops the others.
 Work runs on a local process pool (``workers``) or, with ``scheduler``, on an existing Dask
 distributed cluster; each log's outputs depend only on that log and the shared settings.
 """
@@ -17,11 +26,14 @@ distributed cluster; each log's outputs depend only on that log and the shared s
 from __future__ import annotations
 
 import glob
+import hashlib
 import json
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from decimal import Decimal
+from urllib.parse import quote
 
+from tollcli import __version__
 from tollcli.charging.invoice import file_sha256, invoice_json
 from tollcli.enforcement.locate import vehicle_from_log, vehicle_from_path
 from tollcli.errors import DataError, UsageError
@@ -40,6 +52,65 @@ class Job:
     outdir: str
     force: bool = False
     roads: str | None = None
+    vehicle: str = ""  # the vehicle id (data, as the log or the options give it)
+    name: str = ""  # the outputs' file name (a safe path component, unique in OUTDIR)
+    input_sha256: tuple = ()  # (key, SHA-256) of the shared inputs, for the resume check
+
+
+def path_component(text: str) -> str:
+    """``text`` as one safe file or folder name: percent-encoded, never ``.``/``..`` or hidden, never a path."""
+    quoted = quote(text, safe="-_~@+=,")
+    if quoted.startswith("."):
+        quoted = "%2E" + quoted[1:]
+    return quoted or "%00"
+
+
+def log_name(log: str) -> str:
+    """The log's file name without its log suffix (``truck1.day2.nmea.gz`` → ``truck1.day2``)."""
+    base = os.path.basename(log)
+    for suffix in sorted(LOG_SUFFIXES, key=len, reverse=True):
+        if base.lower().endswith(suffix) and len(base) > len(suffix):
+            return base[: -len(suffix)]
+    return base
+
+
+def _owner(outdir: str, vehicle: str, name: str) -> str | None:
+    """The log (absolute path) whose invoice is at that place in OUTDIR, if any."""
+    try:
+        with open(os.path.join(outdir, "invoices", vehicle, name + ".json"), encoding="utf-8") as fh:
+            log = json.load(fh).get("inputs", {}).get("log")
+        return os.path.abspath(log) if isinstance(log, str) else None
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def plan_outputs(logs: list[str], settings: ChargeSettings, outdir: str) -> list[tuple[str, str, str]]:
+    """(vehicle id, vehicle folder, output name) of every log: no two logs share an output."""
+    
+    vehicles = [settings.vehicle or vehicle_from_log(log) or vehicle_from_path(log) for log in logs]
+    places = [(path_component(v), path_component(log_name(log))) for v, log in zip(vehicles, logs)]
+    groups: dict[tuple[str, str], list[int]] = {}
+    for i, place in enumerate(places):
+        groups.setdefault(place, []).append(i)
+    names = [name for _, name in places]
+    for (folder, name), members in groups.items():
+        if len(members) == 1 and _owner(outdir, folder, name) in (None, os.path.abspath(logs[members[0]])):
+            continue
+        owner = _owner(outdir, folder, name)
+        keeper = next((i for i in members if os.path.abspath(logs[i]) == owner), None)
+        if keeper is None and owner is None:
+            keeper = min(members, key=lambda i: os.path.abspath(logs[i]))
+        for i in members:
+            if i != keeper:
+                folder_hash = hashlib.sha256(os.path.dirname(os.path.abspath(logs[i])).encode("utf-8", "surrogateescape"))
+                names[i] = f"{name}~{folder_hash.hexdigest()[:8]}"
+    out = [(v, folder, n) for v, (folder, _), n in zip(vehicles, places, names)]
+    seen: dict[tuple[str, str], str] = {}
+    for log, (_, folder, n) in zip(logs, out):
+        if (folder, n) in seen:  # the same folder twice among the inputs under two spellings
+            raise UsageError(f"{log} and {seen[folder, n]} would write the same outputs ({folder}/{n}); give each log once")
+        seen[folder, n] = log
+    return out
 
 
 def expand_inputs(inputs: list[str]) -> list[str]:
@@ -65,42 +136,61 @@ def expand_inputs(inputs: list[str]) -> list[str]:
     return logs
 
 
-def _name(log: str) -> str:
-    return vehicle_from_path(log)
+def _current(done: dict, job: Job, settings: ChargeSettings, log_sha: str) -> bool:
+    """Whether an earlier invoice was made from this very log, inputs, settings and tool version."""
+    inputs, parameters = done.get("inputs") or {}, done.get("parameters") or {}
+    if not isinstance(inputs, dict) or not isinstance(parameters, dict) or done.get("tool") != f"tollcli {__version__}":
+        return False
+    if not isinstance(inputs.get("log"), str) or os.path.abspath(inputs["log"]) != os.path.abspath(job.log):
+        return False
+    if inputs.get("log_sha256") != log_sha or any(inputs.get(key) != sha for key, sha in job.input_sha256):
+        return False
+    return all(k in parameters and parameters[k] == v for k, v in asdict(settings).items())
 
 
 def run_one(job: Job) -> dict:
     """Process one log into OUTDIR; never raises for a bad log (the outcome says what happened)."""
-    vehicle = job.settings.vehicle or vehicle_from_log(job.log) or vehicle_from_path(job.log)
-    name = _name(job.log)
-    inv_path = os.path.join(job.outdir, "invoices", vehicle, name + ".json")
+    if not job.name:  # a job made without plan_outputs
+        vehicle, folder, name = plan_outputs([job.log], job.settings, job.outdir)[0]
+    else:
+        vehicle, folder, name = job.vehicle, path_component(job.vehicle), job.name
+    inv_path = os.path.join(job.outdir, "invoices", folder, name + ".json")
     outcome = {"log": job.log, "vehicle": vehicle, "invoice": os.path.relpath(inv_path, job.outdir)}
+    settings = replace(job.settings, vehicle=vehicle)
     try:
         log_sha = file_sha256(job.log)
     except OSError as exc:
-        return {**outcome, "status": "failed", "error": f"{job.log}: {exc.strerror}"}
+        return _failed(job, name, outcome, f"{job.log}: {exc.strerror}")
     if not job.force and os.path.isfile(inv_path):
         try:
             with open(inv_path, encoding="utf-8") as fh:
                 done = json.load(fh)
-            if done.get("inputs", {}).get("log_sha256") == log_sha:
+            if isinstance(done, dict) and _current(done, job, settings, log_sha):
                 return {**outcome, "status": "skipped", "total": done["total"], "currency": done["currency"],
                         "lines": len(done["lines"])}  # fmt: skip
-        except (OSError, ValueError):
+        except (OSError, ValueError, KeyError, TypeError):
             pass  # a damaged earlier output: do it again
-    settings = ChargeSettings(**{**asdict(job.settings), "vehicle": vehicle})
-    tables: list = []
     try:
-        invoice, stats = charge_log(job.log, job.geo, job.tariff, settings, roads=job.roads, epoch_table=tables)
+        return _process(job, settings, folder, name, inv_path, outcome)
     except (DataError, UsageError) as exc:
-        message = str(exc)
-        os.makedirs(os.path.join(job.outdir, "failed"), exist_ok=True)
-        write_text_atomic(os.path.join(job.outdir, "failed", name + ".txt"), message + "\n")
-        return {**outcome, "status": "failed", "error": message}
+        return _failed(job, name, outcome, str(exc))
+    except Exception as exc:  # noqa: BLE001 - one log's failure, whatever it is, never stops the others
+        return _failed(job, name, outcome, f"{job.log}: internal error ({type(exc).__name__}: {exc}); please report it")
+
+
+def _failed(job: Job, name: str, outcome: dict, message: str) -> dict:
+    os.makedirs(os.path.join(job.outdir, "failed"), exist_ok=True)
+    write_text_atomic(os.path.join(job.outdir, "failed", name + ".txt"), message + "\n")
+    return {**outcome, "status": "failed", "error": message}
+
+
+def _process(job: Job, settings: ChargeSettings, folder: str, name: str, inv_path: str, outcome: dict) -> dict:
+    tables: list = []
+    invoice, stats = charge_log(job.log, job.geo, job.tariff, settings, roads=job.roads, epoch_table=tables)
     table = tables[0]
     dated = table["time_utc"].dropna()
     date = dated.iloc[0].strftime("%Y-%m-%d") if len(dated) else "unknown"
-    ep_dir = os.path.join(job.outdir, "epochs", f"date={date}", f"vehicle={vehicle}")
+    ep_dir = os.path.join(job.outdir, "epochs", f"date={date}", f"vehicle={folder}")
     os.makedirs(ep_dir, exist_ok=True)
     with TableWriter(os.path.join(ep_dir, name + ".parquet"), "parquet") as writer:
         writer.write(table)  # vehicle and date come from the partition path (a column too would clash with it)
@@ -128,7 +218,11 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
               scheduler: str | None = None, force: bool = False, roads: str | None = None, progress=None) -> dict:  # fmt: skip
     """Process every log; returns the summary (also written to OUTDIR/summary.json)."""
     os.makedirs(outdir, exist_ok=True)
-    jobs = [Job(log, geo, tariff, settings, outdir, force, roads) for log in logs]
+    shared = [("geoobjects_sha256", file_sha256(geo)), ("tariff_sha256", file_sha256(tariff))]
+    if roads is not None:
+        shared.append(("roads_sha256", file_sha256(roads)))
+    jobs = [Job(log, geo, tariff, settings, outdir, force, roads, vehicle, name, tuple(shared))
+            for log, (vehicle, _, name) in zip(logs, plan_outputs(logs, settings, outdir))]  # fmt: skip
     outcomes: list[dict] = []
     tick = progress or (lambda n: None)
     if scheduler:
