@@ -15,6 +15,13 @@ def _fail(message: str, code: int) -> None:
     sys.exit(code)
 
 
+def _reader_gone() -> None:
+    """The reader of our stdout went away (``| head``): not an error; exit 0 without a word."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    sys.exit(0)
+
+
 def main(argv: list[str] | None = None) -> None:
     from tollcli.cli.app import COMMANDS, build_app
 
@@ -38,13 +45,21 @@ def main(argv: list[str] | None = None) -> None:
         _fail(f"{exc.format_message()} (see '{where} --help')", exc.exit_code or EXIT_USAGE)
     except typer.Exit as exc:
         sys.exit(exc.exit_code)
-    except (KeyboardInterrupt, typer.Abort):
+    except typer.Abort as exc:
+        if isinstance(exc.__cause__, EOFError):  # click turns an end of input into Abort: it is the data's, not the user's
+            _fail(f"unexpected end of input ({exc.__cause__})", EXIT_DATA)
+        sys.stderr.write("tollcli: interrupted\n")
+        sys.exit(130)
+    except KeyboardInterrupt:
         sys.stderr.write("tollcli: interrupted\n")
         sys.exit(130)
     except BrokenPipeError:  # downstream of a pipe closed early (e.g. | head)
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        sys.exit(0)
+        _reader_gone()
+    except SystemExit as exc:
+        # click answers a closed pipe with exit 1 after swapping stdout for its PacifyFlushWrapper
+        if exc.code == 1 and type(sys.stdout).__name__ == "PacifyFlushWrapper":
+            _reader_gone()
+        raise
     except MemoryError:
         _fail("out of memory", EXIT_DATA)
     sys.exit(code if isinstance(code, int) else 0)

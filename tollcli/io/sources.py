@@ -125,6 +125,8 @@ def sniff_format(log: str) -> str:
     stream = open_binary(log)
     try:
         head = stream.peek(512)[:512] if hasattr(stream, "peek") else stream.read(512)
+    except (OSError, EOFError, zlib.error) as exc:
+        raise DataError(f"{log}: cannot read compressed data ({exc})") from None
     finally:
         stream.close()
     first = head.split(b"\n", 1)[0]
