@@ -135,3 +135,62 @@ def test_cli_build_then_check(tmp_path):
     assert proc.returncode == 1 and json.loads(proc.stdout.decode().splitlines()[0])[0]["feature"] == "A9-1"
     bad = run_cli("geoobjects", "build", str(tmp_path / "missing.geojson"))
     assert bad.returncode == 2 and b"Traceback" not in bad.stderr
+
+
+# ---------------------------------------------------------------- process refuses what check rejects
+def _example() -> dict:
+    from conftest import REPO
+
+    return json.loads((REPO / "geoobjects" / "example-geoobjects.geojson").read_text())
+
+
+def _process_with(tmp_path, geo: dict):
+    from conftest import REPO
+
+    path = tmp_path / "geo.geojson"
+    path.write_text(json.dumps(geo))
+    return run_cli("process", str(REPO / "samples" / "sim" / "rural-clean" / "drive.nmea"), "--geo", str(path),
+                   "--tariff", str(REPO / "geoobjects" / "example-tariff.toml"), "-q", "-o", str(tmp_path / "inv.json"))  # fmt: skip
+
+
+def _twin(geo: dict) -> dict:
+    twin = json.loads(json.dumps(geo["features"][0]))
+    twin["properties"]["id"] = "A9-N1-copy"
+    return {**geo, "features": [*geo["features"], twin]}
+
+
+def _to_web_mercator(geo: dict) -> dict:
+    from pyproj import Transformer
+
+    to = Transformer.from_crs("EPSG:4326", "EPSG:3857", always_xy=True)
+    out = json.loads(json.dumps(geo))
+    for f in out["features"]:
+        f["geometry"]["coordinates"] = [[list(to.transform(x, y)) for x, y in ring] for ring in f["geometry"]["coordinates"]]
+    return out
+
+
+def _shifted_lon(geo: dict) -> dict:
+    out = json.loads(json.dumps(geo))
+    out["features"][1]["geometry"]["coordinates"] = [[[x + 197.0, y] for x, y in ring]
+                                                     for ring in out["features"][1]["geometry"]["coordinates"]]  # fmt: skip
+    return out
+
+
+@pytest.mark.parametrize("damage, says", [(_twin, "overlaps"), (_to_web_mercator, "longitude/latitude"),
+                                          (_shifted_lon, "longitude/latitude")], ids=["duplicate", "epsg3857", "lon200"])  # fmt: skip
+def test_process_refuses_a_network_check_rejects(tmp_path, damage, says):
+    result = _process_with(tmp_path, damage(_example()))
+    err = result.stderr.decode()
+    assert result.returncode == 1 and says in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "inv.json").exists()
+    assert run_cli("geoobjects", "check", str(tmp_path / "geo.geojson")).returncode == 1
+
+
+def test_reordered_features_give_the_same_charges(tmp_path):
+    geo = _example()
+    first, second = tmp_path / "a", tmp_path / "b"
+    first.mkdir(), second.mkdir()
+    assert _process_with(first, geo).returncode == 0
+    assert _process_with(second, {**geo, "features": geo["features"][::-1]}).returncode == 0
+    a, b = (json.loads((d / "inv.json").read_text()) for d in (first, second))
+    assert a["lines"] and a["lines"] == b["lines"] and a["total"] == b["total"] and a["not_charged"] == b["not_charged"]

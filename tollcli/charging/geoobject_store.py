@@ -5,6 +5,7 @@ the GeoJSON (plain single-ring polygons in bulk, anything else feature by featur
 checks every feature, projects the polygons to their metric CRS and stores the
 result — ids, names, road classes, HAL, CRS and the metric polygons as WKB — in
 ``$TOLLCLI_CACHE_DIR`` (default ``~/.cache/tollcli``) under the file's SHA-256.
+A file that ``tollcli geoobjects check`` rejects is refused (and never compiled).
 Later loads of the same bytes read that copy (WKB keeps every coordinate bit for
 bit, so invoices do not depend on the cache). ``TOLLCLI_CACHE_DIR=off`` turns the
 cache off; a cache that cannot be written is silently skipped.
@@ -55,11 +56,24 @@ def load_geoobjects(path: str) -> GeoObjects:
             return geo
         except (OSError, ValueError, KeyError, shapely.errors.ShapelyError):
             pass  # a damaged copy: parse again
+    _refuse_what_check_rejects(path)
     geo = _parse(path)
     geo.source_sha256 = digest  # hashed once, for the cache key and for the invoice
     if cached is not None:
         _write_compiled(cached, geo)
     return geo
+
+
+def _refuse_what_check_rejects(path: str) -> None:
+    """DataError when ``tollcli geoobjects check`` finds a problem: a network that check rejects is never charged
+    (overlaps would charge one passage twice, projected coordinates would charge nothing). Runs on the first load
+    of a file only: the compiled copy is made after it passes."""
+    from tollcli.charging.geoobjects import check_geoobjects
+
+    problems = check_geoobjects(path)
+    if problems:
+        more = f" and {len(problems) - 1} more" if len(problems) > 1 else ""
+        raise DataError(f"{path}: not a usable geo-object file: {problems[0]}{more} (tollcli geoobjects check {path} lists them)")
 
 
 def _cache_path(digest: str) -> Path | None:

@@ -89,10 +89,13 @@ def content_sha256(invoice: dict) -> str:
 
 
 def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | None = None,
-               roads: str | None = None, epoch_table: list | None = None) -> tuple[dict, ReadStats | None]:  # fmt: skip
+               roads: str | None = None, epoch_table: list | None = None,
+               as_recorded: dict[str, str] | None = None) -> tuple[dict, ReadStats | None]:  # fmt: skip
     """The invoice for one log (with its content hash) and the reader's statistics (NMEA).
 
     ``epoch_table``: a list that receives the per-epoch table (epochs + RAIM columns) for batch outputs.
+    ``as_recorded``: the input paths to record instead of the ones read (``verify`` reads an invoice's
+    inputs where it finds them and records them as the invoice names them).
     """
     try:
         params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde)
@@ -132,6 +135,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         inputs.update(nav=nav, nav_sha256=file_sha256(nav))
     if roads is not None:
         inputs.update(roads=roads, roads_sha256=file_sha256(roads))
+    inputs.update({k: v for k, v in (as_recorded or {}).items() if k in inputs})
     parameters = {**asdict(settings), "valid_statuses": ["valid", "excluded_valid"], "policy_used": policy}
     invoice = build_invoice(table, positions, geo_objects, tariff_doc,
                             vehicle=settings.vehicle or os.path.basename(log), vehicle_class=settings.vehicle_class,
@@ -207,6 +211,8 @@ def _policy_checks(epochs, settings: ChargeSettings, roads: str | None):
 def settings_from_invoice(invoice: dict) -> ChargeSettings:
     """The settings an invoice was made with."""
     recorded = invoice.get("parameters") or {}
+    if not isinstance(recorded, dict):
+        raise DataError("the invoice's parameters are not a table of settings")
     fields = ChargeSettings.__dataclass_fields__
     return ChargeSettings(**{k: recorded[k] for k in fields if k in recorded})
 

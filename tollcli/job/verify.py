@@ -5,7 +5,13 @@ Checks, in order, each failing with its own reason:
 1. the invoice's ``content_sha256`` matches its content (nobody edited it);
 2. every input it names (log, geo-objects, tariff, navigation file) exists and has
    the SHA-256 recorded in the invoice (the inputs are the ones it was made from);
-3. processing those inputs again with the recorded parameters gives the same bytes.
+3. processing those inputs again with the recorded parameters gives the same invoice
+   (the same canonical text: a re-indented copy of an invoice verifies like the original).
+
+An input is found where the invoice says (relative to the working directory), else
+relative to the invoice's folder, else under its file name beside the invoice: an auditor
+who receives the invoice with its files verifies it anywhere. A candidate counts only
+when its SHA-256 is the recorded one.
 """
 
 from __future__ import annotations
@@ -32,26 +38,38 @@ def verify_invoice(path: str) -> dict:
     if content_sha256(invoice) != invoice["content_sha256"]:
         raise VerifyFailed(f"{path}: invoice content was modified (content_sha256 does not match its content)")
     inputs = invoice["inputs"]
+    if not isinstance(inputs, dict) or not all(isinstance(inputs.get(k), str) for k in ("log", "geoobjects", "tariff")):
+        raise DataError(f"{path}: not a verifiable tollcli invoice (inputs must name the log, geo-objects and tariff)")
+    found: dict[str, str] = {}
     for key, label in INPUTS:
         if key not in inputs:
             continue
         file = inputs[key]
         if file == "-":
             raise VerifyFailed(f"{path}: the {label} was read from stdin and cannot be read again")
-        if not os.path.isfile(file):
-            raise VerifyFailed(f"{path}: {label} {file} not found")
-        recorded = inputs.get(f"{key}_sha256")
-        actual = file_sha256(file)
-        if recorded != actual:
-            raise VerifyFailed(f"{path}: {label} {file} changed since the invoice was made "
-                               f"(sha256 {actual[:12]}… ≠ recorded {str(recorded)[:12]}…)")  # fmt: skip
-    again, _ = charge_log(inputs["log"], inputs["geoobjects"], inputs["tariff"], settings_from_invoice(invoice), inputs.get("nav"),
-                          inputs.get("roads"))  # fmt: skip
-    with open(path, encoding="utf-8") as fh:
-        original = fh.read()
+        found[key] = _locate(path, str(file), inputs.get(f"{key}_sha256"), label)
+    again, _ = charge_log(found["log"], found["geoobjects"], found["tariff"], settings_from_invoice(invoice), found.get("nav"),
+                          found.get("roads"), as_recorded={k: inputs[k] for k in found})  # fmt: skip
+    original = invoice_json(invoice)
     fresh = invoice_json(again)
     if fresh != original:
         at = next((i for i, (a, b) in enumerate(zip(fresh, original)) if a != b), min(len(fresh), len(original)))
         line = original.count("\n", 0, at) + 1
         raise VerifyFailed(f"{path}: processing the same inputs again gives a different invoice (first difference on line {line})")
     return {"invoice": path, "content_sha256": invoice["content_sha256"], "inputs": {k: inputs[k] for k, _ in INPUTS if k in inputs}}
+
+
+def _locate(invoice_path: str, file: str, recorded, label: str) -> str:
+    """Where the input the invoice names is: the first candidate place whose SHA-256 is the recorded one."""
+    here = os.path.dirname(os.path.abspath(invoice_path))
+    candidates = [file] if os.path.isabs(file) else [file, os.path.join(here, file)]
+    candidates.append(os.path.join(here, os.path.basename(file)))
+    present = [c for c in dict.fromkeys(candidates) if os.path.isfile(c)]
+    for candidate in present:
+        if file_sha256(candidate) == recorded:
+            return candidate
+    if not present:
+        raise VerifyFailed(f"{invoice_path}: {label} {file} not found (nor beside the invoice)")
+    actual = file_sha256(present[0])
+    raise VerifyFailed(f"{invoice_path}: {label} {present[0]} changed since the invoice was made "
+                       f"(sha256 {actual[:12]}… ≠ recorded {str(recorded)[:12]}…)")  # fmt: skip
