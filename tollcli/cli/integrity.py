@@ -70,9 +70,10 @@ def integrity(
     stats = ReadStats()
     with writer:
         if checks or roads:
-            table = pd.concat([c.table for c in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav)],
-                              ignore_index=True)  # fmt: skip
-            table = with_checks(table, roads)
+            tables = [c.table for c in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav)]
+            if kind == "nmea":
+                check_usable(stats)  # a log without one epoch: the data error, before any check runs
+            table = with_checks(pd.concat(tables, ignore_index=True), roads)
             counts.update(table["raim_status"].astype(str))
             writer.write(table)
         elif kind == "nmea":

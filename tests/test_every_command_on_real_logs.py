@@ -1,0 +1,72 @@
+"""Every command over every receiver log of the gpsd regression suite: a documented exit code, no traceback.
+
+Run in-process through the CLI's entry point (the same code path as the ``tollcli`` script), so that an
+exception escaping a command fails the test with its traceback instead of being hidden in a subprocess.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+
+import pytest
+
+from conftest import REPO, SHARED_DATA
+from tollcli.cli.main import main
+
+GPSD_LOGS = sorted((SHARED_DATA / "gpsd").glob("*.log")) if (SHARED_DATA / "gpsd").exists() else []
+GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
+TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
+DOCUMENTED = {0, 1, 2, 3}
+
+
+def _run(*args: str) -> tuple[int, str]:
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            main(list(args))
+            code = 0
+        except SystemExit as exc:
+            code = exc.code
+    return code, err.getvalue()
+
+
+COMMANDS = {
+    "epochs": lambda log, out: ["epochs", log, "-q", "-o", f"{out}/e.csv"],
+    "epochs-satellites": lambda log, out: ["epochs", log, "-q", "-o", f"{out}/e.parquet", "--satellites", f"{out}/s.parquet"],
+    "integrity": lambda log, out: ["integrity", log, "-q", "-o", f"{out}/i.csv"],
+    "integrity-checks": lambda log, out: ["integrity", log, "--checks", "-q", "-o", f"{out}/c.csv"],
+    "findings": lambda log, out: ["findings", log, "--geo", GEO, "-q", "-o", f"{out}/f.json"],
+    "locate": lambda log, out: ["locate", log, "-q", "-o", f"{out}/l.csv"],
+}
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_command_over_every_gpsd_log(tmp_path, command):
+    if not GPSD_LOGS:
+        pytest.skip("real data not available: ../shared/data/gpsd")
+    codes = {}
+    for log in GPSD_LOGS:
+        code, err = _run(*COMMANDS[command](str(log), str(tmp_path)))
+        assert code in DOCUMENTED, f"{log.name}: exit {code}: {err}"
+        assert "Traceback" not in err, f"{log.name}: {err}"
+        if code:
+            assert err.strip() and log.name in err, f"{log.name}: exit {code} without saying why: {err!r}"
+        codes[code] = codes.get(code, 0) + 1
+    assert codes.get(0, 0) >= 90, codes  # the logs with NMEA fixes are read
+
+
+def test_process_and_verify_over_every_gpsd_log(tmp_path):
+    """Every real log that gives an invoice gives it again: verify reproduces it byte for byte."""
+    if not GPSD_LOGS:
+        pytest.skip("real data not available: ../shared/data/gpsd")
+    invoiced = 0
+    for i, log in enumerate(GPSD_LOGS):
+        invoice = tmp_path / f"{i}.json"
+        code, err = _run("process", str(log), "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(invoice))
+        assert code in DOCUMENTED and "Traceback" not in err, f"{log.name}: exit {code}: {err}"
+        if code == 0:
+            invoiced += 1
+            code, err = _run("verify", str(invoice))
+            assert code == 0, f"{log.name}: verify: {err}"
+    assert invoiced >= 90
