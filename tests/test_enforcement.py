@@ -293,3 +293,29 @@ def test_each_spoofing_sign_on_a_constructed_trip(tmp_path, kind, trip, rewrite)
         assert found[0]["evidence"]["step_s"] == pytest.approx(-39.0)
     if kind == "overspeed":
         assert found[0]["evidence"]["max_reported_mps"] == pytest.approx(90.0, abs=0.01)
+
+
+def test_locate_tells_apart_logs_of_one_name_recorded_at_the_same_time(tmp_path):
+    """samples/sim/*/drive.nmea: four drives of the same morning are four vehicles; one name on two days is one vehicle."""
+    import json as _json
+
+    from conftest import SAMPLES, run_cli
+
+    sims = sorted(str(p) for p in (SAMPLES / "sim").glob("*/drive.nmea"))
+    rows = _json.loads(run_cli("locate", *sims, "-q", "--json").stdout)
+    assert len({r["vehicle"] for r in rows}) == 4 and {r["vehicle"] for r in rows} >= {"urban-fault/drive"}
+    for day, src in (("day1", SAMPLES / "straight-drive.nmea"), ("day2", SAMPLES / "sim" / "rural-clean" / "drive.nmea")):
+        (tmp_path / day).mkdir()
+        (tmp_path / day / "TRK-042.nmea").write_bytes(src.read_bytes())
+    rows = _json.loads(run_cli("locate", str(tmp_path / "day1" / "TRK-042.nmea"), str(tmp_path / "day2" / "TRK-042.nmea"),
+                               "-q", "--json").stdout)  # fmt: skip
+    assert {r["vehicle"] for r in rows} == {"TRK-042"} and all("day2" in r["log"] for r in rows)
+
+
+def test_locate_at_takes_the_time_format_the_outputs_write():
+    from conftest import SAMPLES, run_cli
+
+    log = str(SAMPLES / "sim" / "rural-clean" / "drive.nmea")
+    for at in ("2026-03-02T08:01:00.000Z", "2026-03-02T08:01:00Z", "2026-03-02T08:01:00"):
+        result = run_cli("locate", log, "--at", at, "-q")
+        assert result.returncode == 0 and "2026-03-02T08:01:00.000Z" in result.stdout.decode(), at

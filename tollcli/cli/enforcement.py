@@ -17,6 +17,7 @@ from tollcli.enforcement.findings import CLASS_MAX_SPEED_MPS, FindingSettings, t
 from tollcli.enforcement.locate import (
     COLUMNS,
     latest_per_vehicle,
+    separate_simultaneous,
     locate_in,
     located_rows,
     vehicle_from_log,
@@ -58,7 +59,7 @@ def _vehicles(logs: list[str], vehicle: str | None) -> list[str]:
 def locate(
     logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="Receiver logs (one or more vehicles).", show_default=False)],
     vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id of a single log (default: a '# vehicle: ID' header line in the log, else the file name without extensions).")] = None,
-    at: Annotated[Optional[dt.datetime], typer.Option("--at", formats=["%Y-%m-%dT%H:%M:%S"], help="Where was it at this UTC time (the last position at or before it).")] = None,
+    at: Annotated[Optional[dt.datetime], typer.Option("--at", formats=["%Y-%m-%dT%H:%M:%S", "%Y-%m-%dT%H:%M:%SZ", "%Y-%m-%dT%H:%M:%S.%fZ", "%Y-%m-%dT%H:%M:%S.%f", "%Y-%m-%d %H:%M:%S"], help="Where was it at this UTC time (the last position at or before it), as the outputs write it (2026-03-02T08:00:00.000Z) or without fraction and Z.")] = None,
     hal: opt.Hal = 50.0,
     output: opt.Output = "-",
     as_json: Annotated[bool, typer.Option("--json", help="Write JSON records instead of a table (same as -o FILE.json).")] = False,
@@ -71,16 +72,25 @@ def locate(
     lon_deg, raim_status, hpl_m, hal_m, speed_mps, course_deg, line.
     """
     at_utc = pd.Timestamp(at).tz_localize("UTC") if at else None
-    rows = []
-    for log, vid in zip(logs, _vehicles(logs, vehicle)):
+    vehicles = _vehicles(logs, vehicle)
+    named_by_file = [not vehicle and vehicle_from_log(p) is None for p in logs]
+    per_log, spans = [], []
+    for log in logs:
         table, _ = _trip(log, hal, strict)
+        dated = table["time_utc"].dropna() if "time_utc" in table else pd.Series(dtype=object)
+        spans.append((dated.min(), dated.max()) if len(dated) else None)
         if table.empty:
             warn(f"{log}: no epochs", quiet)
+            per_log.append(None)
             continue
         found = locate_in(table, at_utc)
         if found["any"] is None:
             warn(f"{log}: no position{' before ' + str(at_utc) if at_utc is not None else ''}", quiet)
-        rows += located_rows(vid, log, found)
+        per_log.append(found)
+    vehicles, notes = separate_simultaneous(vehicles, named_by_file, logs, spans)
+    for note in notes:
+        warn(note, quiet)
+    rows = [row for log, vid, found in zip(logs, vehicles, per_log) if found is not None for row in located_rows(vid, log, found)]
     rows = latest_per_vehicle(rows)
     frame = pd.DataFrame(rows, columns=list(COLUMNS))
     if as_json or output.endswith(".json"):

@@ -46,6 +46,32 @@ def vehicle_from_log(path: str) -> str | None:
     return match.group(1).decode("utf-8", "replace") if match else None
 
 
+def separate_simultaneous(vehicles: list[str], named_by_file: list[bool], logs: list[str],
+                          spans: list[tuple | None]) -> tuple[list[str], list[str]]:
+    """Vehicle ids with logs that cannot be one vehicle told apart, and what was done (one line each).
+
+    Logs whose ids come from their file names (``day1/TRK-042.nmea``, ``day2/TRK-042.nmea``) are one
+    vehicle's — unless their time spans overlap: one vehicle does not record two logs at once
+    (``urban/drive.nmea``, ``rural/drive.nmea`` of the same morning). Those get their folder's name in
+    front (``urban/drive``). Ids from a log header or ``--vehicle`` are kept as given.
+    """
+    out, notes = list(vehicles), []
+    by_id: dict[str, list[int]] = {}
+    for i, (vid, by_file) in enumerate(zip(vehicles, named_by_file)):
+        if by_file and spans[i] is not None:
+            by_id.setdefault(vid, []).append(i)
+    for vid, members in by_id.items():
+        clash = {i for i in members for j in members if i != j
+                 and spans[i][0] <= spans[j][1] and spans[j][0] <= spans[i][1]}  # fmt: skip
+        for i in sorted(clash):
+            folder = os.path.basename(os.path.dirname(os.path.abspath(logs[i]))) or "."
+            out[i] = f"{folder}/{vid}"
+        if clash:
+            notes.append(f"{len(clash)} logs named {vid!r} were recorded at the same time: not one vehicle, "
+                         f"told apart by their folders ({', '.join(sorted(out[i] for i in clash))})")  # fmt: skip
+    return out, notes
+
+
 def locate_in(table: pd.DataFrame, at_utc: pd.Timestamp | None = None) -> dict[str, pd.Series | None]:
     """The last trusted row and the last row with a position (at or before ``at_utc`` when given)."""
     t = table
