@@ -105,3 +105,24 @@ def test_interrupted_write_leaves_the_old_invoice(tmp_path, monkeypatch):
         writers.write_text_atomic(str(out), '{"total": "1.90"}\n' * 1000)
     assert out.read_text() == "old\n" and [p.name for p in tmp_path.iterdir()] == ["invoice.json"]
 
+
+
+def test_audit_refuses_an_invoice_of_another_trip(tmp_path):
+    """The straight drive of 2024 against the truth of a 2026 simulated drive: an error, not '100 % correct'."""
+    from conftest import REPO, run_cli
+
+    geo = str(REPO / "geoobjects" / "example-geoobjects.geojson")
+    invoice = tmp_path / "inv.json"
+    assert run_cli("process", str(REPO / "samples" / "straight-drive.nmea"), "--geo", geo, "--tariff",
+                   str(REPO / "geoobjects" / "example-tariff.toml"), "-q", "-o", str(invoice)).returncode == 0  # fmt: skip
+    result = run_cli("audit", str(invoice), "--truth", str(REPO / "samples" / "sim" / "urban-fault" / "truth.csv"), "--geo", geo)
+    err = result.stderr.decode()
+    assert result.returncode == 1 and "not the same trip" in err and len(err.strip().splitlines()) == 1
+    truth = tmp_path / "truth.csv"
+    truth.write_text((REPO / "samples" / "sim" / "rural-clean" / "truth.csv").read_text().replace("time_utc,", "vehicle,time_utc,", 1)
+                     .replace("\n2026", "\nTRK-9,2026"))  # fmt: skip
+    mine = tmp_path / "mine.json"
+    assert run_cli("process", str(REPO / "samples" / "sim" / "rural-clean" / "drive.nmea"), "--geo", geo, "--tariff",
+                   str(REPO / "geoobjects" / "example-tariff.toml"), "--vehicle", "TRK-1", "-q", "-o", str(mine)).returncode == 0  # fmt: skip
+    other = run_cli("audit", str(mine), "--truth", str(truth), "--geo", geo)
+    assert other.returncode == 1 and "TRK-9" in other.stderr.decode()

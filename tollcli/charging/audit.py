@@ -80,6 +80,47 @@ def driven_from_truth(path: str, geo) -> set[str]:
     return {str(geo.ids[i]) for i in np.unique(obj)}
 
 
+def truth_span(path: str) -> tuple[pd.Timestamp, pd.Timestamp, set[str]] | None:
+    """First and last time of a truth trajectory CSV (``time_utc``, ``time`` or ``timestamp``) and its vehicle ids
+    (a ``vehicle`` column; empty when none); None for an id list or a trajectory without times."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            first = fh.readline()
+    except (OSError, UnicodeDecodeError):
+        return None
+    if first.lstrip().startswith(("[", "{")) or "lat" not in first.lower():
+        return None
+    table = pd.read_csv(path)
+    column = next((c for c in table.columns if c.lower() in ("time_utc", "time", "timestamp")), None)
+    if column is None:
+        return None
+    times = pd.to_datetime(table[column], utc=True, errors="coerce").dropna()
+    if times.empty:
+        return None
+    vehicles = {str(v) for v in table["vehicle"].dropna()} if "vehicle" in table else set()
+    return times.min(), times.max(), vehicles
+
+
+def check_same_trip(invoices: list[dict], names: list[str], truth: str) -> None:
+    """DataError unless every invoice's period overlaps the truth's times (and its vehicle is the truth's, when
+    the truth names one): comparing a 2024 invoice with a 2026 drive says nothing."""
+    span = truth_span(truth)
+    if span is None:
+        return
+    start, end, vehicles = span
+    for invoice, name in zip(invoices, names):
+        period = invoice.get("period") or {}
+        try:
+            a, b = pd.Timestamp(period["start_utc"]), pd.Timestamp(period["end_utc"])
+        except (KeyError, TypeError, ValueError):
+            raise DataError(f"{name}: the invoice has no period to compare with the truth {truth}") from None
+        if b < start or a > end:
+            raise DataError(f"{name}: the invoice covers {period['start_utc']} – {period['end_utc']}, the truth {truth} "
+                            f"{start:%Y-%m-%dT%H:%M:%SZ} – {end:%Y-%m-%dT%H:%M:%SZ}: not the same trip")  # fmt: skip
+        if vehicles and str(invoice.get("vehicle")) not in vehicles:
+            raise DataError(f"{name}: vehicle {invoice.get('vehicle')!r} is not the truth's ({', '.join(sorted(vehicles))})")
+
+
 def audit_with_truth(invoices: list[dict], driven: set[str], fees: dict[str, Decimal], invoice_error_pct: float = 1.0) -> dict:
     """Under/overcharges per geo-object and per run against the truly driven set."""
     charged_sets = [{line["geoobject"] for line in inv["lines"]} for inv in invoices]

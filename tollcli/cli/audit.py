@@ -13,7 +13,7 @@ from typing import Annotated, Optional
 import pandas as pd
 import typer
 
-from tollcli.charging.audit import findings_of, audit_with_truth, driven_from_truth, fee_table, load_invoice, risk_report
+from tollcli.charging.audit import audit_with_truth, check_same_trip, findings_of, driven_from_truth, fee_table, load_invoice, risk_report
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
 from tollcli.cli import options as opt
@@ -67,7 +67,10 @@ def audit(
                    f"{integrity['undetected']} undetected (rate {integrity['undetected_rate']:.2e}, P_MD {integrity['p_md']:g})")  # fmt: skip
         _emit(report, summary, output, quiet)
         return
-    invoices = [load_invoice(p) for p in _expand(runs)]
+    paths = _expand(runs)
+    invoices = [load_invoice(p) for p in paths]
+    if truth:
+        check_same_trip(invoices, paths, truth)
     fees = fee_table(invoices)
     geo_objects = load_geoobjects(geo) if geo else None
     if tariff:
