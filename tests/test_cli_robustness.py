@@ -38,3 +38,90 @@ def test_a_gzip_that_is_only_a_header_is_a_data_error(tmp_path, content, command
     assert result.returncode == 1, err
     assert "interrupted" not in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert "day.nmea.gz" in err
+
+
+# ---------------------------------------------------------------- what users get wrong: one line, a documented code
+DRIVE = str(SAMPLES / "sim" / "rural-clean" / "drive.nmea")
+
+
+def _one_line(result, code: int) -> str:
+    err = result.stderr.decode()
+    assert result.returncode == code, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    return err
+
+
+@pytest.mark.parametrize("command", [["simulate"], ["batch", DRIVE, "--geo", GEO, "--tariff", TARIFF]], ids=["simulate", "batch"])
+def test_an_existing_file_as_output_folder_is_a_usage_error(tmp_path, command):
+    existing = tmp_path / "already.txt"
+    existing.write_text("keep me\n")
+    assert "is a file" in _one_line(run_cli(*command, "-o", str(existing), "-q"), 2)
+    assert existing.read_text() == "keep me\n"
+
+
+def test_an_output_the_system_refuses_is_a_system_error_naming_it():
+    err = _one_line(run_cli("process", DRIVE, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", "/proc/invoice.json"), 4)
+    assert "/proc/invoice.json" in err
+
+
+def test_a_deeply_nested_json_is_a_data_error(tmp_path):
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 100_000)
+    assert "nested too deeply" in _one_line(run_cli("verify", str(deep)), 1)
+    assert "nested too deeply" in _one_line(run_cli("process", DRIVE, "--geo", str(deep), "--tariff", TARIFF, "-q", "-o", "-"), 1)
+
+
+def test_an_unknown_metric_crs_in_a_geo_object_file_is_refused(tmp_path):
+    import json
+
+    geo = json.loads(open(GEO).read())
+    for f in geo["features"]:
+        f["properties"]["crs_metric"] = "EPSG:999999"
+    path = tmp_path / "geo.geojson"
+    path.write_text(json.dumps(geo))
+    assert "EPSG:999999" in _one_line(run_cli("process", DRIVE, "--geo", str(path), "--tariff", TARIFF, "-q", "-o", "-"), 1)
+
+
+def test_a_file_name_that_is_not_utf8_is_recorded_printably(tmp_path):
+    import json
+
+    name = os.fsdecode(b"dr\xffive.nmea")
+    log = os.path.join(str(tmp_path), name)
+    with open(log, "wb") as fh:
+        fh.write(open(DRIVE, "rb").read())
+    result = run_cli("process", log, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", "-")
+    assert result.returncode == 0, result.stderr.decode()
+    invoice = json.loads(result.stdout)
+    assert invoice["inputs"]["log"].endswith("dr\\xffive.nmea") and invoice["lines"]
+
+
+def test_a_damaged_compiled_copy_of_the_geo_objects_is_made_again(tmp_path):
+    env_cache = tmp_path / "cache"
+    env = dict(os.environ, TOLLCLI_CACHE_DIR=str(env_cache), NO_COLOR="1")
+    run = lambda out: subprocess.run([sys.executable, "-m", "tollcli", "process", DRIVE, "--geo", GEO, "--tariff", TARIFF,  # noqa: E731
+                                      "-q", "-o", str(tmp_path / out)], capture_output=True, env=env, timeout=300)  # fmt: skip
+    assert run("a.json").returncode == 0
+    for cached in env_cache.rglob("*.np*"):
+        cached.write_bytes(cached.read_bytes()[:100])
+    again = run("b.json")
+    assert again.returncode == 0, again.stderr.decode()
+    assert (tmp_path / "a.json").read_bytes() == (tmp_path / "b.json").read_bytes()
+
+
+def test_a_defect_is_one_line_with_its_own_exit_code(monkeypatch, capsys):
+    from tollcli.cli import main as entry
+    from tollcli.job import pipeline
+
+    def broken(*args, **kwargs):
+        raise ZeroDivisionError("planted")
+
+    monkeypatch.setattr(pipeline, "charge_log", broken)
+    monkeypatch.delenv("TOLLCLI_DEBUG", raising=False)
+    import tollcli.cli.process as process_command
+
+    monkeypatch.setattr(process_command, "charge_log", broken)
+    with pytest.raises(SystemExit) as exit_:
+        entry.main(["process", DRIVE, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", "-"])
+    assert exit_.value.code == 5
+    err = capsys.readouterr().err
+    assert "internal error (ZeroDivisionError: planted)" in err and len(err.strip().splitlines()) == 1

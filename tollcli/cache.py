@@ -37,7 +37,7 @@ def cached_array(folder: str, name: str, compute, shape: tuple | None = None):
             value = np.load(path, allow_pickle=False)
             if shape is None or value.shape == shape:
                 return value
-        except (OSError, ValueError):
+        except (OSError, ValueError, EOFError):
             pass
     value = np.asarray(compute())
     if path is not None:

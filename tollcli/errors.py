@@ -7,12 +7,18 @@ Exit codes (also in ``tollcli --help`` and the man pages):
   line under ``--strict``)
 * 2 — usage error: bad option, missing file, a directory where a file was expected
 * 3 — partial: outputs were written, but more lines were skipped than ``--max-bad`` allows
+* 4 — system error: a file could not be written or read (read-only folder, disk full,
+  permissions); nothing half-written is left in place of an output
+* 5 — internal error: a defect of tollcli (the message names it; please report it;
+  ``TOLLCLI_DEBUG=1`` shows the traceback)
 """
 
 EXIT_OK = 0
 EXIT_DATA = 1
 EXIT_USAGE = 2
 EXIT_PARTIAL = 3
+EXIT_SYSTEM = 4
+EXIT_INTERNAL = 5
 
 
 class TollError(Exception):

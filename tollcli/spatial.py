@@ -58,8 +58,13 @@ def _transformer(crs: str, inverse: bool = False):
     cache = _TRANSFORMERS.__dict__.setdefault("by_crs", {})
     key = (crs, inverse)
     if key not in cache:
+        from pyproj.exceptions import CRSError
+
         src, dst = ("EPSG:4326", crs) if not inverse else (crs, "EPSG:4326")
-        cache[key] = Transformer.from_crs(src, dst, always_xy=True)
+        try:
+            cache[key] = Transformer.from_crs(src, dst, always_xy=True)
+        except CRSError:
+            raise DataError(f"unknown coordinate reference system {crs!r}") from None
     return cache[key]
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import os
 import tempfile
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,7 +55,7 @@ def load_geoobjects(path: str) -> GeoObjects:
             geo = _read_compiled(cached)
             geo.source_sha256 = digest
             return geo
-        except (OSError, ValueError, KeyError, shapely.errors.ShapelyError):
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, shapely.errors.ShapelyError):
             pass  # a damaged copy: parse again
     _refuse_what_check_rejects(path)
     geo = _parse(path)

@@ -126,9 +126,27 @@ def build_geoobjects(path: str, hal_max_m: float = HAL_MAX_M, connect_tol_m: flo
     return {"type": "FeatureCollection", "features": features}
 
 
+def _crs_problem(crs, seen: dict) -> str:
+    """Why a feature's ``crs_metric`` cannot be used ('' when absent or a known projected CRS in metres)."""
+    if crs is None:
+        return ""
+    if crs not in seen:
+        from pyproj import CRS
+        from pyproj.exceptions import CRSError
+
+        try:
+            parsed = CRS.from_user_input(crs)
+            metres = parsed.is_projected and all(a.unit_name in ("metre", "meter") for a in parsed.axis_info)
+            seen[crs] = "" if metres else f"crs_metric {crs!r} is not a projected CRS in metres"
+        except (CRSError, TypeError, ValueError):
+            seen[crs] = f"crs_metric {crs!r} is not a known coordinate reference system"
+    return seen[crs]
+
+
 def check_geoobjects(path: str, hal_min_m: float = 5.0) -> list[Finding]:
     """Problems of a geo-object file, each tied to a feature id (empty list: the file is usable)."""
     findings: list[Finding] = []
+    crs_seen: dict = {}
     features = read_features(path)
     ids: list[str] = []
     polys = []
@@ -156,6 +174,9 @@ def check_geoobjects(path: str, hal_min_m: float = 5.0) -> list[Finding]:
             continue
         if not geom.is_valid:
             findings.append(Finding(fid, f"invalid geometry: {shapely.is_valid_reason(geom)}"))
+        crs_problem = _crs_problem(props.get("crs_metric"), crs_seen)
+        if crs_problem:
+            findings.append(Finding(fid, crs_problem))
         hal = props.get("hal_m")
         try:
             hal_value = float(hal)

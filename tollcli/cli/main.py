@@ -7,7 +7,7 @@ import sys
 
 import typer
 
-from tollcli.errors import EXIT_DATA, EXIT_USAGE, TollError
+from tollcli.errors import EXIT_DATA, EXIT_INTERNAL, EXIT_SYSTEM, EXIT_USAGE, TollError
 
 
 def _fail(message: str, code: int) -> None:
@@ -62,4 +62,13 @@ def main(argv: list[str] | None = None) -> None:
         raise
     except MemoryError:
         _fail("out of memory", EXIT_DATA)
+    except RecursionError:
+        _fail("an input is nested too deeply to read", EXIT_DATA)
+    except OSError as exc:  # the system refused a file: read-only folder, disk full, permissions
+        where = f"{exc.filename}: " if exc.filename else ""
+        _fail(f"{where}{exc.strerror or exc}", EXIT_SYSTEM)
+    except Exception as exc:  # noqa: BLE001 - a defect: one line and its own exit code, the traceback on request
+        if os.environ.get("TOLLCLI_DEBUG"):
+            raise
+        _fail(f"internal error ({type(exc).__name__}: {exc}); please report it (TOLLCLI_DEBUG=1 shows where)", EXIT_INTERNAL)
     sys.exit(code if isinstance(code, int) else 0)

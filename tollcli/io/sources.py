@@ -17,6 +17,11 @@ BLOCK_BYTES = 1 << 21
 GZIP_MAGIC = b"\x1f\x8b"
 
 
+def printable_path(path: str) -> str:
+    """A path as text that can be written anywhere: bytes of a file name that are not UTF-8 as ``\\xNN``."""
+    return path.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
 def source_name(source: str | os.PathLike | BinaryIO) -> str:
     """A printable name for messages (``-`` for stdin)."""
     if isinstance(source, (str, os.PathLike)):
@@ -116,6 +121,8 @@ def read_json(path: str, what: str):
         raise UsageError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DataError(f"{path}: not {what} ({exc})") from None
+    except RecursionError:
+        raise DataError(f"{path}: not {what} (nested too deeply)") from None
 
 
 def sniff_format(log: str) -> str:

@@ -120,7 +120,7 @@ class TableWriter:
             self._fh = sys.stdout.buffer if binary else sys.stdout
         else:
             folder = os.path.dirname(os.path.abspath(self.path))
-            fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(self.path)}.", suffix=".tmp", dir=folder)
+            fd, self._tmp = _temporary(self.path, folder)
             os.chmod(self._tmp, _umask_mode())
             self._fh = os.fdopen(fd, "wb" if binary else "w", encoding=None if binary else "utf-8", newline=None if binary else "")
         return self._fh
@@ -228,6 +228,22 @@ class TableWriter:
         self._records += 1
 
 
+def _temporary(path: str, folder: str) -> tuple[int, str]:
+    """A temporary file beside ``path``; an OSError names ``path`` (the output), not the temporary name."""
+    try:
+        return tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
+    except OSError as exc:
+        raise OSError(exc.errno, f"cannot write here ({exc.strerror})", path) from None
+
+
+def output_folder(path: str, what: str = "outputs") -> str:
+    """Make ``path`` a folder for ``what`` (created when missing); UsageError when a file is in the way."""
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise UsageError(f"{path}: is a file; -o names a folder for the {what}")
+    os.makedirs(path, exist_ok=True)
+    return path
+
+
 def write_text_atomic(path: str, text: str) -> None:
     """Write a whole document: to stdout for ``-``, else to a temporary file renamed into place."""
     if path == "-":
@@ -236,7 +252,7 @@ def write_text_atomic(path: str, text: str) -> None:
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise UsageError(f"{path}: folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
+    fd, tmp = _temporary(path, folder)
     os.chmod(tmp, _umask_mode())
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
@@ -258,7 +274,7 @@ class AtomicText:
         if not os.path.isdir(folder):
             raise UsageError(f"{path}: folder {folder} does not exist")
         self.path = path
-        fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
+        fd, self._tmp = _temporary(path, folder)
         os.chmod(self._tmp, _umask_mode())
         self._fh = os.fdopen(fd, "w", encoding="utf-8", newline="")
 

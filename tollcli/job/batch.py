@@ -37,7 +37,7 @@ from tollcli import __version__
 from tollcli.charging.invoice import file_sha256, invoice_json
 from tollcli.enforcement.locate import vehicle_from_log, vehicle_from_path
 from tollcli.errors import DataError, UsageError
-from tollcli.io.writers import TableWriter, write_text_atomic
+from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
 from tollcli.job.pipeline import ChargeSettings, charge_log
 
 LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv")
@@ -217,7 +217,7 @@ def summarise(outcomes: list[dict]) -> dict:
 def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, outdir: str, *, workers: int = 1,
               scheduler: str | None = None, force: bool = False, roads: str | None = None, progress=None) -> dict:  # fmt: skip
     """Process every log; returns the summary (also written to OUTDIR/summary.json)."""
-    os.makedirs(outdir, exist_ok=True)
+    output_folder(outdir)
     shared = [("geoobjects_sha256", file_sha256(geo)), ("tariff_sha256", file_sha256(tariff))]
     if roads is not None:
         shared.append(("roads_sha256", file_sha256(roads)))

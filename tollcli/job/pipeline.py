@@ -28,7 +28,7 @@ from tollcli.gnss.wls import wls_geometry
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
-from tollcli.io.sources import sniff_format
+from tollcli.io.sources import printable_path, sniff_format
 from tollcli.job.streaming import TailCharger, choose_policy, has_speeds
 from tollcli.readers.nmea import ReadStats, iter_nmea_tables
 from tollcli.readers.nmea.reader import check_usable
@@ -127,18 +127,18 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         period = (dated.min(), dated.max()) if len(dated) else None
         if epoch_table is not None:
             epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), per_epoch], axis=1))
-    inputs = {"log": log, "geoobjects": geo, "tariff": tariff,
+    inputs = {"log": printable_path(log), "geoobjects": printable_path(geo), "tariff": printable_path(tariff),
               "geoobjects_sha256": geo_objects.source_sha256 or file_sha256(geo), "tariff_sha256": file_sha256(tariff)}  # fmt: skip
     if log != "-":
         inputs["log_sha256"] = file_sha256(log)
     if nav is not None:
-        inputs.update(nav=nav, nav_sha256=file_sha256(nav))
+        inputs.update(nav=printable_path(nav), nav_sha256=file_sha256(nav))
     if roads is not None:
-        inputs.update(roads=roads, roads_sha256=file_sha256(roads))
+        inputs.update(roads=printable_path(roads), roads_sha256=file_sha256(roads))
     inputs.update({k: v for k, v in (as_recorded or {}).items() if k in inputs})
     parameters = {**asdict(settings), "valid_statuses": ["valid", "excluded_valid"], "policy_used": policy}
     invoice = build_invoice(table, positions, geo_objects, tariff_doc,
-                            vehicle=settings.vehicle or os.path.basename(log), vehicle_class=settings.vehicle_class,
+                            vehicle=settings.vehicle or printable_path(os.path.basename(log)), vehicle_class=settings.vehicle_class,
                             inputs=inputs, parameters=parameters, period=period, details=details)  # fmt: skip
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
     return seal(invoice), stats

@@ -12,6 +12,7 @@ import os
 
 import numpy as np
 
+from tollcli.io.writers import output_folder
 from tollcli.report.run_data import RunData
 
 STATUS_COLOURS = {
@@ -31,7 +32,7 @@ def _plt():
 
 def write_plots(run: RunData, outdir: str) -> list[str]:
     """Write the figures into ``outdir``; returns their paths."""
-    os.makedirs(outdir, exist_ok=True)
+    output_folder(outdir, "figures")
     paths = [_trajectory(run, outdir), _protection(run, outdir), _valid_positions(run, outdir)]
     if run.truth is not None and "horiz_error_m" in run.epochs:
         paths.append(_stanford(run, outdir))

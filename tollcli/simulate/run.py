@@ -21,7 +21,7 @@ import numpy as np
 
 from tollcli import __version__
 from tollcli.charging.invoice import file_sha256
-from tollcli.io.writers import AtomicText, TableWriter, write_text_atomic
+from tollcli.io.writers import AtomicText, TableWriter, output_folder, write_text_atomic
 from tollcli.simulate.drive import SimConfig, simulate
 from tollcli.simulate.logs import gsdc_rows, nmea_lines, truth_rows
 from tollcli.simulate.route import Trajectory
@@ -32,7 +32,7 @@ FILES = ("drive.nmea", "drive-derived.csv", "truth.csv")
 def write_drive(traj: Trajectory, config: SimConfig, outdir: str, geo: str | None = None, command: str = "",
                 progress=None) -> dict:  # fmt: skip
     """Simulate and write the drive's files into ``outdir``; returns the manifest."""
-    os.makedirs(outdir, exist_ok=True)
+    output_folder(outdir)
     path = {name: os.path.join(outdir, name) for name in FILES}
     counts = {"epochs": 0, "fixes": 0, "faulty_epochs": 0, "satellite_rows": 0}
     visible = []
