@@ -125,3 +125,31 @@ def test_a_defect_is_one_line_with_its_own_exit_code(monkeypatch, capsys):
     assert exit_.value.code == 5
     err = capsys.readouterr().err
     assert "internal error (ZeroDivisionError: planted)" in err and len(err.strip().splitlines()) == 1
+
+
+def test_sigterm_leaves_no_temporary_file_and_no_half_output(tmp_path):
+    """SIGTERM while `epochs -o out.csv` writes: exit 143, no .tmp left, no out.csv (15 tries at different moments)."""
+    import signal
+    import time
+
+    log = tmp_path / "long.nmea"
+    log.write_bytes(b"".join((SAMPLES / "sim" / d / "drive.nmea").read_bytes() for d in ("rural-clean", "urban-clean") * 10))
+    out = tmp_path / "out" / "epochs.csv"
+    out.parent.mkdir()
+    for attempt in range(15):
+        proc = subprocess.Popen([sys.executable, "-m", "tollcli", "epochs", str(log), "-q", "-o", str(out),
+                                 "--satellites", str(out.parent / "sats.parquet")],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not list(out.parent.glob(".*.tmp")) and proc.poll() is None:
+            time.sleep(0.002)
+        time.sleep(0.01 * (attempt % 5))
+        proc.send_signal(signal.SIGTERM)
+        code = proc.wait(timeout=60)
+        leftovers = list(out.parent.glob(".*.tmp"))
+        assert not leftovers, (attempt, code, leftovers, proc.stderr.read())
+        if code == 0:  # finished before the signal: a whole output
+            out.unlink()
+            (out.parent / "sats.parquet").unlink()
+            continue
+        assert code == 143 and not out.exists(), (attempt, code, proc.stderr.read())

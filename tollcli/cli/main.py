@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
 
 import typer
 
@@ -13,6 +15,14 @@ from tollcli.errors import EXIT_DATA, EXIT_INTERNAL, EXIT_SYSTEM, EXIT_USAGE, To
 def _fail(message: str, code: int) -> None:
     sys.stderr.write(f"tollcli: error: {message}\n")
     sys.exit(code)
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived: unwind like an interrupt, so that every output being written is discarded."""
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise Terminated()
 
 
 def _reader_gone() -> None:
@@ -31,6 +41,8 @@ def main(argv: list[str] | None = None) -> None:
     if first is None and "--version" in args:
         lean, first = True, ""  # no command needed
     app = build_app(first if lean else None)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _on_sigterm)
 
     try:
         code = app(args=argv, prog_name="tollcli", standalone_mode=False)
@@ -53,6 +65,9 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:
         sys.stderr.write("tollcli: interrupted\n")
         sys.exit(130)
+    except Terminated:
+        sys.stderr.write("tollcli: terminated\n")
+        sys.exit(143)
     except BrokenPipeError:  # downstream of a pipe closed early (e.g. | head)
         _reader_gone()
     except SystemExit as exc:
