@@ -153,3 +153,16 @@ def test_sigterm_leaves_no_temporary_file_and_no_half_output(tmp_path):
             (out.parent / "sats.parquet").unlink()
             continue
         assert code == 143 and not out.exists(), (attempt, code, proc.stderr.read())
+
+
+@pytest.mark.parametrize("command", [["findings", DRIVE, "--geo", GEO], ["audit", "INVOICE"],
+                                     ["geoobjects", "build", str(REPO / "geoobjects" / "example-roads.geojson")],
+                                     ["process", DRIVE, "--geo", GEO, "--tariff", TARIFF]], ids=lambda c: c[0] + c[1][:5])  # fmt: skip
+def test_an_output_extension_a_command_does_not_write_is_refused(tmp_path, command):
+    if command[1] == "INVOICE":
+        invoice = tmp_path / "inv.json"
+        assert run_cli("process", DRIVE, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(invoice)).returncode == 0
+        command = ["audit", str(invoice)]
+    out = tmp_path / "out.parquet"
+    err = _one_line(run_cli(*command, "-q", "-o", str(out)), 2)
+    assert "out.parquet" in err and not out.exists()

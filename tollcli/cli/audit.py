@@ -46,7 +46,7 @@ def audit(
     vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class for --tariff prices.")] = "car",
     invoice_error: Annotated[float, typer.Option("--invoice-error", help="M_e: an invoice is right when within this %% of the true total.", min=0.0)] = 1.0,
     epochs: Annotated[Optional[str], typer.Option("--epochs", help="An integrity epoch table ('tollcli integrity -o', CSV/Parquet): with a --truth trajectory, count positioning failures and those the RAIM missed.")] = None,
-    output: opt.Output = "-",
+    output: opt.JsonOutput = "-",
     quiet: opt.Quiet = False,
 ) -> None:
     """Count undercharges (driven, not charged) and overcharges (charged, not driven) with rates and 95 % intervals.
@@ -104,6 +104,7 @@ def audit(
 
 
 def _emit(report: dict, summary: str, output: str, quiet: bool) -> None:
+    opt.require_json(output)
     text = json.dumps(report, indent=2, sort_keys=True, default=str) + "\n"
     to_stdout = output == "-" and sys.stdout.isatty()
     show(lambda: audit_tables(report), quiet if not to_stdout else False, to_stdout=to_stdout)

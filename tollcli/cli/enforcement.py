@@ -112,7 +112,7 @@ def findings(
     gap_min: Annotated[float, typer.Option("--gap-min", help="A gap lasts at least this long, s.", min=1.0)] = 60.0,
     gap_min_distance: Annotated[float, typer.Option("--gap-min-distance", help="…and ends at least this far away, m.", min=0.0)] = 500.0,
     hal: opt.Hal = 50.0,
-    output: opt.Output = "-",
+    output: opt.JsonOutput = "-",
     strict: opt.Strict = False,
     quiet: opt.Quiet = False,
 ) -> None:
@@ -128,7 +128,7 @@ def findings(
     table, sats = _trip(log, hal, strict)
     items = trip_findings(table, sats, table, load_geoobjects(geo) if geo else None, settings) if not table.empty else []
     doc = {"log": log, "settings": settings.__dict__, "findings": items}
-    write_text_atomic(output, json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    write_text_atomic(opt.require_json(output), json.dumps(doc, indent=1, sort_keys=True) + "\n")
     kinds = Counter(f["kind"] for f in items)
     warn(f"{log}: {len(items)} findings" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)
 
@@ -141,7 +141,7 @@ def enforce(
     time_tol: Annotated[float, typer.Option("--time-tol", help="A read and a fix match within this many seconds.", min=0.0)] = 30.0,
     distance_tol: Annotated[float, typer.Option("--distance-tol", help="A read this far from the trip is a finding, m.", min=0.0)] = 1000.0,
     pass_dist: Annotated[float, typer.Option("--pass-dist", help="The trip passes a gantry within this distance, m.", min=0.0)] = 50.0,
-    output: opt.Output = "-",
+    output: opt.JsonOutput = "-",
     strict: opt.Strict = False,
     quiet: opt.Quiet = False,
 ) -> None:
@@ -151,6 +151,6 @@ def enforce(
     items = cross_check(table, read_reads(reads), ids, geoms, crs, tag, RoadsideSettings(time_tol, distance_tol, pass_dist))
     doc = {"log": log, "tag": tag, "settings": {"time_tol_s": time_tol, "distance_tol_m": distance_tol, "pass_dist_m": pass_dist},
            "findings": items}  # fmt: skip
-    write_text_atomic(output, json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    write_text_atomic(opt.require_json(output), json.dumps(doc, indent=1, sort_keys=True) + "\n")
     kinds = Counter(f["kind"] for f in items)
     warn(f"{log}: {len(items)} roadside findings" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)

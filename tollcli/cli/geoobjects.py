@@ -19,7 +19,7 @@ app = typer.Typer(help="Build and check geo-objects: constant-HAL buffers around
 @app.command("build")
 def build(
     roads: Annotated[str, typer.Argument(metavar="ROADS", help="Road network: GeoJSON LineStrings with id, tolled, ...")],
-    output: opt.Output = "-",
+    output: opt.GeoJsonOutput = "-",
     hal_max: Annotated[float, typer.Option("--hal-max", help="Largest HAL, m.", min=0.1)] = HAL_MAX_M,
     trim_factor: Annotated[float, typer.Option("--trim-factor", help="Junction ends are cut by this × HAL.", min=0.0)] = TRIM_FACTOR,
     connect_tol: Annotated[float, typer.Option("--connect-tol", help="Roads closer than this touch (a junction), m.", min=0.0)] = CONNECT_TOL_M,

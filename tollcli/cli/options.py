@@ -15,6 +15,27 @@ Output = Annotated[
     str,
     typer.Option("-o", "--output", help="Output file; the format follows the extension (.csv, .parquet, .geojson, .json); - is stdout (CSV)."),
 ]
+JsonOutput = Annotated[
+    str,
+    typer.Option("-o", "--output", help="Output file, JSON (.json); - is stdout."),
+]
+InvoiceOutput = Annotated[
+    str,
+    typer.Option("-o", "--output", help="Invoice file: .json (the sealed invoice) or .csv (its lines); - is stdout (JSON)."),
+]
+GeoJsonOutput = Annotated[
+    str,
+    typer.Option("-o", "--output", help="Geo-object file, GeoJSON (.geojson or .json); - is stdout."),
+]
+
+
+def require_json(output: str) -> str:
+    """UsageError unless ``output`` is ``-`` or a .json file (commands that write one JSON document)."""
+    from tollcli.errors import UsageError
+
+    if output != "-" and not output.lower().endswith(".json"):
+        raise UsageError(f"{output}: this command writes JSON: name the file .json (or - for stdout)")
+    return output
 Strict = Annotated[
     bool,
     typer.Option("--strict", help="Stop at the first unusable line (bad checksum, malformed, not NMEA) with its line number."),

@@ -22,7 +22,7 @@ def process(
     tariff: Annotated[str, typer.Option("--tariff", help="Tariff (TOML).")],
     vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class in the tariff.")] = "car",
     vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id (default: the log's file name).")] = None,
-    output: opt.Output = "-",
+    output: opt.InvoiceOutput = "-",
     nav: Annotated[Optional[str], typer.Option("--nav", help="RINEX navigation file (RINEX input).")] = None,
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings, tolled and free) for map-matching integrity.")] = None,
     policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")] = None,
