@@ -76,7 +76,7 @@ def test_gst_only_is_a_flagged_approximation_and_nothing_is_unmonitored():
 def test_android_log_without_satellites_cannot_be_monitored():
     tables = read_nmea(shared("android", "pixel6.nmea"))
     out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
-    assert len(out) == 48 and (out["raim_status"] == "insufficient").all() and (out["test_stat_source"] == "none").all()
+    assert len(out) == 48 and (out["raim_status"] == "unmonitored").all() and (out["test_stat_source"] == "none").all()
 
 
 def test_every_gpsd_log_gets_a_status_per_epoch():
@@ -127,3 +127,20 @@ def test_gsdc_bad_rows_do_not_raise(tmp_path):
     assert out["n_used"].tolist()[:2] == [3, 0]
     assert epochs["lat_deg"].iloc[:2].isna().all()
     assert (out["raim_status"].iloc[2:] == "valid").all()
+
+
+def test_a_gga_only_log_is_unmonitored_and_a_gsa_without_satellites_insufficient(tmp_path):
+    """No satellites reported at all: nothing to monitor; satellites reported but too few used: insufficient."""
+    from conftest import SAMPLES
+
+    lines = (SAMPLES / "straight-drive.nmea").read_text().splitlines()
+    gga_only = tmp_path / "gga.nmea"
+    gga_only.write_text("\n".join(line for line in lines if line[3:6] in ("GGA", "RMC")) + "\n")
+    tables = read_nmea(gga_only)
+    out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
+    assert len(out) == 180 and (out["raim_status"] == "unmonitored").all()
+    no_used = tmp_path / "gsv.nmea"
+    no_used.write_text("\n".join(line for line in lines if line[3:6] in ("GGA", "RMC", "GSV")) + "\n")
+    tables = read_nmea(no_used)
+    out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
+    assert (out["raim_status"] == "insufficient").all()

@@ -36,7 +36,7 @@ def _subset(meas: Measurements, rows: np.ndarray) -> Measurements:
     pick = lambda a: None if a is None else a[rows]  # noqa: E731
     return Measurements(meas.H[rows], meas.sigma_m[rows], meas.mask[rows], meas.sv[rows], residual_m=pick(meas.residual_m),
                         dy_m=pick(meas.dy_m), test_stat_override=pick(meas.test_stat_override),
-                        test_stat_source=pick(meas.test_stat_source))  # fmt: skip
+                        test_stat_source=pick(meas.test_stat_source), satellites_reported=pick(meas.satellites_reported))  # fmt: skip
 
 
 def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -35,12 +35,12 @@ from tollcli.readers.nmea.reader import check_usable
 VehicleClass = Annotated[str, typer.Option("--vehicle-class", help=f"Vehicle class, sets the top speed: {', '.join(CLASS_MAX_SPEED_MPS)}.")]
 
 
-def _trip(log: str, hal: float, strict: bool) -> tuple[pd.DataFrame, pd.DataFrame | None]:
+def _trip(log: str, hal: float, strict: bool, date=None) -> tuple[pd.DataFrame, pd.DataFrame | None]:
     """The whole trip's integrity table and satellite table."""
     kind = sniff_format(log)
     stats = ReadStats()
     tables, sats = [], []
-    for chunk in iter_integrity(log, kind, RaimParams(hal_m=hal), strict=strict, stats=stats):
+    for chunk in iter_integrity(log, kind, RaimParams(hal_m=hal), strict=strict, stats=stats, date=date.date() if date else None):
         tables.append(chunk.table)
         if chunk.satellites is not None:
             sats.append(chunk.satellites)
@@ -64,6 +64,7 @@ def locate(
     output: opt.Output = "-",
     as_json: Annotated[bool, typer.Option("--json", help="Write JSON records instead of a table (same as -o FILE.json).")] = False,
     strict: opt.Strict = False,
+    date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
 ) -> None:
     """The last trusted position of each vehicle (RAIM valid at --hal), and the last position of any kind when it differs.
@@ -76,7 +77,7 @@ def locate(
     named_by_file = [not vehicle and vehicle_from_log(p) is None for p in logs]
     per_log, spans = [], []
     for log in logs:
-        table, _ = _trip(log, hal, strict)
+        table, _ = _trip(log, hal, strict, date)
         dated = table["time_utc"].dropna() if "time_utc" in table else pd.Series(dtype=object)
         spans.append((dated.min(), dated.max()) if len(dated) else None)
         if table.empty:
@@ -114,6 +115,7 @@ def findings(
     hal: opt.Hal = 50.0,
     output: opt.JsonOutput = "-",
     strict: opt.Strict = False,
+    date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
 ) -> None:
     """Tamper and evasion findings of one trip (gaps, jamming signs, spoofing signs), with times, positions and evidence.
@@ -125,7 +127,7 @@ def findings(
     settings = FindingSettings.for_class(vehicle_class, **overrides)
     if max_speed is not None:
         settings = FindingSettings(max_speed_mps=max_speed, **overrides)
-    table, sats = _trip(log, hal, strict)
+    table, sats = _trip(log, hal, strict, date)
     items = trip_findings(table, sats, table, load_geoobjects(geo) if geo else None, settings) if not table.empty else []
     doc = {"log": log, "settings": settings.__dict__, "findings": items}
     write_text_atomic(opt.require_json(output), json.dumps(doc, indent=1, sort_keys=True) + "\n")
@@ -143,10 +145,11 @@ def enforce(
     pass_dist: Annotated[float, typer.Option("--pass-dist", help="The trip passes a gantry within this distance, m.", min=0.0)] = 50.0,
     output: opt.JsonOutput = "-",
     strict: opt.Strict = False,
+    date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
 ) -> None:
     """Cross-check RFID/DSRC gantry reads with the GNSS trip: reads where the trip was elsewhere or silent, gantries passed without a read."""
-    table, _ = _trip(log, 50.0, strict)
+    table, _ = _trip(log, 50.0, strict, date)
     ids, geoms, crs = read_gantries(gantries)
     items = cross_check(table, read_reads(reads), ids, geoms, crs, tag, RoadsideSettings(time_tol, distance_tol, pass_dist))
     doc = {"log": log, "tag": tag, "settings": {"time_tol_s": time_tol, "distance_tol_m": distance_tol, "pass_dist_m": pass_dist},

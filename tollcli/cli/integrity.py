@@ -37,6 +37,7 @@ def integrity(
     sigma: opt.Sigma = 5.0,
     iono: opt.Iono = "single",
     strict: opt.Strict = False,
+    date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
     as_json: opt.JsonSummary = False,
     max_bad: opt.MaxBad = None,
@@ -65,19 +66,21 @@ def integrity(
         raise UsageError(str(exc)) from None
     nominal = NominalModel(iono=iono)
     kind = sniff_format(log) if fmt == "auto" else fmt
+    day = date.date() if date else None
     counts: Counter[str] = Counter()
     writer = TableWriter(output, format_for(output))
     stats = ReadStats()
     with writer:
         if checks or roads:
-            tables = [c.table for c in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav)]
+            tables = [c.table for c in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav,
+                                                      date=day)]
             if kind == "nmea":
                 check_usable(stats)  # a log without one epoch: the data error, before any check runs
             table = with_checks(pd.concat(tables, ignore_index=True), roads)
             counts.update(table["raim_status"].astype(str))
             writer.write(table)
         elif kind == "nmea":
-            _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats)
+            _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day)
         else:
             table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal)
             counts.update(table["raim_status"].astype(str))
@@ -119,9 +122,9 @@ def with_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
     return pd.concat([table.reset_index(drop=True), extra, k[["hit_m"]]], axis=1)
 
 
-def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats) -> None:
+def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None) -> None:
     with progress(f"checking {log}", quiet) as advance:
-        for chunk in iter_integrity(log, "nmea", params, sigma_model, sigma, nominal, strict, stats):
+        for chunk in iter_integrity(log, "nmea", params, sigma_model, sigma, nominal, strict, stats, date=day):
             writer.write(chunk.table)
             counts.update(chunk.table["raim_status"].astype(str))
             advance(len(chunk.table))

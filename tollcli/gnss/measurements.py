@@ -28,6 +28,7 @@ class Measurements:
     dy_m: np.ndarray | None = None  # (E, N) pre-fit residuals at the linearisation point (pseudoranges)
     test_stat_override: np.ndarray | None = None  # (E,) a statistic from elsewhere (GST approximation), NaN = none
     test_stat_source: np.ndarray | None = None  # (E,) 'grs', 'gst_approx', 'pseudorange', 'none'
+    satellites_reported: np.ndarray | None = None  # (E,) the receiver reported its satellites (NMEA GSA/GSV); None: n/a
 
 
 def slots(epoch_row: np.ndarray, n_epochs: int) -> tuple[np.ndarray, int]:

@@ -185,5 +185,6 @@ def nmea_measurements(
     weight_sum = np.where(mask, 1.0 / np.where(mask, sigma, 1.0) ** 2, 0.0).sum(axis=1)
     gst_stat = np.where(~have_grs & np.isfinite(rms), rms**2 * weight_sum, np.nan)
     source = np.where(have_grs, "grs", np.where(np.isfinite(gst_stat), "gst_approx", "none")).astype(object)
+    reported = np.isin(epoch_ids, satellites["epoch"].to_numpy()) if n_epochs else np.zeros(0, bool)
     return Measurements(H, sigma, mask, labels, residual_m=np.where(have_grs[:, None], residual, np.nan),
-                        test_stat_override=gst_stat, test_stat_source=source)  # fmt: skip
+                        test_stat_override=gst_stat, test_stat_source=source, satellites_reported=reported)  # fmt: skip

@@ -18,7 +18,7 @@ from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.wls import Geometry, residuals_from_prefit, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
 from tollcli.integrity.kalman_hit import hpl_sbas_m
-from tollcli.integrity.raim import RaimParams, detect, status_names
+from tollcli.integrity.raim import STATUSES, RaimParams, detect, status_names
 
 RAIM_COLUMNS = (
     "raim_mode", "n_used", "dof", "slope_max_m", "test_stat", "test_stat_source", "threshold", "lambda_det",
@@ -52,6 +52,9 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
         excluded_sv[hit] = meas.sv[np.flatnonzero(hit), exclusion.excluded_slot[hit]]
         shift = exclusion.shift_enu_m
     source = meas.test_stat_source if meas.test_stat_source is not None else np.full(n_epochs, "none", dtype=object)
+    status = detection.status.copy()
+    if meas.satellites_reported is not None:  # a receiver that reports no satellites at all (GGA/RMC only): nothing
+        status[~meas.satellites_reported & (geometry.n_meas == 0)] = STATUSES.index("unmonitored")  # to monitor, not "too few"
     return pd.DataFrame(
         {
             "raim_mode": pd.array([params.mode] * n_epochs, dtype="string"),
@@ -66,7 +69,7 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
             "hal_m": detection.hal_m,
             "p_fa": detection.p_fa,
             "p_md": np.full(n_epochs, params.p_md),
-            "raim_status": pd.array(status_names(detection.status), dtype="string"),
+            "raim_status": pd.array(status_names(status), dtype="string"),
             "excluded_sv": pd.array(excluded_sv, dtype="string"),
             "fde_shift_e_m": shift[:, 0],
             "fde_shift_n_m": shift[:, 1],

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as dt
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -32,8 +33,11 @@ def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
 
 def iter_integrity(log: str, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
                    nominal: NominalModel | None = None, strict: bool = False, stats: ReadStats | None = None,
-                   nav: str | None = None) -> Iterator[IntegrityChunk]:  # fmt: skip
-    """Integrity tables of ``log`` (``kind``: nmea, gsdc-derived, rinex); NMEA is streamed in chunks."""
+                   nav: str | None = None, date: dt.date | None = None) -> Iterator[IntegrityChunk]:  # fmt: skip
+    """Integrity tables of ``log`` (``kind``: nmea, gsdc-derived, rinex); NMEA is streamed in chunks.
+
+    ``date``: the UTC date of the first epoch, for NMEA logs without RMC/ZDA dates.
+    """
     nominal = nominal or NominalModel()
     if kind != "nmea":
         epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal)
@@ -42,7 +46,7 @@ def iter_integrity(log: str, kind: str, params: RaimParams, sigma_model: str = "
     if sigma_model == "input":
         raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")
     carry = AngleCarry()
-    for chunk in iter_nmea_tables(log, strict=strict, stats=stats if stats is not None else ReadStats()):
+    for chunk in iter_nmea_tables(log, strict=strict, stats=stats if stats is not None else ReadStats(), date=date):
         meas = nmea_measurements(chunk.epochs, chunk.satellites, sigma_model, sigma_m, nominal, carry)
         raim = run_raim(meas, params)
         table = chunk.epochs.rename(columns={"n_used": "n_used_receiver"})
