@@ -109,16 +109,13 @@ def test_a_damaged_compiled_copy_of_the_geo_objects_is_made_again(tmp_path):
 
 
 def test_a_defect_is_one_line_with_its_own_exit_code(monkeypatch, capsys):
+    import tollcli.cli.process as process_command  # imported before the patch: it binds charge_log at import
     from tollcli.cli import main as entry
-    from tollcli.job import pipeline
 
     def broken(*args, **kwargs):
         raise ZeroDivisionError("planted")
 
-    monkeypatch.setattr(pipeline, "charge_log", broken)
     monkeypatch.delenv("TOLLCLI_DEBUG", raising=False)
-    import tollcli.cli.process as process_command
-
     monkeypatch.setattr(process_command, "charge_log", broken)
     with pytest.raises(SystemExit) as exit_:
         entry.main(["process", DRIVE, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", "-"])
