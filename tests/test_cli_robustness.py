@@ -163,3 +163,16 @@ def test_an_output_extension_a_command_does_not_write_is_refused(tmp_path, comma
     out = tmp_path / "out.parquet"
     err = _one_line(run_cli(*command, "-q", "-o", str(out)), 2)
     assert "out.parquet" in err and not out.exists()
+
+
+@pytest.mark.parametrize("command", [["integrity"], ["locate"], ["findings", "--geo", GEO]], ids=lambda c: c[0])
+def test_the_date_the_reader_asks_for_is_an_option_of_the_command(tmp_path, command):
+    """A GGA-only log has no date; the hint says --date, and integrity, locate and findings take it."""
+    gga = tmp_path / "gga.nmea"
+    gga.write_text("".join(line for line in (SAMPLES / "straight-drive.nmea").read_text().splitlines(True) if line[3:6] == "GGA"))
+    out = tmp_path / ("out.json" if command[0] == "findings" else "out.csv")
+    hint = run_cli("integrity", str(gga), "-o", str(tmp_path / "hint.csv")).stderr.decode()
+    assert "--date" in hint
+    result = run_cli(command[0], str(gga), *command[1:], "--date", "2024-05-06", "-o", str(out))
+    assert result.returncode == 0, result.stderr.decode()
+    assert "2024-05-06" in out.read_text() or command[0] == "findings"
