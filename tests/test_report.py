@@ -101,3 +101,25 @@ def test_report_renders_in_headless_chromium(run, tmp_path):
     assert _has_colour(top, "#1a9850") > 30, "no valid positions drawn on the map"
     assert _has_colour(top, "#d73027") > 30, "no fault_detected positions drawn on the map"
     assert _has_colour(top, "#4575b4", tol=0.12) > 100, "no charged geo-object outline"
+
+
+def test_plot_and_report_of_an_invoice_handed_over_with_its_files(tmp_path):
+    """The auditor's folder: invoice, log and geo-objects side by side, opened from elsewhere; a changed log is refused."""
+    work = tmp_path / "operator"
+    (work / "logs").mkdir(parents=True)
+    shutil.copy(DRIVE / "drive.nmea", work / "logs" / "drive.nmea")
+    shutil.copy(GEO, work / "geo.geojson")
+    made = run_cli("process", "logs/drive.nmea", "--geo", "geo.geojson", "--tariff", TARIFF, "-q", "-o", "invoice.json", cwd=work)
+    assert made.returncode == 0, made.stderr.decode()
+    handed = tmp_path / "case"
+    handed.mkdir()
+    for name in ("invoice.json", "logs/drive.nmea", "geo.geojson"):
+        shutil.copy(work / name, handed / Path(name).name)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    assert run_cli("report", str(handed / "invoice.json"), "-q", "-o", str(tmp_path / "r.html"), cwd=elsewhere).returncode == 0
+    result = run_cli("plot", str(handed / "invoice.json"), "-q", "-o", str(tmp_path / "figs"), cwd=elsewhere)
+    assert result.returncode == 0, result.stderr.decode()
+    (handed / "drive.nmea").write_text("changed\n")
+    changed = run_cli("plot", str(handed / "invoice.json"), "-q", "-o", str(tmp_path / "figs2"), cwd=elsewhere)
+    assert changed.returncode == 1 and "changed since the invoice was made" in changed.stderr.decode()

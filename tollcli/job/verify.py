@@ -47,7 +47,7 @@ def verify_invoice(path: str) -> dict:
         file = inputs[key]
         if file == "-":
             raise VerifyFailed(f"{path}: the {label} was read from stdin and cannot be read again")
-        found[key] = _locate(path, str(file), inputs.get(f"{key}_sha256"), label)
+        found[key] = locate_input(path, str(file), inputs.get(f"{key}_sha256"), label)
     again, _ = charge_log(found["log"], found["geoobjects"], found["tariff"], settings_from_invoice(invoice), found.get("nav"),
                           found.get("roads"), as_recorded={k: inputs[k] for k in found})  # fmt: skip
     original = invoice_json(invoice)
@@ -59,7 +59,7 @@ def verify_invoice(path: str) -> dict:
     return {"invoice": path, "content_sha256": invoice["content_sha256"], "inputs": {k: inputs[k] for k, _ in INPUTS if k in inputs}}
 
 
-def _locate(invoice_path: str, file: str, recorded, label: str) -> str:
+def locate_input(invoice_path: str, file: str, recorded, label: str) -> str:
     """Where the input the invoice names is: the first candidate place whose SHA-256 is the recorded one."""
     here = os.path.dirname(os.path.abspath(invoice_path))
     candidates = [file] if os.path.isabs(file) else [file, os.path.join(here, file)]

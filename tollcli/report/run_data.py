@@ -21,6 +21,7 @@ from tollcli.integrity.truth_check import check_against_truth, errors_against_tr
 from tollcli.io.sources import read_table, sniff_format
 from tollcli.job.log_integrity import iter_integrity
 from tollcli.job.pipeline import settings_from_invoice
+from tollcli.job.verify import locate_input
 from tollcli.readers.nmea import ReadStats
 from tollcli.spatial import read_features
 
@@ -40,8 +41,11 @@ def load_run(invoice_path: str, truth_path: str | None = None) -> RunData:
     invoice = load_invoice(invoice_path)
     inputs = invoice.get("inputs") or {}
     log, geo_path = inputs.get("log"), inputs.get("geoobjects")
-    if not log or not geo_path or log == "-":
+    if not isinstance(log, str) or not isinstance(geo_path, str) or log == "-":
         raise DataError(f"{invoice_path}: the invoice does not name a log file and geo-objects to rebuild the run from")
+    # where the invoice names them, or beside it (an auditor's folder), checked by their recorded SHA-256
+    log = locate_input(invoice_path, log, inputs.get("log_sha256"), "log")
+    geo_path = locate_input(invoice_path, geo_path, inputs.get("geoobjects_sha256"), "geo-objects")
     settings = settings_from_invoice(invoice)
     geo = load_geoobjects(geo_path)
     hal = float(np.min(geo.hal_m))
