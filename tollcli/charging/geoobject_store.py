@@ -27,7 +27,7 @@ from tollcli.cache import cache_dir
 from tollcli.errors import DataError
 from tollcli.spatial import feature_geometry, project, read_features
 
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2  # 2: compiled only after the file passed geoobjects check
 
 
 @dataclass
