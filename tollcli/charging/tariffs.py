@@ -174,13 +174,13 @@ def _bands(items, path: str, text: str = "") -> tuple[Band, ...]:
     bands = []
     for i, item in enumerate(items):
         header = _nth_band_line(text, i)
-        where = f"{path}:{header}: band {item.get('name', i + 1) if isinstance(item, dict) else i + 1}" if header else \
-            f"{path}: band {item.get('name', i + 1) if isinstance(item, dict) else i + 1}"  # fmt: skip
+        label = item.get("name", i + 1) if isinstance(item, dict) else i + 1
+        where = f"{path}:{header}: band {label}" if header else f"{path}: band {label}"
         if not isinstance(item, dict):
             raise DataError(f"{where}: must be a table")
         for key in item:
             if key not in BAND_KEYS:
-                raise DataError(f"{_where(path, text, key, header)}: band {item.get('name', i + 1)}: unknown key {key!r} "
+                raise DataError(f"{_where(path, text, key, header)}: band {label}: unknown key {key!r} "
                                 f"(a band has {', '.join(BAND_KEYS)})")  # fmt: skip
         for key in ("start", "end", "factor"):
             if key not in item:
@@ -188,7 +188,7 @@ def _bands(items, path: str, text: str = "") -> tuple[Band, ...]:
         days = item.get("days", list(DAYS))
         if not isinstance(days, list) or not days or any(_day(d) is None for d in days):
             bad = next((d for d in days if _day(d) is None), None) if isinstance(days, list) else days
-            raise DataError(f"{_where(path, text, 'days', header)}: band {item.get('name', i + 1)}: days must be a list of "
+            raise DataError(f"{_where(path, text, 'days', header)}: band {label}: days must be a list of "
                             f"mon … sun (or monday … sunday), got {bad!r}")  # fmt: skip
         start, end = _minutes(item["start"], where), _minutes(item["end"], where)
         if start == end:

@@ -123,14 +123,15 @@ def findings(
     Writes JSON: the settings used and one record per finding (kind, category,
     start_utc, end_utc, lat_deg, lon_deg, end_lat_deg, end_lon_deg, evidence).
     """
+    opt.require_json(output)
     overrides = {"gap_min_s": gap_min, "gap_min_m": gap_min_distance}
+    if max_speed is not None:  # the given top speed serves any class name
+        overrides["max_speed_mps"] = max_speed
     settings = FindingSettings.for_class(vehicle_class, **overrides)
-    if max_speed is not None:
-        settings = FindingSettings(max_speed_mps=max_speed, **overrides)
     table, sats = _trip(log, hal, strict, date)
     items = trip_findings(table, sats, table, load_geoobjects(geo) if geo else None, settings) if not table.empty else []
     doc = {"log": log, "settings": settings.__dict__, "findings": items}
-    write_text_atomic(opt.require_json(output), json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    write_text_atomic(output, json.dumps(doc, indent=1, sort_keys=True) + "\n")
     kinds = Counter(f["kind"] for f in items)
     warn(f"{log}: {len(items)} findings" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)
 
@@ -149,11 +150,12 @@ def enforce(
     quiet: opt.Quiet = False,
 ) -> None:
     """Cross-check RFID/DSRC gantry reads with the GNSS trip: reads where the trip was elsewhere or silent, gantries passed without a read."""
+    opt.require_json(output)
     table, _ = _trip(log, 50.0, strict, date)
     ids, geoms, crs = read_gantries(gantries)
     items = cross_check(table, read_reads(reads), ids, geoms, crs, tag, RoadsideSettings(time_tol, distance_tol, pass_dist))
     doc = {"log": log, "tag": tag, "settings": {"time_tol_s": time_tol, "distance_tol_m": distance_tol, "pass_dist_m": pass_dist},
            "findings": items}  # fmt: skip
-    write_text_atomic(opt.require_json(output), json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    write_text_atomic(output, json.dumps(doc, indent=1, sort_keys=True) + "\n")
     kinds = Counter(f["kind"] for f in items)
     warn(f"{log}: {len(items)} roadside findings" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)

@@ -86,7 +86,6 @@ def _owner(outdir: str, vehicle: str, name: str) -> str | None:
 
 def plan_outputs(logs: list[str], settings: ChargeSettings, outdir: str) -> list[tuple[str, str, str]]:
     """(vehicle id, vehicle folder, output name) of every log: no two logs share an output."""
-    
     vehicles = [settings.vehicle or vehicle_from_log(log) or vehicle_from_path(log) for log in logs]
     places = [(path_component(v), path_component(log_name(log))) for v, log in zip(vehicles, logs)]
     groups: dict[tuple[str, str], list[int]] = {}
@@ -94,8 +93,7 @@ def plan_outputs(logs: list[str], settings: ChargeSettings, outdir: str) -> list
         groups.setdefault(place, []).append(i)
     names = [name for _, name in places]
     for (folder, name), members in groups.items():
-        if len(members) == 1 and _owner(outdir, folder, name) in (None, os.path.abspath(logs[members[0]])):
-            continue
+        # the log whose invoice is already there keeps the name; a free name goes to the first log by path
         owner = _owner(outdir, folder, name)
         keeper = next((i for i in members if os.path.abspath(logs[i]) == owner), None)
         if keeper is None and owner is None:
