@@ -17,9 +17,9 @@ from tollcli.enforcement.findings import CLASS_MAX_SPEED_MPS, FindingSettings, t
 from tollcli.enforcement.locate import (
     COLUMNS,
     latest_per_vehicle,
-    separate_simultaneous,
     locate_in,
     located_rows,
+    separate_simultaneous,
     vehicle_from_log,
     vehicle_from_path,
 )
