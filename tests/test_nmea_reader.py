@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from tollcli.errors import DataError
 from tollcli.readers.nmea import compose, iter_nmea_tables, read_nmea
 from tollcli.readers.nmea.dates import DateCarry, resolve_days
+from tollcli.readers.nmea.fields import checksum
 
 
 def _read(lines: list[str], **kw):
@@ -96,8 +97,32 @@ def test_resolve_days_recovers_true_dates(start, steps, anchors, split):
     # the reader holds undated chunks until an anchor arrives: mimic that by splitting after one
     first_anchor = min(idx)
     cut = max(cut, first_anchor + 1)
-    got = np.concatenate([resolve_days(tod[:cut], anchor[:cut], carry), resolve_days(tod[cut:], anchor[cut:], carry)])
-    assert (got == true_days).all()
+    (a, jump_a), (b, jump_b) = resolve_days(tod[:cut], anchor[:cut], carry), resolve_days(tod[cut:], anchor[cut:], carry)
+    assert (np.concatenate([a, b]) == true_days).all()
+    assert np.isnan(np.concatenate([jump_a, jump_b])).all()  # true dates are never a jump
+
+
+@pytest.mark.parametrize("cut", [0, 1, 50, 99])
+@pytest.mark.parametrize("jump", [1, -1, -7168])
+def test_a_date_jump_inside_a_continuous_trip_keeps_the_trips_date(cut, jump):
+    """One RMC a day off, or a 1024-week rollover from the middle on: the trip's epochs keep its first date
+    (midnight rollovers still counted), and the jump is kept where it happened; after a gap a new date is taken."""
+    t = 86_300 + np.arange(200, dtype=np.int64)  # 1 Hz across midnight
+    true_days = 20_000 + t // 86_400
+    tod = (t % 86_400).astype(float)
+    given = true_days.copy()
+    given[60] += jump  # one epoch's RMC off
+    given[120:] += jump  # from epoch 120 on, every RMC off (week-number rollover)
+    carry = DateCarry()
+    parts = [resolve_days(tod[:cut], given[:cut], carry), resolve_days(tod[cut:], given[cut:], carry)]
+    days, jumps = (np.concatenate(x) for x in zip(*parts))
+    assert (days == true_days).all()
+    assert np.flatnonzero(np.isfinite(jumps)).tolist() == [60, *range(120, 200)] and (jumps[np.isfinite(jumps)] == jump).all()
+    # the receiver off for an hour, then another date: taken as given
+    later = np.concatenate([tod, tod[-1] + 3_600 + np.arange(3.0)])
+    dates = np.concatenate([true_days, [true_days[-1] + 5] * 3])
+    days, jumps = resolve_days(later, dates, DateCarry())
+    assert days[-3:].tolist() == [true_days[-1] + 5] * 3 and np.isnan(jumps).all()
 
 
 def test_dirty_lines_are_skipped_and_counted():
@@ -217,3 +242,28 @@ def test_huge_integer_fields_are_malformed_not_crashes():
     ]
     tables = _read(lines)
     assert tables.stats.malformed == 3 and len(tables.epochs) == 1
+
+
+@pytest.mark.parametrize("engine", ["bulk", "reference"])
+def test_n_in_view_is_minus_one_without_gsv_and_zero_for_an_empty_gsv(engine):
+    """An epoch without GSV has an unknown number of satellites in view (-1), unlike a GSV that lists none (0)."""
+    gga = "$GPGGA,080000.00,4241.8033,N,00253.5785,E,1,05,1.0,49.3,M,0.0,M,,*"
+    body = gga[1:-1]
+    first = f"{gga}{checksum(body):02X}"
+    second_body = body.replace("080000.00", "080001.00")
+    empty_gsv = "GPGSV,1,1,00"
+    lines = [first, f"${second_body}*{checksum(second_body):02X}", f"${empty_gsv}*{checksum(empty_gsv):02X}"]
+    ep = _read(lines, date=dt.date(2026, 3, 2), engine=engine).epochs
+    assert ep["n_in_view"].tolist() == [-1, 0]
+
+
+@pytest.mark.parametrize("engine", ["bulk", "reference"])
+def test_text_dropped_before_a_sentence_is_counted(engine):
+    """Binary junk before a sentence, or a sentence glued behind another: the last sentence is read and the
+    dropped text is counted and reported (never silently lost)."""
+    good = list(compose.straight_drive(3))
+    lines = [good[0], "\x00\x01junk" + good[1], *good[2:5], good[5] + good[6], *good[7:]]
+    stats = _read(lines, engine=engine).stats
+    assert stats.discarded_text == 2
+    assert "text before the sentence dropped on 2 lines" in stats.summary()
+    assert _read(good, engine=engine).stats.discarded_text == 0

@@ -100,6 +100,7 @@ class _Epoch:
         "mode_indicator",
         "n_used_gga",
         "view",
+        "gsv_seen",
         "used",
         "grs",
         "gbs_svid",
@@ -120,6 +121,7 @@ class _Epoch:
         self.n_used_gga = -1
         # (constellation, svid) -> (signal_id, prn, elev, azim, cn0)
         self.view: dict[tuple[str, int], tuple[int, int, float, float, float]] = {}
+        self.gsv_seen = False  # a GSV sentence (even one listing no satellite) was in the epoch
         self.used: list[tuple[int | None, list[tuple[str, int]]]] = []
         self.grs: list[tuple[int | None, list[float]]] = []
         self.gbs_svid = -1
@@ -277,7 +279,7 @@ class EpochAssembler:
         used = set(used_keys)
         n_used = len(used) if cur.used else cur.n_used_gga
         self.e_n_used.append(n_used)
-        self.e_n_view.append(len(cur.view))
+        self.e_n_view.append(len(cur.view) if cur.gsv_seen else -1)
         keys = sorted(set(cur.view) | used, key=lambda k: (_CONST_INDEX[k[0]], k[1]))
         for key in keys:
             signal, prn, elev, azim, cn0 = cur.view.get(key, (-1, -1, NAN, NAN, NAN))
@@ -478,7 +480,9 @@ class EpochAssembler:
             if not math.isnan(azim) and not 0.0 <= azim <= 360.0:
                 raise ValueError(f"azimuth {azim}")
             rows.append((key, (signal, prn, elev, azim, cn0)))
-        view = self._epoch_for(line).view
+        epoch = self._epoch_for(line)
+        epoch.gsv_seen = True
+        view = epoch.view
         for key, value in rows:
             old = view.get(key)
             # keep the lowest signal id (the primary signal); same signal: the latest report

@@ -315,7 +315,7 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
     out["fix_mode"] = fix_mode.astype(np.int8)
     out["mode_indicator"] = _ONE_CHAR[mode]
     out["n_used"] = np.where(has_gsa, n_used_gsa, n_used_gga).astype(np.int16)
-    out["n_in_view"] = n_in_view.astype(np.int16)
+    out["n_in_view"] = np.where(np.bincount(gsv["e"], minlength=n) > 0, n_in_view, -1).astype(np.int16)
     out["gbs_failed_svid"] = np.full(n, -1, np.int16)
     out.update(floats)
     return out

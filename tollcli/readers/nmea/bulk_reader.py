@@ -28,7 +28,7 @@ from tollcli.readers.nmea import bulk_epochs, bulk_sentences
 from tollcli.readers.nmea.assembler import EpochAssembler
 from tollcli.readers.nmea.bulk_lines import BlockLines, pack_address, split_block, type_code, unpack_address
 from tollcli.readers.nmea.fields import time_of_day_s
-from tollcli.readers.nmea.line_reader import HANDLED_TYPES, classify_line, feed_lines
+from tollcli.readers.nmea.line_reader import DISCARDED, HANDLED_TYPES, classify_line, feed_lines
 
 #: line kinds
 BLANK, COMMENT, NOT_NMEA, NO_CHECKSUM, BAD_CHECKSUM, UNUSED, MALFORMED, DECODED = range(8)
@@ -172,6 +172,9 @@ class BulkReader:
         scratch = EpochAssembler()
         for i in lines:
             k, reason, address, fields = classify_line(bl.text(i))
+            if reason == DISCARDED:
+                why[i] = reason  # counted by _count, the one place a line's statistics are added
+                reason = ""
             if k != "sentence":
                 kind[i] = _KIND[k]
                 if reason:
@@ -220,6 +223,7 @@ class BulkReader:
         stats.unused += int(counts[UNUSED])
         stats.decoded += int(counts[DECODED])
         stats.sentences += int(counts[UNUSED] + counts[MALFORMED] + counts[DECODED])
+        stats.discarded_text += sum(1 for i, w in why.items() if i < cut and w == DISCARDED and k[i] in (UNUSED, DECODED))
         unused = np.flatnonzero(k == UNUSED)
         if unused.size:
             names = [stype[i] if stype[i] is not None else unpack_address(int(bl.address[i])) for i in unused]

@@ -5,6 +5,13 @@ the nearest dated epoch, counting midnight rollovers in between: a rollover is a
 time of day that drops by more than 12 h from one epoch to the next. Epochs
 before the first dated one take it backwards the same way. Vectorized over the
 epochs of a chunk; :class:`DateCarry` holds what the next chunk needs.
+
+A continuous trip keeps one calendar: while the time of day runs on (steps of 0 to
+``MAX_CONTINUOUS_STEP_S``, a midnight rollover included) the date is the one the trip's
+first dated epoch gave, counted on through midnights. A later RMC/ZDA date that disagrees
+(a receiver's date jump, a GPS week-number rollover of 1024 weeks) does not move the
+epochs: it is kept as ``date_jump_days`` (given minus carried date) for the findings. After
+a gap in the time of day (the receiver was off), the next given date is taken as it is.
 """
 
 from __future__ import annotations
@@ -14,7 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 
 HALF_DAY_S = 43_200.0
+DAY_S = 86_400.0
 MS_PER_DAY = 86_400_000
+#: the longest step of the time of day, s, that still continues a trip (longer: the receiver was off)
+MAX_CONTINUOUS_STEP_S = 600.0
 
 
 @dataclass
@@ -25,19 +35,34 @@ class DateCarry:
     last_day: int = -1  # days since 1970-01-01, -1 unknown
 
 
-def resolve_days(tod_s: np.ndarray, date_days: np.ndarray, carry: DateCarry) -> np.ndarray:
-    """Days since 1970-01-01 per epoch (-1 where no date can be known yet).
+def resolve_days(tod_s: np.ndarray, date_days: np.ndarray, carry: DateCarry) -> tuple[np.ndarray, np.ndarray]:
+    """Days since 1970-01-01 per epoch (-1 where no date can be known yet), and each epoch's date jump.
 
     ``tod_s``: time of day per epoch, seconds; ``date_days``: the date an epoch's
-    own RMC/ZDA gave, -1 where none. ``carry`` is updated for the next chunk.
+    own RMC/ZDA gave, -1 where none. Returns (days, ``date_jump_days``): the jump is the
+    given date minus the trip's date where they differ inside a continuous trip, NaN elsewhere.
+    ``carry`` is updated for the next chunk.
     """
     n = tod_s.size
     if n == 0:
-        return np.empty(0, dtype=np.int64)
+        return np.empty(0, dtype=np.int64), np.empty(0)
     prev = np.concatenate(([carry.last_tod_s], tod_s[:-1]))
     with np.errstate(invalid="ignore"):
-        rolls = np.cumsum(tod_s < prev - HALF_DAY_S).astype(np.int64)
-    anchor = date_days >= 0
+        step = tod_s - prev
+        rollover = step < -HALF_DAY_S
+        step = np.where(rollover, step + DAY_S, step)
+        continuous = (step >= 0) & (step <= MAX_CONTINUOUS_STEP_S)
+    if carry.last_day < 0:
+        continuous[0] = False
+    rolls = np.cumsum(rollover).astype(np.int64)
+    given = date_days >= 0
+    # a trip (a run of continuous epochs) takes its first given date; trip 0 continues the carried one
+    trip = np.cumsum(~continuous)
+    rows = np.flatnonzero(given)
+    first_of_trip = rows[np.r_[True, trip[rows][1:] != trip[rows][:-1]]] if rows.size else rows
+    anchor = np.zeros(n, dtype=bool)
+    anchor[first_of_trip] = True
+    anchor &= trip > 0
     base = np.where(anchor, date_days - rolls, -1)
     # forward fill the base (date at roll count 0) from the last anchor seen
     idx = np.where(anchor, np.arange(n), -1)
@@ -51,10 +76,13 @@ def resolve_days(tod_s: np.ndarray, date_days: np.ndarray, carry: DateCarry) -> 
     elif anchor.any():
         first = int(np.argmax(anchor))
         days[:first] = base[first] + rolls[:first]
+    jump = np.full(n, np.nan)
+    differs = given & (days >= 0) & (date_days != days)
+    jump[differs] = (date_days[differs] - days[differs]).astype(float)
     carry.last_tod_s = float(tod_s[-1])
     if days[-1] >= 0:
         carry.last_day = int(days[-1])
-    return days
+    return days, jump
 
 
 def to_time_utc_ms(days: np.ndarray, tod_s: np.ndarray) -> np.ndarray:

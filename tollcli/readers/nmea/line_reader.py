@@ -32,6 +32,7 @@ class ReadStats:
     no_checksum: int = 0
     malformed: int = 0
     not_nmea: int = 0
+    discarded_text: int = 0  # lines whose sentence was read but text before it was dropped (junk, a glued sentence)
     epochs: int = 0
     satellite_rows: int = 0
     undated_epochs: int = 0
@@ -61,6 +62,8 @@ class ReadStats:
         text = f"{self.source}: " + ", ".join(parts)
         if self.skipped:
             text += f"; skipped {self.skipped} lines ({detail})"
+        if self.discarded_text:
+            text += f"; text before the sentence dropped on {self.discarded_text} lines"
         if self.undated_epochs:
             text += f"; {self.undated_epochs} epochs without a date (no RMC/ZDA; use --date)"
         return text
@@ -75,13 +78,18 @@ class ReadStats:
 HANDLED_TYPES = frozenset(EpochAssembler().handled_types())
 
 
+#: ``classify_line``'s word for a usable sentence that had text before it
+DISCARDED = "text before the sentence discarded"
+
+
 def classify_line(line: str) -> tuple[str, str, str, list[str]]:
     """What one raw line is: ``(kind, why, address, fields)``.
 
     ``kind``: ``blank``, ``comment``, ``not_nmea``, ``no_checksum``, ``bad_checksum``
     (``why`` says what is wrong), ``unused`` (a valid sentence the reader does not
     use) or ``sentence`` (a valid sentence of a type the assembler reads; ``fields``
-    are those after the address).
+    are those after the address). For those two, ``why`` is :data:`DISCARDED` when text before the
+    sentence (binary junk, another sentence glued on) was dropped, else empty.
     """
     line = line.strip()
     if not line:
@@ -107,9 +115,10 @@ def classify_line(line: str) -> tuple[str, str, str, list[str]]:
         return "bad_checksum", f"bad checksum (*{expected:02X} given, {got:02X} computed)", "", []
     fields = body.split(",")
     address = fields[0]
+    dropped = DISCARDED if start > 0 else ""
     if len(address) != 5 or address[0] == "P" or address[2:] not in HANDLED_TYPES:
-        return "unused", "", address, []
-    return "sentence", "", address, fields[1:]
+        return "unused", dropped, address, []
+    return "sentence", dropped, address, fields[1:]
 
 
 def feed_lines(lines: list[str], asm: EpochAssembler, stats: ReadStats, strict: bool, name: str) -> None:
@@ -126,9 +135,11 @@ def feed_lines(lines: list[str], asm: EpochAssembler, stats: ReadStats, strict: 
                 problem(stats, "malformed", line_no, f"malformed {address}: {exc}", strict, name)
                 continue
             stats.decoded += 1
+            stats.discarded_text += why == DISCARDED  # the sentence was used; text before it was not
         elif kind == "unused":
             stats.sentences += 1
             stats.unused += 1
+            stats.discarded_text += why == DISCARDED
             stats.unused_types[address] = stats.unused_types.get(address, 0) + 1
         elif kind == "blank":
             stats.blank += 1

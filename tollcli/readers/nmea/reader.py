@@ -146,7 +146,7 @@ def _emit(
         pending.clear()
     if arrays["epoch"].size == 0:
         return
-    days = resolve_days(arrays["tod_s"], arrays["date_days"], carry)
+    days, arrays["date_jump_days"] = resolve_days(arrays["tod_s"], arrays["date_days"], carry)
     time_utc = to_time_utc_ms(days, arrays["tod_s"])
     epochs = epoch_frame(arrays, time_utc)
     sats = satellite_frame(arrays, time_utc)

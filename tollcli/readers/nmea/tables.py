@@ -15,7 +15,7 @@ Epoch table, one row per fix time:
 ``fix_valid``          the receiver claims a GNSS fix (GGA quality 1–5, else RMC/GLL 'A', else GSA ≥ 2)
 ``mode_indicator``     RMC/GLL/GNS mode letter (A autonomous, D differential, E estimated, N none…)
 ``n_used``             satellites used in the fix (GSA count, else GGA/GNS)
-``n_in_view``          satellites reported in GSV
+``n_in_view``          satellites reported in GSV (-1: no GSV in the epoch, unknown; 0: a GSV listing none)
 ``hdop``/``pdop``/``vdop``  dilutions of precision (GSA; HDOP falls back to GGA)
 ``speed_mps``          speed over ground, m/s (RMC, else VTG)
 ``course_deg``         course over ground, degrees from true north
@@ -29,6 +29,8 @@ Epoch table, one row per fix time:
 ``pos_disagreement_m``  largest distance between the positions two sentences (GGA, GNS, RMC, GLL) give
                        for the same epoch, m (NaN when only one gave a position)
 ``date_disagreement_days``  ZDA date minus RMC date when both are in the epoch and differ (NaN otherwise)
+``date_jump_days``     the date the epoch's RMC/ZDA gave minus the date its continuous trip carries, where they
+                       differ (a date jump or week-number rollover; the epoch keeps the trip's date; NaN otherwise)
 =====================  =============================================================
 
 Satellite table, one row per satellite and epoch (the union of GSV "in view" and
@@ -55,6 +57,7 @@ EPOCH_COLUMNS = (
     "sigma_lat_m", "sigma_lon_m", "sigma_alt_m",
     "gbs_err_lat_m", "gbs_err_lon_m", "gbs_err_alt_m", "gbs_failed_svid", "gbs_p_md",
     "gbs_bias_m", "gbs_bias_sd_m", "pos_disagreement_m", "date_disagreement_days",
+    "date_jump_days",
 )  # fmt: skip
 
 SATELLITE_COLUMNS = (
@@ -66,7 +69,7 @@ _EPOCH_DTYPES = {
     "epoch": np.int64, "tod_s": np.float64, "line": np.int64, "fix_quality": np.int8,
     "fix_mode": np.int8, "fix_valid": bool, "mode_indicator": object, "n_used": np.int16,
     "n_in_view": np.int16, "gbs_failed_svid": np.int16,
-    **{k: np.float64 for k in FLOAT_COLUMNS},
+    **{k: np.float64 for k in FLOAT_COLUMNS}, "date_jump_days": np.float64,
 }  # fmt: skip
 _SAT_SOURCES = {
     "constellation": ("sat_constellation", object), "svid": ("sat_svid", np.int16),
