@@ -161,3 +161,59 @@ def test_a_log_that_crashes_the_tool_is_reported_and_the_others_go_on(tmp_path, 
     summary = run_batch([str(bad), str(good)], GEO, TARIFF, ChargeSettings(), str(tmp_path / "out"))
     assert (summary["done"], summary["failed"]) == (1, 1)
     assert "internal error (RuntimeError: boom)" in (tmp_path / "out" / "failed" / "bad.txt").read_text()
+
+
+def _children(pid: int) -> set[int]:
+    try:
+        return {int(p) for p in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()}
+    except OSError:
+        return set()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc to find the pool's workers")
+@pytest.mark.parametrize("how", ["SIGKILL", "SIGTERM"])
+def test_ending_the_batch_ends_its_pool_workers(tmp_path, how):
+    """The batch parent killed (SIGKILL: no chance to clean up) or terminated: no pool worker outlives it,
+    and nothing half-written is left in the output folder."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    for i in range(16):
+        shutil.copy(SAMPLES / "sim" / "urban-fault" / "drive.nmea", folder / f"TRK-{i:02d}.nmea")
+    out = tmp_path / "out"
+    parent = subprocess.Popen([sys.executable, "-m", "tollcli", "batch", str(folder), "--geo", GEO, "--tariff", TARIFF,
+                               "--workers", "2", "-q", "-o", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                              start_new_session=True)  # fmt: skip
+    workers: set[int] = set()
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and parent.poll() is None:
+        workers = {p for p in _children(parent.pid) if _alive(p)}
+        if len(workers) >= 2 and (out / "epochs").exists():
+            break
+        time.sleep(0.05)
+    assert len(workers) >= 2 and parent.poll() is None, "the batch ended before its workers were seen"
+    parent.send_signal(getattr(signal, how))
+    rc = parent.wait(timeout=30)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(_alive(p) for p in workers):
+        time.sleep(0.05)
+    left = [p for p in workers if _alive(p)]
+    for p in left:
+        os.kill(p, signal.SIGKILL)
+    assert not left, f"pool workers still running after the batch ended ({how})"
+    assert rc == (-9 if how == "SIGKILL" else 143), parent.stderr.read().decode()
+    if how == "SIGTERM":
+        assert not [p.name for p in out.rglob("*") if p.name.endswith(".tmp") or ".tmp" in p.name]

@@ -193,7 +193,7 @@ def test_locate_last_trusted_and_later_untrusted(tmp_path):
 GPSD_FINDINGS = {
     "ac12.log": ["time_jump"] * 6, "ac12_binary.log": ["time_jump"] * 5, "bt451.log": ["time_jump"],
     "bu353-glonass.log": ["satellite_collapse"], "ericsson-gru04.log": ["time_jump"],
-    "garmin-10x.log": ["cn0_collapse", "satellite_collapse"], "gp-320fw-2019-04-07-coldboot.log": ["time_jump"] * 3,
+    "garmin-10x.log": ["cn0_collapse", "satellite_collapse"], "gp-320fw-2019-04-07-coldboot.log": ["date_jump", "time_jump", "time_jump"],  # cold boot: 2010 dates, then 1999 with the time of day running on
     "humminbird-M37.log": ["time_jump"], "meinberg-gps164.log": ["doppler_mismatch"], "nl2008u.log": ["gap"],
     "sl869.log": ["position_jump"], "ublox-lea-4h.log": ["gap"], "unicore-um621.log": ["cn0_collapse", "satellite_collapse"],
 }  # fmt: skip
@@ -319,3 +319,18 @@ def test_locate_at_takes_the_time_format_the_outputs_write():
     for at in ("2026-03-02T08:01:00.000Z", "2026-03-02T08:01:00Z", "2026-03-02T08:01:00"):
         result = run_cli("locate", log, "--at", at, "-q")
         assert result.returncode == 0 and "2026-03-02T08:01:00.000Z" in result.stdout.decode(), at
+
+
+def test_binomial_tail_is_scipys():
+    """The numpy binomial tail the persistent-alarm finding uses equals scipy's survival function."""
+    from scipy.stats import binom
+
+    from tollcli.stats import binomial_tail
+
+    rng = np.random.default_rng(7)
+    n = rng.integers(1, 80, 2000)
+    k = rng.integers(0, 82, 2000)
+    p = rng.random(2000)
+    p[:50], p[50:100] = 1.0, 1e-12
+    assert np.allclose(binomial_tail(k, n, p), binom.sf(k - 1, n, p), rtol=1e-9, atol=1e-15)
+    assert binomial_tail(np.array([24]), np.array([30]), np.array([0.5]))[0] == pytest.approx(0.000715, rel=1e-2)

@@ -86,24 +86,81 @@ def test_fuzz_nmea_logs_read_and_check_without_exceptions(lines, shuffle_time):
     assert len(out) == len(tables.epochs)
 
 
-@FUZZ
-@given(st.lists(_line, max_size=40))
-def test_fuzz_cli_ends_in_an_exit_code_never_a_traceback(lines):
+#: the fuzzed inputs through every command: fewer examples than the library fuzzers (each runs eight commands)
+FUZZ_CLI = settings(max_examples=max(EXAMPLES // 4, 5), deadline=None, suppress_health_check=list(HealthCheck),
+                    derandomize=EXAMPLES <= 200)  # fmt: skip
+#: exit codes the commands document (0 ok, 1 data, 2 usage, 3 partial); 4 (system) and 5 (internal) are defects here
+DOCUMENTED = {0, 1, 2, 3}
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+GEO = os.path.join(ROOT, "geoobjects", "example-geoobjects.geojson")
+TARIFF = os.path.join(ROOT, "geoobjects", "example-tariff.toml")
+DRIVE = os.path.join(ROOT, "samples", "sim", "rural-clean", "drive.nmea")
+
+
+def _cli(*args: str) -> tuple[int, str]:
     from tollcli.cli.main import main
 
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            main(list(args))
+            code = 0
+        except SystemExit as exc:
+            code = exc.code
+    return code, err.getvalue()
+
+
+def _judged(code: int, err: str, what: str) -> None:
+    assert code in DOCUMENTED and "Traceback" not in err, f"{what}: exit {code}: {err}"
+    if code:
+        assert err.strip(), f"{what}: exit {code} without a word"
+
+
+@FUZZ_CLI
+@given(st.lists(_line, max_size=40))
+def test_fuzz_logs_through_every_command(lines):
+    """A fuzzed log through every command that reads a log (and verify of what process wrote): a documented exit."""
     with tempfile.TemporaryDirectory() as tmp:
         log = os.path.join(tmp, "log.nmea")
         with open(log, "w", encoding="latin-1", errors="replace") as fh:
             fh.write("\n".join(lines))
-        err = io.StringIO()
-        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-            try:
-                main(["epochs", log, "-o", os.path.join(tmp, "e.parquet"), "-q"])
-                code = 0
-            except SystemExit as exc:
-                code = exc.code
-    assert code in (0, 1, 3), err.getvalue()
-    assert "Traceback" not in err.getvalue()
+        runs = {
+            "epochs": ["epochs", log, "-q", "-o", os.path.join(tmp, "e.parquet"), "--satellites", os.path.join(tmp, "s.parquet")],
+            "integrity": ["integrity", log, "-q", "-o", os.path.join(tmp, "i.csv")],
+            "integrity --checks": ["integrity", log, "--checks", "-q", "-o", os.path.join(tmp, "c.csv")],
+            "findings": ["findings", log, "--geo", GEO, "-q", "-o", os.path.join(tmp, "f.json")],
+            "locate": ["locate", log, "-q", "-o", os.path.join(tmp, "l.csv")],
+            "process": ["process", log, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", os.path.join(tmp, "inv.json")],
+            "batch": ["batch", log, "--geo", GEO, "--tariff", TARIFF, "--workers", "1", "-q", "-o", os.path.join(tmp, "out")],
+        }  # fmt: skip
+        for what, args in runs.items():
+            code, err = _cli(*args)
+            _judged(code, err, what)
+            if what == "process" and code == 0:
+                _judged(*_cli("verify", os.path.join(tmp, "inv.json")), "verify")
+
+
+@FUZZ_CLI
+@given(st.deferred(lambda: _doc))
+def test_fuzz_geoobject_files_through_the_commands(doc):
+    """A fuzzed geo-object file through geoobjects check and process: a documented exit, never a traceback."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "g.geojson")
+        with open(path, "w", encoding="utf-8") as fh:
+            fh.write(doc if isinstance(doc, str) else json.dumps(doc))
+        _judged(*_cli("geoobjects", "check", path, "-q"), "geoobjects check")
+        _judged(*_cli("process", DRIVE, "--geo", path, "--tariff", TARIFF, "-q", "-o", os.path.join(tmp, "i.json")), "process")
+
+
+@FUZZ_CLI
+@given(st.deferred(lambda: _tariff))
+def test_fuzz_tariffs_through_process(text):
+    """A fuzzed tariff through process: an invoice or a documented exit with a reason, never a traceback."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "t.toml")
+        with open(path, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        _judged(*_cli("process", DRIVE, "--geo", GEO, "--tariff", path, "-q", "-o", os.path.join(tmp, "i.json")), "process")
 
 
 # ------------------------------------------------------------------------------------------ GeoJSON

@@ -6,6 +6,7 @@ They run over the bundled samples and simulated drives; each says what it change
 from __future__ import annotations
 
 import json
+from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
@@ -259,12 +260,101 @@ def test_a_log_split_between_passages_is_charged_as_the_whole_log(tmp_path, log)
     assert summary["totals"] == {"EUR": whole["total"]}
 
 
-@pytest.mark.xfail(strict=True, reason="open: a passage cut by a log-file boundary is charged once per file "
-                                       "(passages are not yet joined across a vehicle's consecutive logs)")
-def test_a_log_split_inside_a_passage_is_charged_once(tmp_path):
+@pytest.mark.parametrize("at", [60, 150])
+def test_a_log_split_inside_a_passage_is_charged_once(tmp_path, at):
+    """The log cut inside a passage into two files of one vehicle: the passage is charged once, by the invoice
+    where it began; the next lists its part at fee 0 (``continued``). The second invoice verifies, and a rerun
+    settles (both skipped, the same totals)."""
+    from tollcli.job.batch import run_batch
+    from tollcli.job.verify import verify_invoice
+
+    log = SIM[0]
+    whole = _charge(log)
+    parts = _split(log, tmp_path, at)
+    out = tmp_path / "out"
+    summary = run_batch([str(p) for p in parts], GEO, TARIFF, ChargeSettings(), str(out))
+    assert summary["totals"] == {"EUR": whole["total"]}
+    invoices = [json.loads(p.read_text()) for p in sorted((out / "invoices").rglob("*.json"))]
+    charged = sorted((line["geoobject"], line["entry_utc"], line["fee"]) for inv in invoices for line in inv["lines"]
+                     if line["band"] != "continued")  # fmt: skip
+    assert charged == sorted((line["geoobject"], line["entry_utc"], line["fee"]) for line in whole["lines"])
+    continued = [(inv, line) for inv in invoices for line in inv["lines"] if line["band"] == "continued"]
+    assert len(continued) == 1 and continued[0][1]["fee"] == "0.00"
+    assert continued[0][1]["continues"]["log"] == str(parts[0]) and continued[0][0]["inputs"]["log"] == str(parts[1])
+    assert continued[0][0]["parameters"]["continued"]
+    for inv_path in sorted((out / "invoices").rglob("*.json")):
+        verify_invoice(str(inv_path))
+    again = run_batch([str(p) for p in parts], GEO, TARIFF, ChargeSettings(), str(out))
+    assert again["skipped"] == 2 and again["totals"] == summary["totals"]
+
+
+def test_logs_a_day_apart_are_not_joined(tmp_path):
+    """The same vehicle's logs of two days: no passage is carried from one to the other."""
     from tollcli.job.batch import run_batch
 
     log = SIM[0]
     parts = _split(log, tmp_path, 60)
+    parts[1].write_text("\n".join(_shift_rmc_date(line, 1) for line in parts[1].read_text().splitlines()) + "\n")
     summary = run_batch([str(p) for p in parts], GEO, TARIFF, ChargeSettings(), str(tmp_path / "out"))
-    assert summary["totals"] == {"EUR": _charge(log)["total"]}
+    assert Decimal(summary["totals"]["EUR"]) > Decimal(_charge(log)["total"])  # the passage cut at 60 is charged twice
+    invoices = [json.loads(p.read_text()) for p in sorted((tmp_path / "out" / "invoices").rglob("*.json"))]
+    assert not any(line["band"] == "continued" for inv in invoices for line in inv["lines"])
+
+
+# ---------------------------------------------------------------- RMC date jumps inside a continuous trip
+def _shift_rmc_date(line: str, days: int) -> str:
+    body = line[1 : line.rfind("*")]
+    f = body.split(",")
+    if f[0][2:] != "RMC" or not f[9]:
+        return line
+    date = (pd.Timestamp(f"20{f[9][4:6]}-{f[9][2:4]}-{f[9][0:2]}") + pd.Timedelta(days=days)).strftime("%d%m%y")
+    f[9] = date
+    return _sentence(",".join(f))
+
+
+@pytest.mark.parametrize("how", ["one_day_once", "week_rollover_from_the_middle"])
+def test_a_date_jump_inside_a_passage_charges_it_once_and_is_reported(tmp_path, how):
+    """One RMC a day ahead in the middle of a passage, or every RMC from there on 1024 weeks back: the same
+    charges (one passage, dated as the trip), and a ``date_jump`` finding where the date jumped."""
+    log = SIM[0]
+    before = _charge(log)
+    first = before["lines"][0]
+    middle = pd.Timestamp(first["entry_utc"]) + (pd.Timestamp(first["exit_utc"]) - pd.Timestamp(first["entry_utc"])) / 2
+    groups = _epochs_of(log.read_text().splitlines())
+    at = next(i for i, g in enumerate(groups) if g[0].split(",")[1][:6] >= middle.strftime("%H%M%S"))
+    days, upto = (1, at + 1) if how == "one_day_once" else (-1024 * 7, len(groups))
+    changed = groups[:at] + [[_shift_rmc_date(line, days) for line in g] for g in groups[at:upto]] + groups[upto:]
+    jumped = tmp_path / "drive.nmea"
+    jumped.write_text("\n".join(line for g in changed for line in g) + "\n")
+    after = _charge(jumped)
+    assert after["lines"] == before["lines"] and after["total"] == before["total"] and after["period"] == before["period"]
+    found = [f for f in after["findings"]["items"] if f["kind"] == "date_jump"]
+    assert len(found) == 1 and found[0]["evidence"]["given_minus_trip_days"] == days
+    assert found[0]["evidence"]["week_rollover"] is (how != "one_day_once")
+    assert found[0]["start_utc"].startswith(middle.strftime("%Y-%m-%dT%H:%M"))
+
+
+# ---------------------------------------------------------------- inputs renamed and moved
+def test_logs_renamed_and_moved_into_other_folders_give_the_same_invoices(tmp_path):
+    """The same drives under other names, in other folders (two with the same name on two days): every log
+    keeps an invoice of its own, and the charges do not depend on where a log lies or what it is called."""
+    from tollcli.job.batch import run_batch
+
+    def charges_of(out: Path) -> list[tuple]:
+        docs = [json.loads(p.read_text()) for p in sorted((out / "invoices").rglob("*.json"))]
+        return sorted((json.dumps(d["lines"], sort_keys=True), d["total"], d["period"]["start_utc"]) for d in docs)
+
+    first = tmp_path / "first"
+    first.mkdir()
+    for log in SIM:
+        (first / f"{log.parent.name}.nmea").write_bytes(log.read_bytes())
+    a = run_batch(sorted(str(p) for p in first.iterdir()), GEO, TARIFF, ChargeSettings(vehicle="TRK-9"), str(tmp_path / "a"))
+    moved = tmp_path / "moved"
+    for i, log in enumerate(SIM):
+        folder = moved / ("day1" if i % 2 else "day2") / "deep"
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / ("TRK-9.nmea" if i < 2 else f"renamed-{i}.log")).write_bytes(log.read_bytes())
+    b = run_batch(sorted(str(p) for p in moved.rglob("*.*")), GEO, TARIFF, ChargeSettings(vehicle="TRK-9"), str(tmp_path / "b"))
+    assert a["done"] == b["done"] == len(SIM) and a["totals"] == b["totals"]
+    assert len(list((tmp_path / "b" / "invoices").rglob("*.json"))) == len(SIM)
+    assert charges_of(tmp_path / "a") == charges_of(tmp_path / "b")

@@ -47,7 +47,8 @@ def test_verify_of_an_invoice_with_a_bad_parameter_is_a_one_line_error(tmp_path)
     invoice = tmp_path / "invoice.json"
     assert run_cli("process", DRIVE, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(invoice)).returncode == 0
     doc = json.loads(invoice.read_text())
-    for name, value in (("tc_s", -5), ("n_th", 0), ("p_md", 1.5), ("tc_s", "5")):
+    for name, value in (("tc_s", -5), ("n_th", 0), ("p_md", 1.5), ("tc_s", "5"), ("continued", ["A9-N1"]),
+                        ("continued", {"A9-N1": {"log": "x", "exit_utc": "yesterday"}})):  # fmt: skip
         doc["parameters"] = {**doc["parameters"], name: value}
         bad = tmp_path / f"bad-{name}.json"
         bad.write_text(invoice_json(seal(doc)))

@@ -1,8 +1,11 @@
-"""Small statistics shared by the integrity checks and the audit: the Wilson score interval."""
+"""Small statistics shared by the integrity checks, the findings and the audit: the Wilson score interval,
+the binomial upper tail (numpy only: no scipy import on a command's start-up path)."""
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 Z95 = 1.959963984540054
 
@@ -15,3 +18,24 @@ def wilson(successes: int, trials: int, z: float = Z95) -> tuple[float, float]:
     centre = (p + z * z / (2 * trials)) / (1 + z * z / trials)
     half = z * math.sqrt(p * (1 - p) / trials + z * z / (4 * trials * trials)) / (1 + z * z / trials)
     return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def binomial_tail(k: np.ndarray, n: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """P(X ≥ k) for X ~ Binomial(n, p), element-wise (exact sum of the terms, in logs; numpy only).
+
+    Used on a few candidate windows (n ≤ a window's epochs), so the (windows × n) table stays small.
+    """
+    k, n = np.asarray(k, np.int64), np.asarray(n, np.int64)
+    p = np.clip(np.asarray(p, float), 1e-300, 1.0)
+    if k.size == 0:
+        return np.zeros(0)
+    top = int(n.max(initial=0))
+    log_fact = np.concatenate([[0.0], np.cumsum(np.log(np.arange(1, top + 1)))])
+    j = np.arange(top + 1)[None, :]
+    nn, kk, pp = n[:, None], k[:, None], p[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_q = np.where(pp < 1.0, np.log1p(-pp), -np.inf)
+        log_term = (log_fact[nn] - log_fact[j] - log_fact[np.clip(nn - j, 0, None)] + j * np.log(pp)
+                    + np.where(nn - j > 0, (nn - j) * log_q, 0.0))  # fmt: skip
+    terms = np.where((j >= kk) & (j <= nn), np.exp(log_term), 0.0)
+    return np.minimum(terms.sum(axis=1), 1.0)

@@ -16,8 +16,9 @@ import pandas as pd
 
 from tollcli import __version__
 from tollcli.charging.canonical_json import canonical_json
-from tollcli.charging.recognition import GeoObjects
+from tollcli.charging.recognition import PASSAGE_GAP_S, GeoObjects
 from tollcli.charging.tariffs import Tariff
+from tollcli.integrity.raim import STATUS_MEANINGS
 from tollcli.times import iso_utc
 
 
@@ -35,18 +36,23 @@ def _iso(ts) -> str:
 
 def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: GeoObjects, tariff: Tariff, *,
                   vehicle: str, vehicle_class: str, inputs: dict[str, str], parameters: dict, period,
-                  details: tuple[dict, dict] | None = None) -> dict:  # fmt: skip
+                  details: tuple[dict, dict] | None = None, continued: dict | None = None) -> dict:  # fmt: skip
     """The invoice document (a dict of JSON-ready values).
 
     Per passage: its statuses counted and its independent valid positions listed as
     evidence, each found by one grouping over all positions (no table per passage).
     ``details``: those two already made by :func:`passage_details` (``positions`` is then not used).
+    ``continued``: geo-object id → ``{"log", "exit_utc"}`` of a passage the vehicle's previous log charged and
+    ended inside; this log's first passage of that geo-object, entered at most ``PASSAGE_GAP_S`` after that
+    exit, is the same passage: it is listed (band ``continued``, with its evidence) at fee 0, never charged twice.
     """
     index = {gid: i for i, gid in enumerate(geo.ids)}
     statuses, evidence = details if details is not None else passage_details(positions)
     entry = iso_utc(charges["entry_utc"]) if len(charges) else []
     exit_ = iso_utc(charges["exit_utc"]) if len(charges) else []
     lines, not_charged, total = [], [], Decimal(0)
+    zero = Decimal(0).quantize(Decimal(1).scaleb(-tariff.minor_unit))
+    carried_in = dict(continued or {})
     columns = ("geoobject", "passage", "n_inside", "n_valid", "n_independent", "charged", "entry_utc")
     for k, (gid, passage, n_inside, n_valid, n_indep, charged, entry_utc) in enumerate(zip(*(charges[c] for c in columns))):
         i = index[gid]
@@ -59,10 +65,15 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
         if not charged:
             not_charged.append(base)
             continue
+        carried = carried_in.pop(gid, None)
+        if carried is not None and continues(carried["exit_utc"], entry_utc):
+            lines.append({**base, "fee": str(zero), "band": "continued", "continues": carried,
+                          "evidence": evidence.get((gid, passage), [])})  # fmt: skip
+            continue
         fee, band = tariff.fee(gid, geo.road_class[i], vehicle_class, pd.Timestamp(entry_utc).to_pydatetime())
         total += fee
         lines.append({**base, "fee": str(fee), "band": band, "evidence": evidence.get((gid, passage), [])})
-    return {
+    doc = {
         "tool": f"tollcli {__version__}",
         "vehicle": vehicle,
         "vehicle_class": vehicle_class,
@@ -74,6 +85,17 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
         "total": str(total.quantize(Decimal(1).scaleb(-tariff.minor_unit))),
         "not_charged": not_charged,
     }
+    seen = {status for passage in (*lines, *not_charged) for status in passage["statuses"]}
+    if "probable_false_alarm" in seen:  # the auditor reads why so many positions alarmed, and what it does not mean
+        doc["status_notes"] = {"probable_false_alarm": STATUS_MEANINGS["probable_false_alarm"]
+                               + f" (p_fa = {parameters.get('p_fa')}; see each position's p_fa in the evidence)"}  # fmt: skip
+    return doc
+
+
+def continues(exit_utc: str, entry_utc) -> bool:
+    """Whether a passage entered at ``entry_utc`` continues one left at ``exit_utc`` (the passages' own gap rule)."""
+    gap_s = (pd.Timestamp(entry_utc) - pd.Timestamp(exit_utc)).total_seconds()
+    return 0 <= gap_s <= PASSAGE_GAP_S
 
 
 def passage_details(positions: pd.DataFrame) -> tuple[dict, dict]:

@@ -10,7 +10,7 @@ import typer
 
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
-from tollcli.errors import EXIT_DATA, EXIT_PARTIAL
+from tollcli.errors import DataError, PartialError
 from tollcli.job.batch import expand_inputs, run_batch
 from tollcli.job.pipeline import ChargeSettings
 
@@ -37,7 +37,10 @@ def batch(
     Resumable: a log whose invoice records its current SHA-256 is skipped (--force
     redoes it). A bad log is reported in failed/ and the summary and never stops
     the others (exit 3 when some failed, 1 when all did). Outputs do not depend on
-    the worker count or the scheduler.
+    the worker count or the scheduler. A vehicle's consecutive logs (the next
+    starting within 120 s of the last) are one drive: a passage cut by the file
+    boundary is charged once, where it began; the next invoice lists its part at
+    fee 0 (band 'continued'). Ending the batch (even kill -9) ends its workers.
     """
     logs = expand_inputs(inputs)
     settings = ChargeSettings(vehicle_class=vehicle_class, raim=raim, p_md=p_md, p_fa=p_fa, policy=policy)
@@ -52,5 +55,8 @@ def batch(
     for o in summary["outcomes"]:
         if o["status"] == "failed":
             warn(f"  failed: {o['error']}", quiet)
-    if summary["failed"]:
-        raise typer.Exit(EXIT_DATA if summary["failed"] == summary["logs"] else EXIT_PARTIAL)
+    if summary["failed"]:  # one line even with --quiet: an exit code ≠ 0 always says why
+        first = next(o["error"] for o in summary["outcomes"] if o["status"] == "failed")
+        message = (f"{summary['failed']} of {summary['logs']} logs failed (see {os.path.join(output, 'failed')}); "
+                   f"first: {first}")  # fmt: skip
+        raise (DataError if summary["failed"] == summary["logs"] else PartialError)(message)

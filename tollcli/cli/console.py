@@ -31,7 +31,7 @@ def progress(description: str, quiet: bool):
         yield lambda n: bar.advance(task, n)
 
 
-STATUS_STYLES = {"valid": "green", "excluded_valid": "green", "fault_detected": "red", "unavailable": "yellow",
+STATUS_STYLES = {"valid": "green", "excluded_valid": "green", "fault_detected": "red", "probable_false_alarm": "magenta", "unavailable": "yellow",
                  "unmonitored": "dim", "insufficient": "dim"}  # fmt: skip
 
 
@@ -51,7 +51,12 @@ def invoice_tables(invoice: dict):
     for line in invoice["lines"] + invoice.get("not_charged", []):
         for k, v in line.get("statuses", {}).items():
             counts[k] = counts.get(k, 0) + int(v)
-    statuses = Table(title="Positions inside geo-objects, by RAIM status")
+    title = "Positions inside geo-objects, by RAIM status"
+    caption = None
+    if "probable_false_alarm" in counts:
+        caption = ("probable_false_alarm: the test failed at a P_FA above p_fa — ETC keeps HPL = HAL by lowering its "
+                   "threshold and pays in false alarms; not trusted, not charged on, no evidence of a fault")  # fmt: skip
+    statuses = Table(title=title, caption=caption, min_width=len(title) + 4)
     statuses.add_column("status")
     statuses.add_column("epochs", justify="right")
     for k, v in sorted(counts.items()):

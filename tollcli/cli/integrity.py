@@ -49,8 +49,10 @@ def integrity(
     Adds raim_mode, n_used, dof, slope_max_m, test_stat, test_stat_source,
     threshold, lambda_det, hpl_m, hal_m, p_fa, p_md, raim_status, excluded_sv,
     fde_shift_e_m, fde_shift_n_m and raim_lat_deg/raim_lon_deg. Statuses: valid,
-    fault_detected, excluded_valid, unavailable, unmonitored (no residuals in
-    the log), insufficient (fewer than unknowns + 1 measurements).
+    fault_detected (t > Th at P_FA ≤ --p-fa: a credible alarm), probable_false_alarm
+    (ETC: t > Th, but this epoch's P_FA is above --p-fa — not trusted, no evidence
+    of a fault), excluded_valid, unavailable, unmonitored (no residuals in the
+    log), insufficient (fewer than unknowns + 1 measurements).
     """
     if fmt not in FORMATS:
         raise UsageError(f"--format {fmt}: use one of {', '.join(FORMATS)}")

@@ -53,7 +53,7 @@ DateOpt = Annotated[
 RaimMode = Annotated[str, typer.Option("--raim", help="RAIM: etc (HPL = HAL, P_FA per epoch) or classic (fixed P_FA, HPL ≤ HAL).")]
 Hal = Annotated[float, typer.Option("--hal", help="Horizontal alert limit, m.", min=0.0)]
 PMd = Annotated[float, typer.Option("--p-md", help="Probability of missed detection.")]
-PFa = Annotated[float, typer.Option("--p-fa", help="Probability of false alarm (classic RAIM).")]
+PFa = Annotated[float, typer.Option("--p-fa", help="Probability of false alarm: classic RAIM's design value; under ETC an alarm at a higher per-epoch P_FA reads probable_false_alarm.")]
 Fde = Annotated[bool, typer.Option("--fde", help="Fault detection and exclusion: drop one satellite when exactly one subset passes.")]
 SigmaModel = Annotated[
     str,

@@ -22,9 +22,13 @@ spoofing
   ``cn0_uniform``  ≥ 5 satellites with C/N0 spread < ``uniform_std_db`` and median ≥ ``uniform_min_dbhz``
   for ≥ ``uniform_min_s`` (a simulator's signature);
   ``raim_persistent_alarm``  the RAIM's test fails in ≥ 80 % of ≥ ``raim_window_s`` s with good
-  geometry (HDOP ≤ 2, ≥ 6 satellites);
+  geometry (HDOP ≤ 2, ≥ 6 satellites), far more often than those epochs' P_FA explain (binomial tail
+  < ``RAIM_ALARM_P_VALUE``: ETC alarms at P_FA near 1 — probable false alarms — accuse nobody);
   ``position_disagreement``  two sentences of one epoch place it ≥ ``disagree_m`` apart (GGA vs RMC…);
   ``date_disagreement``  ZDA and RMC give different dates;
+  ``date_jump``  inside a continuous trip an RMC/ZDA date jumps away from the trip's date (the epochs keep
+  the trip's date, so the passage is charged once; ``week_rollover`` when the jump is a multiple of
+  1024 GPS weeks, a receiver fault rather than an attack);
   ``doppler_mismatch``  the reported (Doppler) speed and the speed from successive fixes differ by more
   than max(``doppler_tol_mps``, 30 %) over ``doppler_window_s`` s, for ≥ ``doppler_window_s`` s.
 """
@@ -41,14 +45,20 @@ from shapely import affinity
 from tollcli.enforcement.trip import cn0_summary, fixes, runs, trailing_median
 from tollcli.errors import UsageError
 from tollcli.geodesy import great_circle_distance_m
+from tollcli.stats import binomial_tail
 from tollcli.times import epoch_seconds, iso_from_seconds
 
 CATEGORY = {
     "gap": "evasion", "cn0_collapse": "jamming", "satellite_collapse": "jamming", "fix_lost_at_speed": "jamming",
     "position_jump": "spoofing", "time_jump": "spoofing", "overspeed": "spoofing", "cn0_uniform": "spoofing",
     "raim_persistent_alarm": "spoofing", "position_disagreement": "spoofing", "date_disagreement": "spoofing",
+    "date_jump": "spoofing",
     "doppler_mismatch": "spoofing",
 }  # fmt: skip
+#: a persistent RAIM alarm is reported when no-fault alarms (each epoch at its own P_FA) would be this unlikely
+RAIM_ALARM_P_VALUE = 1e-3
+#: 1024 GPS weeks, days (a receiver that counts weeks modulo 1024 dates fixes this far back)
+WEEK_ROLLOVER_DAYS = 1024 * 7
 #: top speed by vehicle class, m/s (a vehicle faster than this is not that vehicle, or not where it says)
 CLASS_MAX_SPEED_MPS = {"car": 250 / 3.6, "van": 180 / 3.6, "truck": 130 / 3.6, "bus": 130 / 3.6, "motorcycle": 300 / 3.6}
 
@@ -339,25 +349,38 @@ def _disagreements(epochs: pd.DataFrame, t: np.ndarray) -> list[dict]:
         for a, b in runs(np.isfinite(days) & (days != 0)):
             lat, lon = _where(epochs, a)
             out.append(_finding("date_disagreement", (a, b), t[a], t[b], lat, lon, zda_minus_rmc_days=days[a], epochs=b - a + 1))
+    if "date_jump_days" in epochs:
+        jumps = epochs["date_jump_days"].to_numpy(float)
+        for a, b in runs(np.isfinite(jumps)):
+            lat, lon = _where(epochs, a)
+            out.append(_finding("date_jump", (a, b), t[a], t[b], lat, lon, given_minus_trip_days=jumps[a],
+                                week_rollover=bool(jumps[a] % WEEK_ROLLOVER_DAYS == 0), epochs=b - a + 1))  # fmt: skip
     return out
 
 
 def _raim_alarm(epochs: pd.DataFrame, raim: pd.DataFrame, t: np.ndarray, s: FindingSettings) -> list[dict]:
     status = raim["raim_status"].astype(str).to_numpy()
-    monitored = np.isin(status, ["valid", "fault_detected", "excluded_valid"])
-    alarm = status == "fault_detected"
+    monitored = np.isin(status, ["valid", "fault_detected", "excluded_valid", "probable_false_alarm"])
+    # every failed test counts, but a window needs far more alarms than its P_FA explain (ETC's at P_FA ≈ 1 do not)
+    alarm = np.isin(status, ["fault_detected", "probable_false_alarm"] if "p_fa" in raim else ["fault_detected"])
     hdop = epochs["hdop"].to_numpy(float)
     n_used = raim["n_used"].to_numpy(float)
     good = monitored & (hdop <= 2.0) & (n_used >= 6)
     n = max(int(s.raim_window_s), 2)
     c_good = np.concatenate([[0], np.cumsum(good)])
     c_alarm = np.concatenate([[0], np.cumsum(alarm & good)])
+    p_fa = np.nan_to_num(raim["p_fa"].to_numpy(float), nan=1.0) if "p_fa" in raim else np.zeros(good.size)
+    c_p_fa = np.concatenate([[0.0], np.cumsum(np.where(good, np.clip(p_fa, 0.0, 1.0), 0.0))])
     idx = np.arange(n, good.size + 1)
     if idx.size == 0:
         return []
     g = c_good[idx] - c_good[idx - n]
-    share = np.where(g > 0, (c_alarm[idx] - c_alarm[idx - n]) / np.maximum(g, 1), 0.0)
-    hot = idx[(g >= 0.8 * n) & (share >= 0.8)]
+    alarms = c_alarm[idx] - c_alarm[idx - n]
+    share = np.where(g > 0, alarms / np.maximum(g, 1), 0.0)
+    expected = np.where(g > 0, (c_p_fa[idx] - c_p_fa[idx - n]) / np.maximum(g, 1), 1.0)
+    candidate = np.flatnonzero((g >= 0.8 * n) & (share >= 0.8))
+    surprise = binomial_tail(alarms[candidate], g[candidate], expected[candidate])  # P(≥ this many alarms | no fault)
+    hot = idx[candidate[surprise < RAIM_ALARM_P_VALUE]]
     mark = np.zeros(good.size + 1)
     np.add.at(mark, hot - n, 1)  # every epoch of a hot window
     np.add.at(mark, hot, -1)
@@ -366,6 +389,7 @@ def _raim_alarm(epochs: pd.DataFrame, raim: pd.DataFrame, t: np.ndarray, s: Find
     for a, b in runs(flag):
         lat, lon = _where(epochs, a)
         out.append(_finding("raim_persistent_alarm", (a, b), t[a], t[b], lat, lon, alarm_share=float(np.mean(alarm[a : b + 1])),
+                            expected_false_alarm_share=float(np.mean(np.clip(p_fa[a : b + 1], 0.0, 1.0))),
                             median_test_stat=float(np.nanmedian(raim["test_stat"].to_numpy(float)[a : b + 1])),
                             median_threshold=float(np.nanmedian(raim["threshold"].to_numpy(float)[a : b + 1])),
                             median_hdop=float(np.nanmedian(hdop[a : b + 1]))))  # fmt: skip

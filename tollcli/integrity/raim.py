@@ -7,7 +7,10 @@ Statuses, in the order they are decided:
                    (slope ∞) or no threshold > 0 keeps P_MD
 ``unmonitored``    geometry is fine but the log gives no test statistic (no residuals):
                    slopes, HPL and Th are reported, the position is never ``valid``
-``fault_detected`` t > Th
+``fault_detected`` t > Th at a false-alarm probability P_FA ≤ ``p_fa`` (the alarm is credible)
+``probable_false_alarm`` t > Th, but this epoch's P_FA > ``p_fa`` (ETC only: to keep P_MD at the HAL the
+                   threshold was set so low that the test fails often without any fault; the position is
+                   not trusted — not charged on — but it is no evidence of a fault or an attack)
 ``excluded_valid`` (FDE only) t > Th, and exactly one subset without one satellite passes
 ``valid``          t ≤ Th (and, classic, HPL ≤ HAL)
 """
@@ -21,9 +24,23 @@ import numpy as np
 from tollcli.gnss.wls import Geometry
 from tollcli.integrity import design
 
-STATUSES = ("valid", "fault_detected", "excluded_valid", "unavailable", "unmonitored", "insufficient")
-VALID, FAULT, EXCLUDED, UNAVAILABLE, UNMONITORED, INSUFFICIENT = range(6)
+STATUSES = ("valid", "fault_detected", "excluded_valid", "unavailable", "unmonitored", "insufficient", "probable_false_alarm")
+VALID, FAULT, EXCLUDED, UNAVAILABLE, UNMONITORED, INSUFFICIENT, PROBABLE_FALSE_ALARM = range(7)
 MODES = ("etc", "classic")
+#: what each status tells an auditor (reports and invoices quote these)
+STATUS_MEANINGS = {
+    "valid": "the RAIM test passed (t ≤ Th): the position is trusted within the HAL",
+    "excluded_valid": "the test failed, one satellite was excluded and the rest passed: trusted",
+    "fault_detected": "the test failed at a false-alarm probability P_FA ≤ p_fa: a credible alarm, probably a fault",
+    "probable_false_alarm": (
+        "the test failed, but at this epoch's geometry P_FA > p_fa: to keep P_MD at the HAL the ETC RAIM lowers its "
+        "threshold until the test often fails with no fault at all (HPL = HAL is bought with false alarms). The "
+        "position is not trusted and never charged on, but the alarm alone is no evidence of a fault or of tampering"
+    ),
+    "unavailable": "the geometry cannot protect the HAL (classic: HPL > HAL; ETC: a measurement nothing checks)",
+    "unmonitored": "the log gives no test statistic (no residuals): not checked, never trusted",
+    "insufficient": "too few satellites for a check (fewer than unknowns + 1) or a singular geometry",
+}
 
 
 @dataclass
@@ -33,7 +50,7 @@ class RaimParams:
     mode: str = "etc"  # "etc" (HPL = HAL, P_FA varies) or "classic" (P_FA fixed, HPL varies)
     hal_m: float = 50.0
     p_md: float = 5e-5
-    p_fa: float = 5e-3  # classic only
+    p_fa: float = 5e-3  # classic: the design P_FA; ETC: an alarm above it is a probable_false_alarm
     fde: bool = False
     exact_threshold: bool = False  # ETC: exact ncx2 quantile per epoch instead of the safe look-up table
     _table: design.EtcThresholdTable | None = field(default=None, repr=False, compare=False)

@@ -18,7 +18,7 @@ from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.wls import Geometry, residuals_from_prefit, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
 from tollcli.integrity.kalman_hit import hpl_sbas_m
-from tollcli.integrity.raim import STATUSES, RaimParams, detect, status_names
+from tollcli.integrity.raim import FAULT, PROBABLE_FALSE_ALARM, STATUSES, RaimParams, detect, status_names
 
 RAIM_COLUMNS = (
     "raim_mode", "n_used", "dof", "slope_max_m", "test_stat", "test_stat_source", "threshold", "lambda_det",
@@ -53,6 +53,8 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
         shift = exclusion.shift_enu_m
     source = meas.test_stat_source if meas.test_stat_source is not None else np.full(n_epochs, "none", dtype=object)
     status = detection.status.copy()
+    with np.errstate(invalid="ignore"):  # an alarm at a P_FA above the one asked for is probably false (ETC)
+        status[(status == FAULT) & (detection.p_fa > params.p_fa)] = PROBABLE_FALSE_ALARM
     if meas.satellites_reported is not None:  # a receiver that reports no satellites at all (GGA/RMC only): nothing
         status[~meas.satellites_reported & (geometry.n_meas == 0)] = STATUSES.index("unmonitored")  # to monitor, not "too few"
     return pd.DataFrame(

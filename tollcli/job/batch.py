@@ -17,6 +17,11 @@ never paths: they are percent-encoded into one folder or file name (``../x`` →
 
 A log is skipped (unless ``force``) only when its invoice exists and records the same log (path and
 SHA-256), the same geo-object, tariff and road files (SHA-256), every setting and the tool version.
+
+A vehicle's logs are one drive when they follow each other: when a log starts at most ``PASSAGE_GAP_S``
+after the vehicle's previous log ended, a passage that log ended inside and this one starts inside is one
+passage, charged once — by the invoice where it began; the next invoice lists its part at fee 0 (band
+``continued``, naming the log it continues) and records that in its parameters, so ``verify`` reproduces it.
 A log that fails in any way — bad data or an error of the tool — is reported in ``failed/`` and the
 summary; it never stops the others.
 Work runs on a local process pool (``workers``) or, with ``scheduler``, on an existing Dask
@@ -33,8 +38,11 @@ from dataclasses import asdict, dataclass, replace
 from decimal import Decimal
 from urllib.parse import quote
 
+import pandas as pd
+
 from tollcli import __version__
 from tollcli.charging.invoice import file_sha256, invoice_json
+from tollcli.charging.recognition import PASSAGE_GAP_S
 from tollcli.enforcement.locate import vehicle_from_log, vehicle_from_path
 from tollcli.errors import DataError, UsageError
 from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
@@ -143,7 +151,8 @@ def _current(done: dict, job: Job, settings: ChargeSettings, log_sha: str) -> bo
         return False
     if inputs.get("log_sha256") != log_sha or any(inputs.get(key) != sha for key, sha in job.input_sha256):
         return False
-    return all(k in parameters and parameters[k] == v for k, v in asdict(settings).items())
+    # ``continued`` depends on the vehicle's other logs: join_passages checks it after every log is done
+    return all(k in parameters and parameters[k] == v for k, v in asdict(settings).items() if k != "continued")
 
 
 def run_one(job: Job) -> dict:
@@ -202,6 +211,56 @@ def _process(job: Job, settings: ChargeSettings, folder: str, name: str, inv_pat
             "epochs": int(len(table)), "skipped_lines": int(stats.skipped) if stats is not None else 0}  # fmt: skip
 
 
+def join_passages(outcomes: list[dict], jobs: dict[str, Job]) -> list[dict]:
+    """Charge once a passage cut by the boundary between two consecutive logs of a vehicle.
+
+    Every invoice whose recorded ``continued`` differs from what its vehicle's previous log gives is made
+    again with it (rarely more than a few: only logs that start inside a geo-object the last one ended in).
+    What a log carries over depends only on that log's lines, never on what it took in: one pass settles.
+    """
+    invoices = {}
+    for o in outcomes:
+        if o["status"] in ("done", "skipped"):
+            try:
+                with open(os.path.join(jobs[o["log"]].outdir, o["invoice"]), encoding="utf-8") as fh:
+                    invoices[o["log"]] = json.load(fh)
+            except (OSError, ValueError):
+                continue
+    by_vehicle: dict[str, list[str]] = {}
+    for log, inv in invoices.items():
+        if isinstance(inv.get("period"), dict):
+            by_vehicle.setdefault(str(inv.get("vehicle")), []).append(log)
+    wanted: dict[str, dict | None] = {log: None for log in invoices}
+    for logs in by_vehicle.values():
+        logs.sort(key=lambda log: (invoices[log]["period"]["start_utc"], log))
+        for a, b in zip(logs, logs[1:]):
+            wanted[b] = _carried_over(invoices[a], invoices[b]) or None
+    redo = {log for log, inv in invoices.items() if (inv.get("parameters") or {}).get("continued") != wanted[log]}
+    if not redo:
+        return outcomes
+    out = []
+    for o in outcomes:
+        if o["log"] in redo:
+            job = jobs[o["log"]]
+            o = run_one(replace(job, settings=replace(job.settings, continued=wanted[o["log"]]), force=True))
+        out.append(o)
+    return out
+
+
+def _carried_over(previous: dict, invoice: dict) -> dict:
+    """The passages ``previous`` charged and ended inside, when ``invoice`` follows it within the passage gap."""
+    end, start = pd.Timestamp(previous["period"]["end_utc"]), pd.Timestamp(invoice["period"]["start_utc"])
+    if not 0 <= (start - end).total_seconds() <= PASSAGE_GAP_S:
+        return {}
+    log = (previous.get("inputs") or {}).get("log", "")
+    carried: dict[str, dict] = {}
+    for line in previous.get("lines", []):
+        if (end - pd.Timestamp(line["exit_utc"])).total_seconds() <= PASSAGE_GAP_S:
+            if line["geoobject"] not in carried or line["exit_utc"] > carried[line["geoobject"]]["exit_utc"]:
+                carried[line["geoobject"]] = {"log": str(log), "exit_utc": line["exit_utc"]}
+    return carried
+
+
 def summarise(outcomes: list[dict]) -> dict:
     outcomes = sorted(outcomes, key=lambda o: o["log"])
     totals: dict[str, Decimal] = {}
@@ -210,6 +269,46 @@ def summarise(outcomes: list[dict]) -> dict:
             totals[o["currency"]] = totals.get(o["currency"], Decimal(0)) + Decimal(o["total"])
     counts = {s: sum(o["status"] == s for o in outcomes) for s in ("done", "skipped", "failed")}
     return {"logs": len(outcomes), **counts, "totals": {k: str(v) for k, v in sorted(totals.items())}, "outcomes": outcomes}
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Pool worker initializer: the worker ends when the batch process ends, however it ends (even SIGKILL).
+
+    Linux tells the worker at once (``PR_SET_PDEATHSIG``); elsewhere a thread notices within a second that
+    its parent changed. Either way the worker gets SIGTERM and discards the output it was writing.
+    """
+    import signal
+    import threading
+    import time
+
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError, TypeError):
+        pass
+
+    def stop(signum, frame):
+        raise SystemExit(128 + signum)  # unwind: the outputs being written are discarded; then _run_in_worker ends
+
+    signal.signal(signal.SIGTERM, stop)
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(1.0)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    if os.getppid() != parent_pid:  # the parent ended before the worker could ask to be told
+        os.kill(os.getpid(), signal.SIGTERM)
+    threading.Thread(target=watch, name="watch-parent", daemon=True).start()
+
+
+def _run_in_worker(job: Job) -> dict:
+    """``run_one`` in a pool worker: a worker told to stop unwinds its log's outputs, then ends (never takes another)."""
+    try:
+        return run_one(job)
+    except BaseException:  # noqa: BLE001 - SIGTERM or an interrupt: what was written has been discarded on the way out
+        os._exit(143)
 
 
 def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, outdir: str, *, workers: int = 1,
@@ -239,10 +338,18 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
         from concurrent.futures import ProcessPoolExecutor
         from concurrent.futures import as_completed as done_first
 
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            for fut in done_first([pool.submit(run_one, job) for job in jobs]):
+        pool = ProcessPoolExecutor(max_workers=workers, initializer=die_with_parent, initargs=(os.getpid(),))
+        try:
+            for fut in done_first([pool.submit(_run_in_worker, job) for job in jobs]):
                 outcomes.append(fut.result())
                 tick(1)
+        except BaseException:  # interrupted or terminated: stop the workers now, not after every queued log
+            for process in list((getattr(pool, "_processes", None) or {}).values()):
+                process.terminate()  # SIGTERM: a worker unwinds and discards what it was writing
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
+    outcomes = join_passages(outcomes, {job.log: job for job in jobs})
     summary = summarise(outcomes)
     write_text_atomic(os.path.join(outdir, "summary.json"), json.dumps(summary, indent=1, sort_keys=True) + "\n")
     return summary

@@ -51,6 +51,9 @@ class ChargeSettings:
     strict: bool = False
     date: str | None = None  # YYYY-MM-DD for logs without dates
     policy: str | None = None  # which checks a position must pass (None: the strictest the inputs support)
+    #: passages the vehicle's previous log charged and ended inside (geo-object id → {"log", "exit_utc"}):
+    #: set by ``batch`` so that a passage cut by a file boundary is charged once (see build_invoice)
+    continued: dict | None = None
 
 
 #: the shortest correlation time accepted, s (a 10 Hz receiver's epoch interval)
@@ -75,11 +78,26 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
         bad("sigma_m (--sigma)", settings.sigma_m, "a standard deviation > 0 m")
     if not isinstance(settings.vehicle_class, str) or not settings.vehicle_class:
         bad("vehicle_class (--vehicle-class)", settings.vehicle_class, "a vehicle class of the tariff")
+    if settings.continued is not None:
+        _check_continued(settings.continued)
     if tariff is not None:
         classes = sorted({vc for table in (*tariff.road_class.values(), *tariff.geoobject.values()) for vc in table})
         if settings.vehicle_class not in classes:
             bad("vehicle_class (--vehicle-class)", settings.vehicle_class,
                 f"not a vehicle class of the tariff {tariff.source} ({', '.join(classes)})")
+
+
+def _check_continued(continued) -> None:
+    rule = "a table of geo-object id → {log, exit_utc} (the passages a previous log ended inside)"
+    if not isinstance(continued, dict):
+        raise UsageError(f"continued = {continued!r}: {rule}")
+    for gid, carried in continued.items():
+        if not isinstance(carried, dict) or set(carried) != {"log", "exit_utc"} or not all(isinstance(v, str) for v in carried.values()):
+            raise UsageError(f"continued[{gid!r}] = {carried!r}: {rule}")
+        try:
+            pd.Timestamp(carried["exit_utc"]).tz_convert("UTC")
+        except (ValueError, TypeError):
+            raise UsageError(f"continued[{gid!r}].exit_utc = {carried['exit_utc']!r}: not a UTC time") from None
 
 
 def content_sha256(invoice: dict) -> str:
@@ -137,18 +155,21 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         inputs.update(roads=printable_path(roads), roads_sha256=file_sha256(roads))
     inputs.update({k: v for k, v in (as_recorded or {}).items() if k in inputs})
     parameters = {**asdict(settings), "valid_statuses": ["valid", "excluded_valid"], "policy_used": policy}
+    if settings.continued is None:
+        del parameters["continued"]  # recorded only by an invoice that continues a passage of the log before
     invoice = build_invoice(table, positions, geo_objects, tariff_doc,
                             vehicle=settings.vehicle or printable_path(os.path.basename(log)), vehicle_class=settings.vehicle_class,
-                            inputs=inputs, parameters=parameters, period=period, details=details)  # fmt: skip
+                            inputs=inputs, parameters=parameters, period=period, details=details,
+                            continued=settings.continued)  # fmt: skip
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
     return seal(invoice), stats
 
 
 #: epoch columns kept for the whole log after its chunks are read (policy checks, findings, the invoice's period)
 KEPT_EPOCH_COLUMNS = ("epoch", "time_utc", "tod_s", "line", "lat_deg", "lon_deg", "fix_valid", "n_used", "hdop", "speed_mps",
-                      "course_deg", "sigma_major_m", "pos_disagreement_m", "date_disagreement_days")  # fmt: skip
+                      "course_deg", "sigma_major_m", "pos_disagreement_m", "date_disagreement_days", "date_jump_days")  # fmt: skip
 #: per-epoch RAIM columns kept (the policy checks and the findings use them)
-KEPT_RAIM_COLUMNS = ("raim_status", "n_used", "test_stat", "threshold")
+KEPT_RAIM_COLUMNS = ("raim_status", "n_used", "test_stat", "threshold", "p_fa")
 #: epochs per chunk: the working set of the satellite-level steps (an hour at 1 Hz)
 CHUNK_EPOCHS = 3_600
 #: bytes read at a time (a chunk ends at a block's end: tests make both small to cut logs often)

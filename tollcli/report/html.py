@@ -15,7 +15,8 @@ from importlib import resources
 import numpy as np
 import pandas as pd
 
-from tollcli.report.plots import STATUS_COLOURS
+from tollcli.integrity.raim import STATUS_MEANINGS
+from tollcli.report.plots import STATUS_COLOURS, figure_png, stanford_figure
 from tollcli.report.run_data import RunData
 
 EPOCH_COLUMNS = ("time_utc", "raim_lat_deg", "raim_lon_deg", "raim_status", "hpl_m", "hal_m", "p_fa", "test_stat",
@@ -78,6 +79,19 @@ def report_html(run: RunData, tiles: str | None = None) -> str:
                  f"{_num(c['horizontal_error_m']['median'], '.1f')} m, 95 % {_num(c['horizontal_error_m']['p95'], '.1f')} m; "
                  f"{c['positioning_failures']} positioning failures, {c['undetected']} undetected. Regions: "
                  + html.escape(", ".join(f"{k} {v}" for k, v in c["regions"].items())) + "</p>")  # fmt: skip
+    if run.truth is not None and "horiz_error_m" in e:
+        import base64
+
+        png = base64.b64encode(figure_png(stanford_figure(run))).decode("ascii")
+        truth += f'<p><img alt="Stanford diagram: horizontal error against HPL" src="data:image/png;base64,{png}"></p>'
+    p_fa_asked = inv["parameters"].get("p_fa")
+    meanings = "".join(f'<li><b style="color:{STATUS_COLOURS.get(k, "#000")}">{html.escape(k)}</b> ({v}): '
+                       f"{html.escape(STATUS_MEANINGS[k])}</li>" for k, v in counts.items() if k in STATUS_MEANINGS)  # fmt: skip
+    if "probable_false_alarm" in counts:
+        meanings += (f"<li>The line between a credible alarm and a probable false one is p_fa = {html.escape(str(p_fa_asked))} "
+                     "(<code>--p-fa</code>). The ETC RAIM fixes the protection level at the HAL and lets P_FA vary per epoch: "
+                     "with weak geometry it alarms often without any fault. Charging needs only N_Th independent valid "
+                     "positions per passage, so false alarms cost evidence, not money wrongly charged.</li>")  # fmt: skip
     title = f"tollcli audit report — {inv.get('vehicle', '')}"
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
@@ -97,6 +111,7 @@ th {{ background: #eee; }}
 P_MD {inv['parameters'].get('p_md')}, N_Th {inv['parameters'].get('n_th')}, T_c {inv['parameters'].get('tc_s')} s;
 log SHA-256 {html.escape(str(inv['inputs'].get('log_sha256', ''))[:16])}…; invoice content SHA-256 {html.escape(str(inv.get('content_sha256', ''))[:16])}….
 Epoch statuses (HAL {run.hal_m:g} m): {html.escape(', '.join(f'{k} {v}' for k, v in counts.items()))}.</p>
+<details open><summary>What the epoch statuses mean</summary><ul>{meanings}</ul></details>
 <div id="map"></div>
 <h2 id="invoice">Invoice</h2>
 {_table(["geo-object", "name", "entry (UTC)", "exit (UTC)", "valid independent", "band", "fee"], lines, "invoice")}
