@@ -67,3 +67,19 @@ def test_threshold_table_is_on_the_safe_side():
     assert np.max(exact - approx) < 0.7  # and close: one grid step of √λ
     on_grid = np.array([49.0, 64.0])
     assert table(np.array([1, 1]), on_grid) == pytest.approx(design.etc_threshold(5e-5, np.array([1, 1]), on_grid))
+
+
+def test_threshold_table_covers_modern_receivers_up_to_k_64():
+    """Phones and multi-GNSS receivers: k up to 64 and λ_det far above 1 600 (slopes ≪ HAL/40). Over √λ up to
+    6 000 (beyond the grid: computed exactly) the table is never above the exact threshold and within 10 % of it
+    wherever the exact one is at least 1 (below, a grid step of √λ is the bound); P_FA is that of the threshold."""
+    rng = np.random.default_rng(64)
+    k = np.repeat(np.arange(1, 65), 40)
+    sqrt_lam = np.concatenate([rng.uniform(0.0, 40.0, 10), rng.uniform(40.0, 4_000.0, 28), rng.uniform(4_000.0, 6_000.0, 2)])
+    lam = np.tile(sqrt_lam, 64) ** 2
+    table = design.EtcThresholdTable(5e-5)
+    approx, exact = table(k, lam), design.etc_threshold(5e-5, k, lam)
+    assert (approx <= exact * (1 + 1e-12) + 1e-12).all()
+    big = exact >= 1.0
+    assert (approx[big] >= 0.9 * exact[big]).all(), np.min(approx[big] / exact[big])
+    assert np.allclose(table.p_fa(k, lam), design.false_alarm_probability(approx, k), rtol=1e-9, equal_nan=True)

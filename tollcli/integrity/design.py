@@ -75,32 +75,39 @@ class EtcThresholdTable:
     Th grows with λ_det, so the table returns the threshold at the grid point
     just *below* √λ_det: never above the exact threshold (P_MD is kept; P_FA is
     a little higher than exact and is reported from the threshold used).
-    Above the grid the last grid value is used (safe for the same reason).
-    Rows for each k are computed on first use: ``n_steps`` quantiles, a few ms.
+    The grid is uniform (``step``) up to ``sqrt_lambda_max``, then geometric (each point
+    ``ratio`` times the last) up to ``sqrt_lambda_top``: good geometry with many satellites
+    (slope ≪ HAL/40) has λ_det far above 1 600, where Th ≈ (√λ − z)² and a 1 % step in √λ
+    costs ~2 % of Th. Above the grid the exact threshold is computed (rare: slope < HAL/4000).
+    Rows for each k are computed on first use and kept in the cache directory.
     """
 
-    def __init__(self, p_md: float, step: float = 0.01, sqrt_lambda_max: float = 40.0):
+    def __init__(self, p_md: float, step: float = 0.01, sqrt_lambda_max: float = 40.0, ratio: float = 1.01,
+                 sqrt_lambda_top: float = 4000.0):  # fmt: skip
         self.p_md = float(p_md)
         self.step = float(step)
-        self.grid = np.arange(0.0, sqrt_lambda_max + step / 2, step)
+        uniform = np.arange(0.0, sqrt_lambda_max + step / 2, step)
+        n_geo = int(np.ceil(np.log(sqrt_lambda_top / uniform[-1]) / np.log(ratio)))
+        self.grid = np.concatenate([uniform, uniform[-1] * ratio ** np.arange(1, n_geo + 1)])
+        self.scheme = f"u{step!r}x{ratio!r}"
         self._rows: dict[int, np.ndarray] = {}
         self._p_fa_rows: dict[int, np.ndarray] = {}
 
     def _row(self, k: int) -> np.ndarray:
         row = self._rows.get(k)
         if row is None:
-            row = _stored_row(self.p_md, self.step, self.grid, k)
+            row = _stored_row(self.p_md, self.scheme, self.grid, k)
             self._rows[k] = row
         return row
 
     def _p_fa_row(self, k: int) -> np.ndarray:
         row = self._p_fa_rows.get(k)
         if row is None:
-            row = _stored_row(self.p_md, self.step, self.grid, k, what="pfa")
+            row = _stored_row(self.p_md, self.scheme, self.grid, k, what="pfa")
             self._p_fa_rows[k] = row
         return row
 
-    def _lookup(self, dof, lambda_det, row_of) -> np.ndarray:
+    def _lookup(self, dof, lambda_det, row_of, exact) -> np.ndarray:
         dof = np.asarray(dof)
         lam = np.asarray(lambda_det, dtype=float)
         out = np.full(np.broadcast(dof, lam).shape, np.nan)
@@ -108,22 +115,27 @@ class EtcThresholdTable:
         ok = (dof >= 1) & np.isfinite(lam) & (lam >= 0)
         idx = np.zeros(out.shape, dtype=np.int64)
         with np.errstate(invalid="ignore"):
-            idx[ok] = np.minimum(np.floor(np.sqrt(lam[ok]) / self.step + 1e-9), self.grid.size - 1).astype(np.int64)
-        for k in np.unique(dof[ok]).astype(int):
-            sel = ok & (dof == k)
+            idx[ok] = np.searchsorted(self.grid, np.sqrt(lam[ok]), side="right") - 1  # the grid point at or below
+        above = ok & (idx >= self.grid.size - 1) & (lam > self.grid[-1] ** 2)
+        table = ok & ~above
+        for k in np.unique(dof[table]).astype(int):
+            sel = table & (dof == k)
             out[sel] = row_of(int(k))[idx[sel]]
+        if above.any():
+            out[above] = exact(dof[above], lam[above])
         return out
 
     def __call__(self, dof, lambda_det) -> np.ndarray:
         """The threshold for each (k, λ_det)."""
-        return self._lookup(dof, lambda_det, self._row)
+        return self._lookup(dof, lambda_det, self._row, lambda k, lam: etc_threshold(self.p_md, k, lam))
 
     def p_fa(self, dof, lambda_det) -> np.ndarray:
         """P_FA of the threshold :meth:`__call__` gives: ``false_alarm_probability(self(dof, λ), dof)``, stored per row."""
-        return self._lookup(dof, lambda_det, self._p_fa_row)
+        return self._lookup(dof, lambda_det, self._p_fa_row,
+                            lambda k, lam: false_alarm_probability(etc_threshold(self.p_md, k, lam), k))  # fmt: skip
 
 
-def _stored_row(p_md: float, step: float, grid: np.ndarray, k: int, what: str = "threshold") -> np.ndarray:
+def _stored_row(p_md: float, scheme: str, grid: np.ndarray, k: int, what: str = "threshold") -> np.ndarray:
     """One table row, kept in the cache directory (``TOLLCLI_CACHE_DIR``) across processes.
 
     ``what``: "threshold" (the ETC thresholds over the grid) or "pfa" (their P_FA).
@@ -136,10 +148,10 @@ def _stored_row(p_md: float, step: float, grid: np.ndarray, k: int, what: str = 
 
     def compute() -> np.ndarray:
         if what == "pfa":
-            return false_alarm_probability(_stored_row(p_md, step, grid, k), np.full(grid.shape, k))
+            return false_alarm_probability(_stored_row(p_md, scheme, grid, k), np.full(grid.shape, k))
         return etc_threshold(p_md, np.full(grid.shape, k), grid**2)
 
-    name = f"etc-{what}-pmd{p_md!r}-step{step!r}-n{grid.size}-k{k}-scipy{scipy.__version__}.npy"
+    name = f"etc-{what}-pmd{p_md!r}-{scheme}-n{grid.size}-k{k}-scipy{scipy.__version__}.npy"
     return cached_array("thresholds", name, compute, shape=grid.shape)
 
 
