@@ -217,3 +217,21 @@ def test_ending_the_batch_ends_its_pool_workers(tmp_path, how):
     assert rc == (-9 if how == "SIGKILL" else 143), parent.stderr.read().decode()
     if how == "SIGTERM":
         assert not [p.name for p in out.rglob("*") if p.name.endswith(".tmp") or ".tmp" in p.name]
+
+
+def test_the_same_drive_twice_for_one_vehicle_is_charged_and_said(tmp_path):
+    """One drive uploaded twice under two names: each log keeps its invoice, and the overlap is reported
+    (outcomes name each other, the summary counts them, the CLI warns)."""
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    for name in ("TRK-5.morning.nmea", "TRK-5.again.nmea"):
+        shutil.copy(SAMPLES / "sim" / "rural-clean" / "drive.nmea", folder / name)
+    shutil.copy(SAMPLES / "sim" / "urban-clean" / "drive.nmea", folder / "TRK-6.nmea")
+    result = run_cli("batch", str(folder), "--geo", GEO, "--tariff", TARIFF, "--vehicle-class", "car", "--workers", "1",
+                     "-o", str(tmp_path / "out"))  # fmt: skip
+    assert result.returncode == 0, result.stderr.decode()
+    assert "2 logs overlap in time another log of the same vehicle" in result.stderr.decode()
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["overlapping"] == 2 and summary["done"] == 3
+    named = {Path(o["log"]).name: [Path(x).name for x in o.get("overlaps", [])] for o in summary["outcomes"]}
+    assert named == {"TRK-5.again.nmea": ["TRK-5.morning.nmea"], "TRK-5.morning.nmea": ["TRK-5.again.nmea"], "TRK-6.nmea": []}

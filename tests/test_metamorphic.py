@@ -356,5 +356,6 @@ def test_logs_renamed_and_moved_into_other_folders_give_the_same_invoices(tmp_pa
         (folder / ("TRK-9.nmea" if i < 2 else f"renamed-{i}.log")).write_bytes(log.read_bytes())
     b = run_batch(sorted(str(p) for p in moved.rglob("*.*")), GEO, TARIFF, ChargeSettings(vehicle="TRK-9"), str(tmp_path / "b"))
     assert a["done"] == b["done"] == len(SIM) and a["totals"] == b["totals"]
+    assert a["overlapping"] == b["overlapping"] == len(SIM)  # three drives of one vehicle at the same hour: said
     assert len(list((tmp_path / "b" / "invoices").rglob("*.json"))) == len(SIM)
     assert charges_of(tmp_path / "a") == charges_of(tmp_path / "b")

@@ -52,6 +52,9 @@ def batch(
     if as_json:
         typer.echo(json.dumps({k: v for k, v in summary.items() if k != "outcomes"}, sort_keys=True))
     warn(line, quiet)
+    if summary["overlapping"]:
+        warn(f"  warning: {summary['overlapping']} logs overlap in time another log of the same vehicle (each is charged: "
+             f"the same drive twice?); their outcomes in {os.path.join(output, 'summary.json')} name the others", quiet)  # fmt: skip
     for o in summary["outcomes"]:
         if o["status"] == "failed":
             warn(f"  failed: {o['error']}", quiet)

@@ -22,6 +22,8 @@ A vehicle's logs are one drive when they follow each other: when a log starts at
 after the vehicle's previous log ended, a passage that log ended inside and this one starts inside is one
 passage, charged once — by the invoice where it began; the next invoice lists its part at fee 0 (band
 ``continued``, naming the log it continues) and records that in its parameters, so ``verify`` reproduces it.
+Logs of one vehicle whose periods overlap (the same drive uploaded twice, a clock gone wrong) are charged
+each as it is, but never silently: each outcome lists the logs it overlaps and the summary counts them.
 A log that fails in any way — bad data or an error of the tool — is reported in ``failed/`` and the
 summary; it never stops the others.
 Work runs on a local process pool (``workers``) or, with ``scheduler``, on an existing Dask
@@ -231,18 +233,25 @@ def join_passages(outcomes: list[dict], jobs: dict[str, Job]) -> list[dict]:
         if isinstance(inv.get("period"), dict):
             by_vehicle.setdefault(str(inv.get("vehicle")), []).append(log)
     wanted: dict[str, dict | None] = {log: None for log in invoices}
+    overlaps: dict[str, set[str]] = {}
     for logs in by_vehicle.values():
         logs.sort(key=lambda log: (invoices[log]["period"]["start_utc"], log))
         for a, b in zip(logs, logs[1:]):
             wanted[b] = _carried_over(invoices[a], invoices[b]) or None
+        for i, a in enumerate(logs):  # the same vehicle in two logs at once: the same drive twice, charged in each
+            for b in logs[i + 1 :]:
+                if invoices[b]["period"]["start_utc"] >= invoices[a]["period"]["end_utc"]:
+                    break
+                overlaps.setdefault(a, set()).add(b)
+                overlaps.setdefault(b, set()).add(a)
     redo = {log for log, inv in invoices.items() if (inv.get("parameters") or {}).get("continued") != wanted[log]}
-    if not redo:
-        return outcomes
     out = []
     for o in outcomes:
         if o["log"] in redo:
             job = jobs[o["log"]]
             o = run_one(replace(job, settings=replace(job.settings, continued=wanted[o["log"]]), force=True))
+        if o["log"] in overlaps and o["status"] != "failed":
+            o = {**o, "overlaps": sorted(overlaps[o["log"]])}
         out.append(o)
     return out
 
@@ -268,7 +277,9 @@ def summarise(outcomes: list[dict]) -> dict:
         if o["status"] in ("done", "skipped"):
             totals[o["currency"]] = totals.get(o["currency"], Decimal(0)) + Decimal(o["total"])
     counts = {s: sum(o["status"] == s for o in outcomes) for s in ("done", "skipped", "failed")}
-    return {"logs": len(outcomes), **counts, "totals": {k: str(v) for k, v in sorted(totals.items())}, "outcomes": outcomes}
+    overlapping = sum("overlaps" in o for o in outcomes)
+    return {"logs": len(outcomes), **counts, "overlapping": overlapping, "totals": {k: str(v) for k, v in sorted(totals.items())},
+            "outcomes": outcomes}  # fmt: skip
 
 
 def die_with_parent(parent_pid: int) -> None:
