@@ -1,7 +1,9 @@
-"""Shared test fixtures: where the real data lives, and a CLI runner."""
+"""Shared test fixtures: where the real data lives, and CLI runners (a subprocess, or in-process)."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import subprocess
 import sys
@@ -32,3 +34,20 @@ def run_cli(*args: str, stdin: bytes | None = None, cwd: Path | None = None) -> 
         [sys.executable, "-m", "tollcli", *args],
         input=stdin, capture_output=True, cwd=cwd or REPO, env=env, timeout=300,
     )  # fmt: skip
+
+
+def run_main(*args: str) -> tuple[int, str]:
+    """Run the CLI's entry point in this process (the ``tollcli`` script's code path): (exit code, stderr).
+
+    An exception escaping a command fails the test with its traceback instead of hiding in a subprocess.
+    """
+    from tollcli.cli.main import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            main(list(args))
+            code = 0
+        except SystemExit as exc:
+            code = exc.code
+    return code, err.getvalue()

@@ -6,29 +6,14 @@ exception escaping a command fails the test with its traceback instead of being 
 
 from __future__ import annotations
 
-import contextlib
-import io
-
 import pytest
 
-from conftest import REPO, SHARED_DATA
-from tollcli.cli.main import main
+from conftest import REPO, SHARED_DATA, run_main
 
 GPSD_LOGS = sorted((SHARED_DATA / "gpsd").glob("*.log")) if (SHARED_DATA / "gpsd").exists() else []
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
 TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
 DOCUMENTED = {0, 1, 2, 3}
-
-
-def _run(*args: str) -> tuple[int, str]:
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            main(list(args))
-            code = 0
-        except SystemExit as exc:
-            code = exc.code
-    return code, err.getvalue()
 
 
 COMMANDS = {
@@ -47,7 +32,7 @@ def test_command_over_every_gpsd_log(tmp_path, command):
         pytest.skip("real data not available: ../shared/data/gpsd")
     codes = {}
     for log in GPSD_LOGS:
-        code, err = _run(*COMMANDS[command](str(log), str(tmp_path)))
+        code, err = run_main(*COMMANDS[command](str(log), str(tmp_path)))
         assert code in DOCUMENTED, f"{log.name}: exit {code}: {err}"
         assert "Traceback" not in err, f"{log.name}: {err}"
         if code:
@@ -63,10 +48,10 @@ def test_process_and_verify_over_every_gpsd_log(tmp_path):
     invoiced = 0
     for i, log in enumerate(GPSD_LOGS):
         invoice = tmp_path / f"{i}.json"
-        code, err = _run("process", str(log), "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(invoice))
+        code, err = run_main("process", str(log), "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(invoice))
         assert code in DOCUMENTED and "Traceback" not in err, f"{log.name}: exit {code}: {err}"
         if code == 0:
             invoiced += 1
-            code, err = _run("verify", str(invoice))
+            code, err = run_main("verify", str(invoice))
             assert code == 0, f"{log.name}: verify: {err}"
     assert invoiced >= 90

@@ -6,13 +6,13 @@ Budget: ``FUZZ_EXAMPLES`` examples per fuzzer (default small, for CI);
 
 from __future__ import annotations
 
-import contextlib
 import datetime as dt
 import io
 import json
 import os
 import tempfile
 
+from conftest import run_main
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -97,17 +97,12 @@ TARIFF = os.path.join(ROOT, "geoobjects", "example-tariff.toml")
 DRIVE = os.path.join(ROOT, "samples", "sim", "rural-clean", "drive.nmea")
 
 
-def _cli(*args: str) -> tuple[int, str]:
-    from tollcli.cli.main import main
-
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            main(list(args))
-            code = 0
-        except SystemExit as exc:
-            code = exc.code
-    return code, err.getvalue()
+def _written(folder: str, name: str, text) -> str:
+    """``text`` (JSON for a non-string) written to ``folder/name``; its path."""
+    path = os.path.join(folder, name)
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(text if isinstance(text, str) else json.dumps(text))
+    return path
 
 
 def _judged(code: int, err: str, what: str) -> None:
@@ -134,10 +129,10 @@ def test_fuzz_logs_through_every_command(lines):
             "batch": ["batch", log, "--geo", GEO, "--tariff", TARIFF, "--workers", "1", "-q", "-o", os.path.join(tmp, "out")],
         }  # fmt: skip
         for what, args in runs.items():
-            code, err = _cli(*args)
+            code, err = run_main(*args)
             _judged(code, err, what)
             if what == "process" and code == 0:
-                _judged(*_cli("verify", os.path.join(tmp, "inv.json")), "verify")
+                _judged(*run_main("verify", os.path.join(tmp, "inv.json")), "verify")
 
 
 @FUZZ_CLI
@@ -145,11 +140,9 @@ def test_fuzz_logs_through_every_command(lines):
 def test_fuzz_geoobject_files_through_the_commands(doc):
     """A fuzzed geo-object file through geoobjects check and process: a documented exit, never a traceback."""
     with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "g.geojson")
-        with open(path, "w", encoding="utf-8") as fh:
-            fh.write(doc if isinstance(doc, str) else json.dumps(doc))
-        _judged(*_cli("geoobjects", "check", path, "-q"), "geoobjects check")
-        _judged(*_cli("process", DRIVE, "--geo", path, "--tariff", TARIFF, "-q", "-o", os.path.join(tmp, "i.json")), "process")
+        path = _written(tmp, "g.geojson", doc)
+        _judged(*run_main("geoobjects", "check", path, "-q"), "geoobjects check")
+        _judged(*run_main("process", DRIVE, "--geo", path, "--tariff", TARIFF, "-q", "-o", os.path.join(tmp, "i.json")), "process")
 
 
 @FUZZ_CLI
@@ -157,10 +150,8 @@ def test_fuzz_geoobject_files_through_the_commands(doc):
 def test_fuzz_tariffs_through_process(text):
     """A fuzzed tariff through process: an invoice or a documented exit with a reason, never a traceback."""
     with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "t.toml")
-        with open(path, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        _judged(*_cli("process", DRIVE, "--geo", GEO, "--tariff", path, "-q", "-o", os.path.join(tmp, "i.json")), "process")
+        path = _written(tmp, "t.toml", text)
+        _judged(*run_main("process", DRIVE, "--geo", GEO, "--tariff", path, "-q", "-o", os.path.join(tmp, "i.json")), "process")
 
 
 # ------------------------------------------------------------------------------------------ GeoJSON
@@ -195,9 +186,7 @@ _doc = st.one_of(
 @given(_doc)
 def test_fuzz_geoobject_files_give_results_or_data_errors(doc):
     with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "g.geojson")
-        with open(path, "w", encoding="utf-8") as fh:
-            fh.write(doc if isinstance(doc, str) else json.dumps(doc))
+        path = _written(tmp, "g.geojson", doc)
         for fn in (build_geoobjects, check_geoobjects, load_geoobjects):
             try:
                 fn(path)
@@ -225,9 +214,7 @@ _tariff = st.builds(lambda cur, tz, parts, junk: f"currency = {cur}\ntimezone = 
 @given(_tariff, _key, _key, st.datetimes(dt.datetime(1990, 1, 1), dt.datetime(2090, 1, 1)))
 def test_fuzz_tariffs_give_fees_or_data_errors(text, road_class, vehicle_class, when):
     with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "t.toml")
-        with open(path, "w", encoding="utf-8") as fh:
-            fh.write(text)
+        path = _written(tmp, "t.toml", text)
         try:
             tariff = load_tariff(path)
             fee, _ = tariff.fee("g", road_class, vehicle_class, when.replace(tzinfo=dt.timezone.utc))

@@ -32,10 +32,14 @@ distributed cluster; each log's outputs depend only on that log and the shared s
 
 from __future__ import annotations
 
+import ctypes
 import glob
 import hashlib
 import json
 import os
+import signal
+import threading
+import time
 from dataclasses import asdict, dataclass, replace
 from decimal import Decimal
 from urllib.parse import quote
@@ -288,13 +292,7 @@ def die_with_parent(parent_pid: int) -> None:
     Linux tells the worker at once (``PR_SET_PDEATHSIG``); elsewhere a thread notices within a second that
     its parent changed. Either way the worker gets SIGTERM and discards the output it was writing.
     """
-    import signal
-    import threading
-    import time
-
     try:
-        import ctypes
-
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
     except (OSError, AttributeError, TypeError):
         pass

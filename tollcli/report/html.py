@@ -8,6 +8,7 @@ longer offline, by the user's choice.
 
 from __future__ import annotations
 
+import base64
 import html
 import json
 from importlib import resources
@@ -80,8 +81,6 @@ def report_html(run: RunData, tiles: str | None = None) -> str:
                  f"{c['positioning_failures']} positioning failures, {c['undetected']} undetected. Regions: "
                  + html.escape(", ".join(f"{k} {v}" for k, v in c["regions"].items())) + "</p>")  # fmt: skip
     if run.truth is not None and "horiz_error_m" in e:
-        import base64
-
         png = base64.b64encode(figure_png(stanford_figure(run))).decode("ascii")
         truth += f'<p><img alt="Stanford diagram: horizontal error against HPL" src="data:image/png;base64,{png}"></p>'
     p_fa_asked = inv["parameters"].get("p_fa")
