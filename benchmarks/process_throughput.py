@@ -10,6 +10,10 @@ with an empty cache directory (it parses the geo-object GeoJSON and compiles it)
 then again (it reads the compiled copy: what every later log of a fleet sees). The commands run as an
 installed package does, with tollcli's bytecode compiled (``compileall`` first; the environment
 variable ``PYTHONDONTWRITEBYTECODE`` is dropped for them).
+``--mix ublox`` gives the drive a u-blox ZED-F9P/NEO-M9N sentence mix (as ``ublox-zed-f9p-nmea.log``): its
+GST with an RMS field that is no range RMS (10⁵ "m") and 2.3/3.5/4.0 m σ's, its GBS (the receiver's RAIM, no
+failed satellite), ZDA, no GRS; the share of the segments under the track that are charged, the parallel
+roads charged, the findings, and the time ``pynmea2.parse`` alone needs for the file are printed beside.
 ``--memory-hours 1 10 100`` adds the peak RSS of ``process`` over those drive
 lengths (same network), with the ratio of the longest to the shortest.
 """
@@ -56,6 +60,39 @@ def roads(n_objects: int, length_m: float, seg_m: float = 250.0) -> dict:
     return {"type": "FeatureCollection", "features": feats}
 
 
+UBLOX_RMS = (235111, 348874, 43, 239130, 837, 228650)  # ublox-zed-f9p-nmea.log's GST RMS fields, in turn
+
+
+def ublox_mix(lines):
+    """The drive's sentences with a u-blox receiver's integrity sentences instead of its GST."""
+    from tollcli.readers.nmea.compose import with_checksum
+
+    k = 0
+    for line in lines:
+        if "GST," not in line:
+            yield line
+            continue
+        t = line.split(",")[1]
+        yield with_checksum(f"GNGST,{t},{UBLOX_RMS[k % len(UBLOX_RMS)]},,,,2.3,3.5,4.0")
+        yield with_checksum(f"GNGBS,{t},2.3,3.5,4.0,,,,,,")
+        hh, mm, ss = t[0:2], t[2:4], t[4:]
+        yield with_checksum(f"GNZDA,{hh}{mm}{ss},06,05,2024,00,00")
+        k += 1
+
+
+def pynmea2_seconds(path: Path) -> float:
+    import pynmea2
+
+    start = time.perf_counter()
+    with open(path, encoding="latin-1") as fh:
+        for line in fh:
+            try:
+                pynmea2.parse(line.rstrip("\n"))
+            except pynmea2.ParseError:
+                pass
+    return time.perf_counter() - start
+
+
 def timed(cmd: list[str], env: dict | None = None) -> tuple[float, float]:
     """Wall time (s) and peak RSS (MB) of a command in a fresh process."""
     code = ("import resource, subprocess, sys, time\n"
@@ -70,13 +107,15 @@ def main() -> None:
     parser.add_argument("--hours", type=float, default=10.0)
     parser.add_argument("--objects", type=int, default=10_000)
     parser.add_argument("--memory-hours", type=float, nargs="*", default=[], help="drive lengths for the memory test, h")
+    parser.add_argument("--mix", choices=("compose", "ublox"), default="compose", help="the drive's sentence mix")
     args = parser.parse_args()
     n_epochs = int(args.hours * 3600)
     tollcli = [sys.executable, "-m", "tollcli"]
     tariff = Path(__file__).resolve().parents[1] / "geoobjects" / "example-tariff.toml"
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "drive.nmea"
-        log.write_text("\n".join(straight_drive(n_epochs)) + "\n")
+        drive = straight_drive(n_epochs)
+        log.write_text("\n".join(ublox_mix(drive) if args.mix == "ublox" else drive) + "\n")
         road_file = Path(tmp) / "roads.geojson"
         road_file.write_text(json.dumps(roads(args.objects, n_epochs * SPEED)))
         start = time.perf_counter()
@@ -103,6 +142,16 @@ def main() -> None:
         print(f"tollcli process, geo-objects compiled:        {t_proc:6.2f} s  {n_epochs / t_proc:9,.0f} epochs/s  peak RSS {m_proc:6.0f} MB")
         print(f"ratio process / reader time: {t_proc / t_read:.2f}; invoice: {len(invoice['lines'])} lines, total {invoice['total']}; "
               f"cold and warm invoices {'byte-identical' if same else 'DIFFER'}")  # fmt: skip
+        under = {f["properties"]["id"] for f in geo["features"] if f["properties"]["id"].startswith("R0-")}
+        driven = {i for i in under if int(i.split("-")[1]) * 250.0 + 250.0 <= n_epochs * SPEED}
+        charged = {line["geoobject"] for line in invoice["lines"]}
+        print(f"mix {args.mix}: {len(charged & driven)} of {len(driven)} segments under the track charged "
+              f"({len(charged & driven) / max(len(driven), 1):.1%}), {len(charged - under)} on parallel roads; "
+              f"findings: {sorted({f['kind'] for f in invoice['findings']['items']}) or 'none'}; "
+              f"level {invoice['parameters']['integrity_sources_used']}, vouched by "
+              f"{sorted({s for line in invoice['lines'] for s in line['vouched_by']})}")  # fmt: skip
+        t_py = pynmea2_seconds(log)
+        print(f"pynmea2.parse alone on the same file: {t_py:6.2f} s; ratio process / pynmea2: {t_proc / t_py:.2f}")
         memory = []
         for hours in sorted(args.memory_hours):
             n = int(hours * 3600)

@@ -1,5 +1,11 @@
 """NMEA reader throughput against plain pynmea2, and peak memory against log size.
 
+Real patterns (the figures that count): each receiver pattern of
+:mod:`real_patterns` (a real gpsd log's sentence sequence: u-blox, Quectel, SiRF,
+MediaTek, SkyTraq, ST, Unicore, Telit) is replayed, re-timed, into a log of at least
+``--pattern-lines`` lines and read by the bulk reader and by ``pynmea2.parse``; per pattern:
+lines/s, the ratio to pynmea2 in the same run, and the share of epochs read line by line.
+
 Speed: the same synthetic multi-constellation log (RMC, VTG, GGA, 2×GSA, 3×GSV,
 GST per epoch) is read by ``tollcli.readers.nmea.iter_nmea_tables`` (full decoding into
 epoch and satellite tables) with the bulk path (the default, with its compiled
@@ -63,9 +69,12 @@ def plain_pynmea2(path: Path) -> float:
     import pynmea2
 
     start = time.perf_counter()
-    with open(path, encoding="ascii") as fh:
+    with open(path, encoding="latin-1") as fh:
         for line in fh:
-            pynmea2.parse(line.rstrip("\n"))
+            try:
+                pynmea2.parse(line.rstrip("\n"))
+            except pynmea2.ParseError:  # real receivers write sentences pynmea2 refuses (counted in its time)
+                pass
     return time.perf_counter() - start
 
 
@@ -84,16 +93,41 @@ def peak_rss_mb(path: Path) -> float:
     return int(kib) / 1024.0
 
 
+def patterns(tmp: str, min_lines: int, repeat: int) -> None:
+    """Per real receiver pattern: bulk reader lines/s, ratio to pynmea2, per-line share."""
+    import real_patterns
+
+    if not real_patterns.DATA.is_dir():
+        print(f"real patterns: {real_patterns.DATA} not found (the shared data); skipped")
+        return
+    print(f"{'pattern (gpsd log)':48s} {'lines':>9s} {'bulk lines/s':>13s} {'pynmea2 l/s':>12s} {'ratio':>6s} {'per-line':>8s}")
+    for name, log_name in real_patterns.PATTERNS.items():
+        path = Path(tmp) / "pattern.nmea"
+        n_lines = real_patterns.replay(real_patterns.DATA / log_name, path, min_lines)
+        stats = ReadStats()
+        for _ in iter_nmea_tables(path, stats=stats):
+            pass
+        t_ours = min(ours(path) for _ in range(repeat))
+        t_base = min(plain_pynmea2(path) for _ in range(repeat))
+        share = stats.per_line_epochs / max(stats.epochs, 1)
+        print(f"{name + ' (' + log_name + ')':48s} {n_lines:9,d} {n_lines / t_ours:13,.0f} {n_lines / t_base:12,.0f} "
+              f"{t_base / t_ours:6.2f} {share:8.2%}")
+        path.unlink()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--speed-mb", type=float, default=20.0, help="size of the speed-test log, MB")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--memory-gb", type=float, nargs="*", default=[0.1, 1.0], help="log sizes for the memory test, GB")
     parser.add_argument("--no-memory", action="store_true")
+    parser.add_argument("--pattern-lines", type=int, default=500_000, help="lines per replayed real pattern (0: skip them)")
     parser.add_argument("--workdir", default=None, help="where to write the logs (default: a temporary folder)")
     args = parser.parse_args()
 
     with tempfile.TemporaryDirectory(dir=args.workdir) as tmp:
+        if args.pattern_lines:
+            patterns(tmp, args.pattern_lines, args.repeat)
         log = Path(tmp) / "speed.nmea"
         n_lines = write_log(log, int(args.speed_mb * 1e6))
         ours(log)  # warm the look-up tables and the page cache

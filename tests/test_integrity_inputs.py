@@ -65,7 +65,7 @@ def test_gsv_angles_carry_forward_within_their_age_and_across_chunks():
 def test_gst_only_is_a_flagged_approximation_and_nothing_is_unmonitored():
     tables = _tables(list(compose.straight_drive(3)))  # GST, no GRS
     out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
-    assert (out["test_stat_source"] == "gst_approx").all()
+    assert (out["test_stat_source"] == "gst").all() and (out["integrity_source"] == "gst").all()
     bare = _tables([line for line in compose.straight_drive(3) if "GST" not in line])
     out = run_raim(nmea_measurements(bare.epochs, bare.satellites), RaimParams("etc"))
     assert (out["raim_status"] == "unmonitored").all() and out["hpl_m"].notna().all() and out["threshold"].notna().all()

@@ -13,6 +13,7 @@ from conftest import REPO, SAMPLES, run_cli, shared
 from tollcli.charging.recognition import charges, load_geoobjects, recognise, thin_independent
 from tollcli.gnss.nmea_measurements import nmea_measurements
 from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.run import run_raim
 from tollcli.readers.nmea import compose, read_nmea
 
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
@@ -20,8 +21,13 @@ TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
 SAMPLE = str(SAMPLES / "straight-drive.nmea")
 
 
-def _drive(offset_left_m: float = 0.0, rms_m=None, n: int = 180):
-    """The sample drive, moved sideways; ``rms_m(k)`` sets the GST RMS of epoch k (a fault when large)."""
+def _drive(offset_left_m: float = 0.0, rms_m=None, n: int = 180, ellipse_follows: bool = True):
+    """The sample drive, moved sideways; ``rms_m(k)`` sets the GST RMS of epoch k (a fault when large).
+
+    ``ellipse_follows``: the receiver's error ellipse grows with a large RMS (σ's = RMS / 8), as a
+    receiver's a-posteriori ellipse does, so that the RMS is a plausible range RMS; False keeps the
+    2–3 m ellipse beside it (the u-blox signature of an RMS field that is no range RMS).
+    """
     c = math.radians(45.0 - 90.0)
     lat = 42.6987 + offset_left_m * math.cos(c) / 111_132.0
     lon = 2.8956 + offset_left_m * math.sin(c) / (111_320.0 * math.cos(math.radians(42.6987)))
@@ -33,6 +39,8 @@ def _drive(offset_left_m: float = 0.0, rms_m=None, n: int = 180):
                 k += 1
                 fields = line[1:].split("*")[0].split(",")
                 fields[2] = f"{rms_m(k):.2f}"
+                if ellipse_follows and rms_m(k) > 10.0:
+                    fields[3] = fields[6] = fields[7] = f"{rms_m(k) / 8.0:.2f}"
                 line = compose.with_checksum(",".join(fields))
             out.append(line)
         lines = out
@@ -71,6 +79,20 @@ def test_epochs_with_a_detected_fault_never_count():
     assert table["charged"].all()  # the fault-free epochs still charge both segments
     _, none = _charge(_drive(rms_m=lambda k: 80.0))
     assert not none["charged"].any() and len(none) == 2  # seen, but nothing valid: not charged
+
+
+def test_an_implausible_gst_rms_neither_validates_nor_faults():
+    # 80 m next to a 3 × 2 m ellipse at HDOP 0.9: no range RMS (u-blox writes such values); ignored, and for the
+    # rest of the log; the ellipse's bound (4.45 × 3 m = 13.4 m ≤ HAL 40 m) still validates
+    positions, table = _charge(_drive(rms_m=lambda k: 80.0 if k % 2 else 2.1, ellipse_follows=False))
+    assert not (positions["raim_status"] == "fault_detected").any()
+    assert set(positions["integrity_source"]) <= {"gst"} and table["charged"].all()
+    tables = _drive(rms_m=lambda k: 80.0 if k % 2 else 2.1, ellipse_follows=False)
+    raim = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
+    assert raim["gst_rms_note"].tolist()[:4] == ["", "implausible", "implausible_earlier", "implausible"]
+    assert raim["test_stat"].isna().iloc[1:].all() and np.allclose(raim["hpl_gst_m"], 4.4505 * 3.0, atol=1e-3)
+    # the ellipse's bound alone validates (no residual test ran)
+    assert (raim["residual_status"] == "").all() and set(raim["raim_status"]) == {"valid"}
 
 
 def test_tc_thinning_is_exact():

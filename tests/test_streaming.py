@@ -144,7 +144,7 @@ def test_charges_without_groupby_are_the_groupby_ones(rows):
     t_s = 1.7e9 + np.array([r[1] for r in rows], float)
     cols = {"epoch_row": np.arange(len(rows)), "obj": obj, "raim_status": np.full(len(rows), "valid", object),
             "test_stat": np.ones(len(rows)), "threshold": np.ones(len(rows)), "p_fa": np.ones(len(rows)),
-            "test_stat_source": np.full(len(rows), "grs", object), "valid": np.array([r[2] for r in rows]),
+            "test_stat_source": np.full(len(rows), "grs", object), "integrity_source": np.full(len(rows), "grs", object), "valid": np.array([r[2] for r in rows]),
             "verdict": np.full(len(rows), "valid", object), "t_s": t_s,
             "time_utc": pd.to_datetime(t_s * 1000, unit="ms", utc=True).array}  # fmt: skip
     pos = passages(cols, geo, tc_s=5.0, passage_gap_s=60.0)
@@ -215,7 +215,7 @@ def _synthetic_trip(tmp_path, n: int, seed: int):
     rows = np.sort(rng.choice(n, size=n // 3, replace=False))
     pairs = {"epoch_row": rows, "obj": np.zeros(rows.size, np.int64), "raim_status": status[rows],
              "test_stat": rng.random(rows.size), "threshold": np.full(rows.size, 13.0), "p_fa": np.full(rows.size, 1e-3),
-             "test_stat_source": np.full(rows.size, "grs", object), "raim_valid": status[rows] == "valid"}  # fmt: skip
+             "test_stat_source": np.full(rows.size, "grs", object), "integrity_source": np.full(rows.size, "grs", object), "raim_valid": status[rows] == "valid"}  # fmt: skip
     _roads(tmp_path, connector=False)
     roads = tmp_path / "roads.geojson"
     geo = tmp_path / "geo.geojson"  # one geo-object: around T (P is free), so a position counts only when matched to T

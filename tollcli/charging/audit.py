@@ -15,7 +15,11 @@ Without truth, a risk report from the invoices alone:
   valid independent positions remained, with the statuses that explain why;
 * per charge, an upper bound on the chance it is false: at least N_Th of its n
   independent valid positions must be misleading, each with probability ≤ P_MD
-  even when a fault is present, so P(false) ≤ P(Bin(n, P_MD) ≥ N_Th).
+  even when a fault is present, so P(false) ≤ P(Bin(n, P_MD) ≥ N_Th). That holds for
+  positions a fault-detecting source vouched for (a residual test, the receiver's own
+  RAIM: the invoice line's ``vouched_by``); a covariance-only bound (GST) detects no
+  fault, so its n_cov positions are counted as possibly misleading:
+  P(false) ≤ P(Bin(n − n_cov, P_MD) ≥ N_Th − n_cov) (1 when n_cov ≥ N_Th).
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import pandas as pd
 from scipy import stats
 
 from tollcli.errors import DataError, UsageError
+from tollcli.integrity.sources import FAULT_DETECTING
 from tollcli.io.sources import read_json
 from tollcli.stats import wilson
 
@@ -205,9 +210,12 @@ def risk_report(invoices: list[dict], fees: dict[str, Decimal]) -> dict:
                             "why": item.get("statuses", {}), "fee": str(fee) if fee is not None else None})  # fmt: skip
         for line in inv["lines"]:
             n = int(line["n_valid_independent"])
-            bound = float(stats.binom.sf(n_th - 1, n, p_md))
+            vouched = line.get("vouched_by") or {}  # invoices before sources were recorded: residual tests only
+            n_cov = sum(int(k) for source, k in vouched.items() if source not in FAULT_DETECTING)
+            need = n_th - n_cov
+            bound = 1.0 if need <= 0 else float(stats.binom.sf(need - 1, n - n_cov, p_md))
             charges.append({"vehicle": inv.get("vehicle", ""), "geoobject": line["geoobject"], "entry_utc": line["entry_utc"],
-                            "n_valid_independent": n, "p_false_bound": bound})  # fmt: skip
+                            "n_valid_independent": n, "vouched_by": vouched, "p_false_bound": bound})  # fmt: skip
     exponent = min((Decimal(inv["total"]).as_tuple().exponent for inv in invoices), default=-2)
     return {"runs": len(invoices), "revenue_at_risk": at_risk, "money_at_risk": str(money.quantize(Decimal(1).scaleb(exponent))),
             "charges": charges}  # fmt: skip

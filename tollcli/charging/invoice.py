@@ -19,6 +19,7 @@ from tollcli.charging.canonical_json import canonical_json
 from tollcli.charging.recognition import PASSAGE_GAP_S, GeoObjects
 from tollcli.charging.tariffs import Tariff
 from tollcli.integrity.raim import STATUS_MEANINGS
+from tollcli.integrity.sources import SOURCE_MEANINGS
 from tollcli.times import iso_utc
 
 
@@ -73,6 +74,8 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
         fee, band = tariff.fee(gid, geo.road_class[i], vehicle_class, pd.Timestamp(entry_utc).to_pydatetime())
         total += fee
         lines.append({**base, "fee": str(fee), "band": band, "evidence": evidence.get((gid, passage), [])})
+    for line in lines:  # the sources whose verdicts made its positions count (the audit bounds a false charge with them)
+        line["vouched_by"] = vouched_by(line["evidence"])
     doc = {
         "tool": f"tollcli {__version__}",
         "vehicle": vehicle,
@@ -85,6 +88,9 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
         "total": str(total.quantize(Decimal(1).scaleb(-tariff.minor_unit))),
         "not_charged": not_charged,
     }
+    sources = {source for line in lines for source in line["vouched_by"]}
+    if sources - {"grs", "pseudorange"}:  # the auditor reads what a receiver's own verdict is worth
+        doc["source_notes"] = {s: SOURCE_MEANINGS[s] for s in sorted(sources) if s in SOURCE_MEANINGS}
     seen = {status for passage in (*lines, *not_charged) for status in passage["statuses"]}
     if "probable_false_alarm" in seen:  # the auditor reads why so many positions alarmed, and what it does not mean
         doc["status_notes"] = {"probable_false_alarm": STATUS_MEANINGS["probable_false_alarm"]
@@ -123,15 +129,25 @@ def _evidence(positions: pd.DataFrame) -> dict[tuple, list[dict]]:
     times = iso_utc(kept["time_utc"]) if len(kept) else []
     out: dict[tuple, list[dict]] = {}
     numbers = [[None if v != v else v for v in kept[c].to_numpy(float).tolist()] for c in ("test_stat", "threshold", "p_fa")]
-    for gid, passage, epoch, when, status, stat, threshold, p_fa, source in zip(
+    vouching = kept["integrity_source"] if "integrity_source" in kept else kept["test_stat_source"]
+    for gid, passage, epoch, when, status, stat, threshold, p_fa, source, vouched in zip(
         kept["geoobject"], kept["passage"].tolist(), kept["epoch_row"].tolist(), times, kept["raim_status"],
-        *numbers, kept["test_stat_source"],
+        *numbers, kept["test_stat_source"], vouching,
     ):  # fmt: skip
         out.setdefault((gid, passage), []).append(
             {"epoch": epoch, "time_utc": when, "raim_status": status, "test_stat": stat, "threshold": threshold,
-             "p_fa": p_fa, "test_stat_source": source}  # fmt: skip
+             "p_fa": p_fa, "test_stat_source": source, "integrity_source": vouched}  # fmt: skip
         )
     return out
+
+
+def vouched_by(evidence: list[dict]) -> dict[str, int]:
+    """Source → the number of evidence positions its verdict made count."""
+    out: dict[str, int] = {}
+    for item in evidence:
+        source = item.get("integrity_source") or item.get("test_stat_source") or "none"
+        out[source] = out.get(source, 0) + 1
+    return dict(sorted(out.items()))
 
 
 def invoice_json(invoice: dict) -> str:

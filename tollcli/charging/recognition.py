@@ -32,13 +32,6 @@ PASSAGE_GAP_S = 120.0
 from tollcli.charging.geoobject_store import GeoObjects, load_geoobjects  # noqa: E402,F401  (re-exported)
 
 
-def _subset(meas: Measurements, rows: np.ndarray) -> Measurements:
-    pick = lambda a: None if a is None else a[rows]  # noqa: E731
-    return Measurements(meas.H[rows], meas.sigma_m[rows], meas.mask[rows], meas.sv[rows], residual_m=pick(meas.residual_m),
-                        dy_m=pick(meas.dy_m), test_stat_override=pick(meas.test_stat_override),
-                        test_stat_source=pick(meas.test_stat_source), satellites_reported=pick(meas.satellites_reported))  # fmt: skip
-
-
 def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(epoch row, geo-object index) for every position inside a geo-object, and the metric x, y of all rows."""
     from tollcli.spatial import wgs84_to
@@ -78,7 +71,8 @@ def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params:
     """One row per (epoch, geo-object) position inside, with its RAIM verdict under that HAL.
 
     Columns: ``epoch_row``, ``geoobject``, ``time_utc``, ``passage`` (per geo-object),
-    ``raim_status``, ``test_stat``, ``threshold``, ``p_fa``, ``test_stat_source``,
+    ``raim_status``, ``test_stat``, ``threshold``, ``p_fa``, ``test_stat_source``, ``integrity_source``
+    (the source whose verdict decided, :mod:`tollcli.integrity.sources`),
     ``valid`` (counts for the geo-object), ``independent`` (kept by T_c thinning), ``verdict``
     (the RAIM status, or for a RAIM-valid position the policy's failed check: ``epoch_why`` per
     epoch row, '' when it passes; with ``matched_road`` a position counts only for the geo-object of
@@ -91,7 +85,8 @@ def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params:
     return positions_from_pairs(pairs, epochs["time_utc"], geo, tc_s, passage_gap_s, epoch_why, matched_road)
 
 
-PAIR_COLUMNS = ("epoch_row", "obj", "raim_status", "test_stat", "threshold", "p_fa", "test_stat_source", "raim_valid")
+PAIR_COLUMNS = ("epoch_row", "obj", "raim_status", "test_stat", "threshold", "p_fa", "test_stat_source", "integrity_source",
+                "raim_valid")  # fmt: skip
 
 
 def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams, row_offset: int = 0,
@@ -106,8 +101,9 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
     if rows.size == 0:
         return {"epoch_row": np.zeros(0, np.int64), "obj": np.zeros(0, np.int64), "raim_status": np.zeros(0, object),
                 "test_stat": np.zeros(0), "threshold": np.zeros(0), "p_fa": np.zeros(0),
-                "test_stat_source": np.zeros(0, object), "raim_valid": np.zeros(0, bool)}  # fmt: skip
-    raim = run_raim(_subset(meas, rows), params, hal_m=geo.hal_m[obj],
+                "test_stat_source": np.zeros(0, object), "integrity_source": np.zeros(0, object),
+                "raim_valid": np.zeros(0, bool)}  # fmt: skip
+    raim = run_raim(meas.take(rows), params, hal_m=geo.hal_m[obj],
                     geometry=take_epochs(geometry, rows) if geometry is not None else None)
     status = raim["raim_status"].to_numpy(dtype=object)
     de, dn = raim["fde_shift_e_m"].to_numpy(), raim["fde_shift_n_m"].to_numpy()
@@ -117,6 +113,7 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
     return {"epoch_row": rows + row_offset, "obj": obj, "raim_status": status, "test_stat": raim["test_stat"].to_numpy(),
             "threshold": raim["threshold"].to_numpy(), "p_fa": raim["p_fa"].to_numpy(),
             "test_stat_source": raim["test_stat_source"].to_numpy(dtype=object),
+            "integrity_source": raim["integrity_source"].to_numpy(dtype=object),
             "raim_valid": np.isin(status, VALID_STATUSES) & shifted_inside}  # fmt: skip
 
 
@@ -137,7 +134,7 @@ def positions_from_pairs(pairs: dict[str, np.ndarray], time_utc: pd.Series, geo:
 
 
 POSITION_COLUMNS = ("epoch_row", "geoobject", "time_utc", "passage", "raim_status", "test_stat", "threshold", "p_fa",
-                    "test_stat_source", "valid", "independent", "verdict")  # fmt: skip
+                    "test_stat_source", "integrity_source", "valid", "independent", "verdict")  # fmt: skip
 
 
 def empty_positions() -> pd.DataFrame:
@@ -182,7 +179,8 @@ def passages(cols: dict[str, np.ndarray], geo: GeoObjects, tc_s: float = 5.0, pa
         "epoch_row": cols["epoch_row"][by_obj], "geoobject": geo.ids[obj], "time_utc": cols["time_utc"][by_obj],
         "passage": passage, "raim_status": cols["raim_status"][by_obj], "test_stat": cols["test_stat"][by_obj],
         "threshold": cols["threshold"][by_obj], "p_fa": cols["p_fa"][by_obj],
-        "test_stat_source": cols["test_stat_source"][by_obj], "valid": valid, "independent": independent,
+        "test_stat_source": cols["test_stat_source"][by_obj], "integrity_source": cols["integrity_source"][by_obj],
+        "valid": valid, "independent": independent,
         "verdict": cols["verdict"][by_obj],
     })  # fmt: skip
 

@@ -26,6 +26,7 @@ def batch(
     vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class in the tariff.")] = "car",
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network for map-matching integrity.")] = None,
     policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all.")] = None,
+    integrity_sources: opt.IntegritySources = "auto",
     raim: opt.RaimMode = "etc",
     p_md: opt.PMd = 5e-5,
     p_fa: opt.PFa = 5e-3,
@@ -43,7 +44,8 @@ def batch(
     fee 0 (band 'continued'). Ending the batch (even kill -9) ends its workers.
     """
     logs = expand_inputs(inputs)
-    settings = ChargeSettings(vehicle_class=vehicle_class, raim=raim, p_md=p_md, p_fa=p_fa, policy=policy)
+    settings = ChargeSettings(vehicle_class=vehicle_class, raim=raim, p_md=p_md, p_fa=p_fa, policy=policy,
+                              integrity_sources=integrity_sources)  # fmt: skip
     with progress(f"batch of {len(logs)} logs", quiet) as advance:
         summary = run_batch(logs, geo, tariff, settings, output, workers=workers, scheduler=scheduler, force=force,
                             roads=roads, progress=advance)  # fmt: skip

@@ -14,6 +14,7 @@ from tollcli.cli.console import progress, warn
 from tollcli.errors import UsageError
 from tollcli.gnss.sigma_models import SIGMA_MODELS, NominalModel
 from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for
 from tollcli.job.log_integrity import iter_integrity
@@ -28,6 +29,7 @@ def integrity(
     output: opt.Output = "-",
     fmt: Annotated[str, typer.Option("--format", help="Input: auto, nmea, gsdc-derived, rinex (observation file).")] = "auto",
     nav: Annotated[Optional[str], typer.Option("--nav", help="RINEX navigation file (with --format rinex).")] = None,
+    integrity_sources: opt.IntegritySources = "auto",
     raim: opt.RaimMode = "etc",
     hal: opt.Hal = 50.0,
     p_md: opt.PMd = 5e-5,
@@ -44,9 +46,14 @@ def integrity(
     checks: Annotated[bool, typer.Option("--checks", help="Add the speed check, the Kalman HIT and (with --roads) map matching and its fuzzy integrity; reads the whole log first.")] = False,
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings) to match onto; implies --checks.")] = None,
 ) -> None:
-    """Check every epoch with the WLSR RAIM and write the epoch table with its verdict.
+    """Check every epoch with every integrity source the log has and write the epoch table with its verdict.
 
-    Adds raim_mode, n_used, dof, slope_max_m, test_stat, test_stat_source,
+    Sources: the WLSR RAIM on GRS residuals or pseudoranges, the receiver's own
+    RAIM (GBS) and its error ellipse (GST); the strictest verdict wins
+    (raim_status), the deciding source is integrity_source, each source's own
+    verdict is kept (residual_status, gbs_status, gst_status, hpl_gbs_m,
+    hpl_gst_m), and gst_rms_note says where a GST RMS field was ignored as no
+    range RMS. Adds raim_mode, n_used, dof, slope_max_m, test_stat, test_stat_source,
     threshold, lambda_det, hpl_m, hal_m, p_fa, p_md, raim_status, excluded_sv,
     fde_shift_e_m, fde_shift_n_m and raim_lat_deg/raim_lon_deg. Statuses: valid,
     fault_detected (t > Th at P_FA ≤ --p-fa: a credible alarm), probable_false_alarm
@@ -63,7 +70,9 @@ def integrity(
     if as_json and output == "-":
         raise UsageError("--json prints the summary on stdout: give the table a file with -o")
     try:
-        params = RaimParams(mode=raim, hal_m=hal, p_md=p_md, p_fa=p_fa, fde=fde)
+        if integrity_sources not in LEVEL_CHOICES:
+            raise ValueError(f"--integrity-sources {integrity_sources}: use one of {', '.join(LEVEL_CHOICES)}")
+        params = RaimParams(mode=raim, hal_m=hal, p_md=p_md, p_fa=p_fa, fde=fde, sources=LEVELS.get(integrity_sources))
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     nominal = NominalModel(iono=iono)
@@ -79,24 +88,39 @@ def integrity(
             if kind == "nmea":
                 check_usable(stats)  # a log without one epoch: the data error, before any check runs
             table = with_checks(pd.concat(tables, ignore_index=True), roads)
-            counts.update(table["raim_status"].astype(str))
+            _tally(table, counts)
             writer.write(table)
         elif kind == "nmea":
             _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day)
         else:
             table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal)
-            counts.update(table["raim_status"].astype(str))
+            _tally(table, counts)
             writer.write(table)
         writer.commit()
-    summary = {"statuses": dict(sorted(counts.items())), "epochs": sum(counts.values()), "format": kind,
+    statuses = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "status"}
+    sources = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "source"}
+    ignored = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "note" and k[1]}
+    summary = {"statuses": statuses, "epochs": sum(statuses.values()), "format": kind,
+               "integrity_sources": sources, "integrity_sources_setting": integrity_sources, "gst_rms_ignored": ignored,
                "raim": raim, "hal_m": hal, "p_md": p_md, "p_fa": p_fa if raim == "classic" else None,
                "fde": fde, "sigma_model": sigma_model}  # fmt: skip
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
     else:
-        warn(f"{log}: {summary['epochs']} epochs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())), quiet)
+        text = f"{log}: {summary['epochs']} epochs: " + ", ".join(f"{n} {s}" for s, n in statuses.items())
+        text += "; decided by " + ", ".join(f"{s} {n}" for s, n in sources.items())
+        if ignored:
+            text += f"; GST RMS ignored on {sum(ignored.values())} epochs (no range-residual RMS: " + ", ".join(
+                f"{n} {k}" for k, n in ignored.items()) + ")"
+        warn(text, quiet)
     if kind == "nmea":
         check_partial(stats, max_bad)
+
+
+def _tally(table: pd.DataFrame, counts: Counter) -> None:
+    """Count the statuses, deciding sources and GST RMS notes of a table."""
+    for kind, column in (("status", "raim_status"), ("source", "integrity_source"), ("note", "gst_rms_note")):
+        counts.update((kind, v) for v in table[column].astype(str))
 
 
 def with_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
@@ -128,7 +152,7 @@ def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, count
     with progress(f"checking {log}", quiet) as advance:
         for chunk in iter_integrity(log, "nmea", params, sigma_model, sigma, nominal, strict, stats, date=day):
             writer.write(chunk.table)
-            counts.update(chunk.table["raim_status"].astype(str))
+            _tally(chunk.table, counts)
             advance(len(chunk.table))
     check_usable(stats)
     warn(stats.summary(), quiet)

@@ -54,6 +54,13 @@ RaimMode = Annotated[str, typer.Option("--raim", help="RAIM: etc (HPL = HAL, P_F
 Hal = Annotated[float, typer.Option("--hal", help="Horizontal alert limit, m.", min=0.0)]
 PMd = Annotated[float, typer.Option("--p-md", help="Probability of missed detection.")]
 PFa = Annotated[float, typer.Option("--p-fa", help="Probability of false alarm: classic RAIM's design value; under ETC an alarm at a higher per-epoch P_FA reads probable_false_alarm.")]
+IntegritySources = Annotated[
+    str,
+    typer.Option("--integrity-sources", help="Which integrity sources may validate a position: residual (GRS residuals, "
+                 "pseudoranges), receiver (and the receiver's own RAIM, GBS), covariance (and the GST error ellipse), or "
+                 "auto: the strictest the log supports (decided at its first epoch with any source). A fault or an "
+                 "exceeded bound from any source always counts."),
+]
 Fde = Annotated[bool, typer.Option("--fde", help="Fault detection and exclusion: drop one satellite when exactly one subset passes.")]
 SigmaModel = Annotated[
     str,

@@ -26,6 +26,7 @@ def process(
     nav: Annotated[Optional[str], typer.Option("--nav", help="RINEX navigation file (RINEX input).")] = None,
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings, tolled and free) for map-matching integrity.")] = None,
     policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")] = None,
+    integrity_sources: opt.IntegritySources = "auto",
     raim: opt.RaimMode = "etc",
     p_md: opt.PMd = 5e-5,
     p_fa: opt.PFa = 5e-3,
@@ -51,7 +52,8 @@ def process(
         raise UsageError(f"{output}: invoices are written as .json or .csv")
     settings = ChargeSettings(vehicle_class=vehicle_class, vehicle=vehicle, raim=raim, p_md=p_md, p_fa=p_fa, fde=fde,
                               sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
-                              date=date.date().isoformat() if date else None, policy=policy)  # fmt: skip
+                              date=date.date().isoformat() if date else None, policy=policy,
+                              integrity_sources=integrity_sources)  # fmt: skip
     invoice, stats = charge_log(log, geo, tariff, settings, nav, roads)
     if output == "-" and sys.stdout.isatty():
         show(lambda: invoice_tables(invoice), False, to_stdout=True)

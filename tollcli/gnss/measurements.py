@@ -7,9 +7,11 @@ adapters (NMEA, GSDC derived, RINEX) all produce a :class:`Measurements`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
+
+from tollcli.gnss.receiver_outputs import ReceiverOutputs
 
 CONSTELLATION_LETTER = {
     "GPS": "G", "GLONASS": "R", "Galileo": "E", "BeiDou": "C", "QZSS": "J", "NavIC": "I", "SBAS": "S", "unknown": "X",
@@ -27,8 +29,14 @@ class Measurements:
     residual_m: np.ndarray | None = None  # (E, N) post-fit residuals (NMEA GRS), or
     dy_m: np.ndarray | None = None  # (E, N) pre-fit residuals at the linearisation point (pseudoranges)
     test_stat_override: np.ndarray | None = None  # (E,) a statistic from elsewhere (GST approximation), NaN = none
-    test_stat_source: np.ndarray | None = None  # (E,) 'grs', 'gst_approx', 'pseudorange', 'none'
+    test_stat_source: np.ndarray | None = None  # (E,) 'grs', 'gst' (a plausible GST RMS), 'pseudorange', 'none'
     satellites_reported: np.ndarray | None = None  # (E,) the receiver reported its satellites (NMEA GSA/GSV); None: n/a
+    receiver: ReceiverOutputs | None = None  # the receiver's own integrity outputs (NMEA GBS, GST)
+
+    def take(self, rows: np.ndarray) -> Measurements:
+        """The given epochs (rows may repeat: one per epoch and geo-object)."""
+        return Measurements(**{f.name: None if getattr(self, f.name) is None else (
+            getattr(self, f.name).take(rows) if f.name == "receiver" else getattr(self, f.name)[rows]) for f in fields(self)})
 
 
 def slots(epoch_row: np.ndarray, n_epochs: int) -> tuple[np.ndarray, int]:

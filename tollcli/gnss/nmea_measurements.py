@@ -6,9 +6,12 @@
   angles reported for it at most ``max_angle_age_s`` earlier (satellites move
   about 0.5° a minute); without any it is left out of the RAIM (it still counts
   in the receiver's ``n_used``).
-* Test statistic: from GRS residuals exactly (t = Σ r_i²/σ_i²); otherwise from
-  GST as an approximation, t ≈ rms²·Σ 1/σ_i², flagged ``gst_approx``; with
-  neither the epoch is ``unmonitored``.
+* Test statistic: from GRS residuals exactly (t = Σ r_i²/σ_i², source ``grs``);
+  otherwise from the GST RMS where it is a plausible range RMS
+  (:mod:`tollcli.gnss.receiver_outputs`), t ≈ rms²·Σ 1/σ_i², source ``gst``; with
+  neither, no residual test (``none``).
+* The receiver's own integrity outputs (GBS, the GST ellipse) ride along as
+  :class:`~tollcli.gnss.receiver_outputs.ReceiverOutputs` for the integrity verdicts.
 * Duplicated satellites in an epoch are counted once.
 """
 
@@ -18,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.gnss.measurements import Measurements, pad, slots, sv_labels
+from tollcli.gnss.receiver_outputs import RmsCarry, receiver_outputs
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.gnss.wls import observation_matrix
 
@@ -25,9 +29,10 @@ MAX_ANGLE_AGE_S = 30.0
 
 
 class AngleCarry:
-    """The latest GSV angles per satellite, carried from one chunk to the next."""
+    """What one chunk hands the next: the latest GSV angles per satellite, and the GST RMS verdict."""
 
     def __init__(self) -> None:
+        self.rms = RmsCarry()
         self.last = pd.DataFrame({"t_s": [], "constellation": [], "svid": [], "elev_deg": [], "azim_deg": []})
 
 
@@ -181,10 +186,11 @@ def nmea_measurements(
     labels = pad(sv_labels(const, used["svid"].to_numpy()), row, slot, shape, "")
 
     have_grs = mask.any(axis=1) & ~(mask & ~np.isfinite(residual)).any(axis=1)
-    rms = epochs["rms_residual_m"].to_numpy(float) if "rms_residual_m" in epochs else np.full(n_epochs, np.nan)
+    receiver = receiver_outputs(epochs, carry.rms if carry is not None else None)
     weight_sum = np.where(mask, 1.0 / np.where(mask, sigma, 1.0) ** 2, 0.0).sum(axis=1)
-    gst_stat = np.where(~have_grs & np.isfinite(rms), rms**2 * weight_sum, np.nan)
-    source = np.where(have_grs, "grs", np.where(np.isfinite(gst_stat), "gst_approx", "none")).astype(object)
+    gst_stat = np.where(~have_grs & np.isfinite(receiver.gst_rms_m), receiver.gst_rms_m**2 * weight_sum, np.nan)
+    source = np.where(have_grs, "grs", np.where(np.isfinite(gst_stat), "gst", "none")).astype(object)
     reported = np.isin(epoch_ids, satellites["epoch"].to_numpy()) if n_epochs else np.zeros(0, bool)
     return Measurements(H, sigma, mask, labels, residual_m=np.where(have_grs[:, None], residual, np.nan),
-                        test_stat_override=gst_stat, test_stat_source=source, satellites_reported=reported)  # fmt: skip
+                        test_stat_override=gst_stat, test_stat_source=source, satellites_reported=reported,
+                        receiver=receiver)  # fmt: skip

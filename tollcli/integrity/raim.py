@@ -53,6 +53,9 @@ class RaimParams:
     p_fa: float = 5e-3  # classic: the design P_FA; ETC: an alarm above it is a probable_false_alarm
     fde: bool = False
     exact_threshold: bool = False  # ETC: exact ncx2 quantile per epoch instead of the safe look-up table
+    #: the integrity sources that may validate a position (``integrity.sources.LEVELS``); None: the strictest
+    #: level the epochs given support (see :func:`tollcli.integrity.sources.level_for`)
+    sources: tuple[str, ...] | None = None
     _table: design.EtcThresholdTable | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:

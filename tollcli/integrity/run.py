@@ -2,14 +2,19 @@
 
 Columns added to the epoch table (names as in the papers, units in the names):
 ``raim_mode``, ``n_used`` (measurements in the RAIM), ``dof`` (k), ``slope_max_m``,
-``test_stat`` (WSSE), ``test_stat_source`` (grs, gst_approx, pseudorange, none),
+``test_stat`` (WSSE), ``test_stat_source`` (grs, gst, pseudorange, none),
 ``threshold``, ``lambda_det``, ``hpl_m``, ``hal_m``, ``p_fa``, ``p_md``,
-``raim_status``, ``excluded_sv``, ``fde_shift_e_m``/``fde_shift_n_m`` (how far the
+``raim_status`` (the strictest verdict of every integrity source, :mod:`tollcli.integrity.sources`),
+``integrity_source`` (the source that decided it), ``residual_status``/``gbs_status``/``gst_status``
+(each source's own verdict, '' where it gave none), ``hpl_gbs_m``/``hpl_gst_m`` (the receiver's
+bounds; the satellite a GBS names as failed is the epoch table's ``gbs_failed_svid``), ``gst_rms_note`` (why a GST RMS was ignored), ``excluded_sv``, ``fde_shift_e_m``/``fde_shift_n_m`` (how far the
 position moves when the excluded measurement is dropped), ``hpl_sbas_m`` (paper 004's
 K_H·d_major from the per-satellite σ's: an accuracy bound, not a RAIM output).
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -18,12 +23,29 @@ from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.wls import Geometry, residuals_from_prefit, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
 from tollcli.integrity.kalman_hit import hpl_sbas_m
-from tollcli.integrity.raim import FAULT, PROBABLE_FALSE_ALARM, STATUSES, RaimParams, detect, status_names
+from tollcli.gnss.receiver_outputs import GST_RMS_NOTES
+from tollcli.integrity.raim import (
+    EXCLUDED,
+    FAULT,
+    INSUFFICIENT,
+    PROBABLE_FALSE_ALARM,
+    STATUSES,
+    UNAVAILABLE,
+    UNMONITORED,
+    VALID,
+    RaimParams,
+    detect,
+    status_names,
+)
+from tollcli.integrity.sources import LEVELS, NONE, RESIDUAL_SOURCES, combine, level_for, receiver_verdicts, strictest
 
 RAIM_COLUMNS = (
     "raim_mode", "n_used", "dof", "slope_max_m", "test_stat", "test_stat_source", "threshold", "lambda_det",
-    "hpl_m", "hal_m", "p_fa", "p_md", "raim_status", "excluded_sv", "fde_shift_e_m", "fde_shift_n_m", "hpl_sbas_m",
+    "hpl_m", "hal_m", "p_fa", "p_md", "raim_status", "integrity_source", "residual_status", "gbs_status", "gst_status",
+    "hpl_gbs_m", "hpl_gst_m", "gst_rms_note", "excluded_sv", "fde_shift_e_m", "fde_shift_n_m",
+    "hpl_sbas_m",
 )  # fmt: skip
+_STATUS_OR_NONE = np.array(STATUSES + ("",), dtype=object)  # index -1: no verdict
 
 
 def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geometry | None = None) -> pd.DataFrame:
@@ -51,12 +73,17 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
         hit = exclusion.excluded_slot >= 0
         excluded_sv[hit] = meas.sv[np.flatnonzero(hit), exclusion.excluded_slot[hit]]
         shift = exclusion.shift_enu_m
-    source = meas.test_stat_source if meas.test_stat_source is not None else np.full(n_epochs, "none", dtype=object)
+    source = meas.test_stat_source
+    if source is None:  # residuals given directly: a residual test
+        source = np.where(np.isfinite(t), "pseudorange" if meas.dy_m is not None else "grs", "none").astype(object)
     status = detection.status.copy()
     with np.errstate(invalid="ignore"):  # an alarm at a P_FA above the one asked for is probably false (ETC)
         status[(status == FAULT) & (detection.p_fa > params.p_fa)] = PROBABLE_FALSE_ALARM
     if meas.satellites_reported is not None:  # a receiver that reports no satellites at all (GGA/RMC only): nothing
         status[~meas.satellites_reported & (geometry.n_meas == 0)] = STATUSES.index("unmonitored")  # to monitor, not "too few"
+    verdicts, extra = _source_verdicts(meas, status, source, detection.hal_m, params)
+    undecided = np.where(np.isin(status, (INSUFFICIENT, UNMONITORED)), status, UNMONITORED)  # no allowed source decided
+    final, deciding = combine(verdicts, _allowed(meas, params), undecided)
     return pd.DataFrame(
         {
             "raim_mode": pd.array([params.mode] * n_epochs, dtype="string"),
@@ -71,10 +98,74 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
             "hal_m": detection.hal_m,
             "p_fa": detection.p_fa,
             "p_md": np.full(n_epochs, params.p_md),
-            "raim_status": pd.array(status_names(status), dtype="string"),
+            "raim_status": pd.array(status_names(final), dtype="string"),
+            "integrity_source": pd.array(deciding, dtype="string"),
+            "residual_status": _names(verdicts["grs"] if "grs" in verdicts else verdicts["pseudorange"]),
+            "gbs_status": _names(verdicts.get("gbs")),
+            "gst_status": _names(verdicts.get("gst")),
+            **extra,
             "excluded_sv": pd.array(excluded_sv, dtype="string"),
             "fde_shift_e_m": shift[:, 0],
             "fde_shift_n_m": shift[:, 1],
             "hpl_sbas_m": hpl_sbas_m(geometry, meas.sigma_m),
         }
     )
+
+
+def _names(verdict: np.ndarray | None):
+    return pd.array(_STATUS_OR_NONE[verdict], dtype="string") if verdict is not None else pd.array([], dtype="string")
+
+
+def _source_verdicts(meas: Measurements, status: np.ndarray, source: np.ndarray, hal_m: np.ndarray, params: RaimParams):
+    """Each source's verdict codes (-1: none), in SOURCES order, and the receiver's columns."""
+    n = status.size
+    decided = np.isin(status, (VALID, FAULT, EXCLUDED, UNAVAILABLE, PROBABLE_FALSE_ALARM))
+    residual = np.where(decided & np.isin(source, RESIDUAL_SOURCES), status, NONE)
+    name = "pseudorange" if np.any(source == "pseudorange") else "grs"
+    verdicts = {name: residual}
+    r = meas.receiver
+    if r is None:
+        verdicts["gbs"] = verdicts["gst"] = np.full(n, NONE)
+        nan = np.full(n, np.nan)
+        return verdicts, {"hpl_gbs_m": nan, "hpl_gst_m": nan, "gst_rms_note": pd.array(np.full(n, "", object), dtype="string")}  # fmt: skip
+    own = receiver_verdicts(r, np.broadcast_to(hal_m, (n,)), params.p_md)
+    gst_rms = np.where(decided & (source == "gst"), status, NONE)
+    verdicts["gbs"] = own["gbs"]
+    verdicts["gst"] = strictest(gst_rms, own["gst_bound"])
+    return verdicts, {"hpl_gbs_m": own["hpl_gbs_m"], "hpl_gst_m": own["hpl_gst_m"],
+                      "gst_rms_note": pd.array(np.asarray(GST_RMS_NOTES, dtype=object)[r.gst_rms_note], dtype="string")}  # fmt: skip
+
+
+def _allowed(meas: Measurements, params: RaimParams) -> tuple[str, ...]:
+    """The sources that may validate: the params', else the strictest level these epochs support."""
+    if params.sources is not None:
+        return params.sources
+    return LEVELS[level_of(meas) or "residual"]
+
+
+def settle_sources(params: RaimParams, meas: Measurements) -> RaimParams:
+    """``params`` with its sources fixed for the rest of a log: unchanged when set or when no epoch of
+    ``meas`` has a source yet; else the strictest level ``meas`` supports (call it chunk after chunk)."""
+    if params.sources is not None:
+        return params
+    level = level_of(meas)
+    return params if level is None else replace(params, sources=LEVELS[level])
+
+
+def level_name(sources: tuple[str, ...] | None) -> str | None:
+    """The level of a tuple of sources (None for None)."""
+    return next((name for name, s in LEVELS.items() if s == sources), None) if sources is not None else None
+
+
+def level_of(meas: Measurements) -> str | None:
+    """The strictest level the epochs of ``meas`` support, from the first epoch that has any source (None: none has)."""
+    n = meas.mask.shape[0]
+    residual = np.isin(meas.test_stat_source, RESIDUAL_SOURCES) if meas.test_stat_source is not None else np.zeros(n, bool)
+    r = meas.receiver
+    gbs = (np.isfinite(r.gbs_sigma_major_m) | (r.gbs_failed_svid >= 0)) if r is not None else np.zeros(n, bool)
+    gst = (np.isfinite(r.gst_sigma_major_m) | np.isfinite(r.gst_rms_m)) if r is not None else np.zeros(n, bool)
+    anything = np.flatnonzero(residual | gbs | gst)
+    if not anything.size:
+        return None
+    i = int(anything[0])
+    return level_for(bool(residual[i]), bool(gbs[i]), bool(gst[i]))

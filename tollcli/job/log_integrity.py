@@ -14,7 +14,7 @@ from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
 from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.integrity.raim import RaimParams
-from tollcli.integrity.run import run_raim
+from tollcli.integrity.run import run_raim, settle_sources
 from tollcli.readers.nmea import ReadStats, iter_nmea_tables
 
 
@@ -48,6 +48,7 @@ def iter_integrity(log: str, kind: str, params: RaimParams, sigma_model: str = "
     carry = AngleCarry()
     for chunk in iter_nmea_tables(log, strict=strict, stats=stats if stats is not None else ReadStats(), date=date):
         meas = nmea_measurements(chunk.epochs, chunk.satellites, sigma_model, sigma_m, nominal, carry)
+        params = settle_sources(params, meas)  # the level is the log's, from its first epoch with a source
         raim = run_raim(meas, params)
         table = chunk.epochs.rename(columns={"n_used": "n_used_receiver"})
         yield IntegrityChunk(with_raim_position(pd.concat([table.reset_index(drop=True), raim], axis=1)), chunk.satellites)

@@ -6,7 +6,7 @@ import datetime as dt
 import hashlib
 import math
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import pandas as pd
 
@@ -26,7 +26,8 @@ from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.gnss.wls import wls_geometry
 from tollcli.integrity.raim import RaimParams
-from tollcli.integrity.run import run_raim
+from tollcli.integrity.run import level_name, run_raim, settle_sources
+from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
 from tollcli.io.sources import printable_path, sniff_format
 from tollcli.job.streaming import TailCharger, choose_policy, has_speeds
@@ -51,6 +52,8 @@ class ChargeSettings:
     strict: bool = False
     date: str | None = None  # YYYY-MM-DD for logs without dates
     policy: str | None = None  # which checks a position must pass (None: the strictest the inputs support)
+    #: which integrity sources may validate a position (integrity.sources.LEVELS; "auto": the strictest the log supports)
+    integrity_sources: str = "auto"
     #: passages the vehicle's previous log charged and ended inside (geo-object id → {"log", "exit_utc"}):
     #: set by ``batch`` so that a passage cut by a file boundary is charged once (see build_invoice)
     continued: dict | None = None
@@ -76,6 +79,8 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
             bad(f"{name} (--{name.replace('_', '-')})", value, "a probability strictly between 0 and 1")
     if not isinstance(settings.sigma_m, number) or not math.isfinite(settings.sigma_m) or settings.sigma_m <= 0:
         bad("sigma_m (--sigma)", settings.sigma_m, "a standard deviation > 0 m")
+    if settings.integrity_sources not in LEVEL_CHOICES:
+        bad("integrity_sources (--integrity-sources)", settings.integrity_sources, f"one of {', '.join(LEVEL_CHOICES)}")
     if not isinstance(settings.vehicle_class, str) or not settings.vehicle_class:
         bad("vehicle_class (--vehicle-class)", settings.vehicle_class, "a vehicle class of the tariff")
     if settings.continued is not None:
@@ -116,7 +121,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     inputs where it finds them and records them as the invoice names them).
     """
     try:
-        params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde)
+        params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde,
+                            sources=LEVELS.get(settings.integrity_sources))  # "auto" (or a bad value, refused below): None
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     tariff_doc = load_tariff(tariff)
@@ -125,16 +131,17 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     kind = sniff_format(log)
     stats = None
     nominal = NominalModel()
-    epoch_raim = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa)
+    epoch_raim = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, sources=params.sources)
     finding_settings = FindingSettings.for_class(settings.vehicle_class)
     if kind == "nmea":
         charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
-        stats = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table)
+        stats, params = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table)
         policy, table, details, found, period = charger.finish()
         positions = None
     else:
         epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal)
-        per_epoch = run_raim(meas, epoch_raim)
+        params = settle_sources(params, meas)
+        per_epoch = run_raim(meas, replace(epoch_raim, sources=params.sources))
         pairs = inside_pairs(epochs, meas, geo_objects, params)
         policy, why, matched = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
         positions = positions_from_pairs(pairs, epochs["time_utc"], geo_objects, tc_s=settings.tc_s, epoch_why=why,
@@ -154,7 +161,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     if roads is not None:
         inputs.update(roads=printable_path(roads), roads_sha256=file_sha256(roads))
     inputs.update({k: v for k, v in (as_recorded or {}).items() if k in inputs})
-    parameters = {**asdict(settings), "valid_statuses": ["valid", "excluded_valid"], "policy_used": policy}
+    parameters = {**asdict(settings), "valid_statuses": ["valid", "excluded_valid"], "policy_used": policy,
+                  "integrity_sources_used": level_name(params.sources) or "residual"}  # fmt: skip
     if settings.continued is None:
         del parameters["continued"]  # recorded only by an invoice that continues a passage of the log before
     invoice = build_invoice(table, positions, geo_objects, tariff_doc,
@@ -179,12 +187,14 @@ STREAM_ROUNDS = True
 
 
 def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams,
-                      nominal: NominalModel, charger: TailCharger, epoch_table: list | None = None) -> ReadStats:  # fmt: skip
+                      nominal: NominalModel, charger: TailCharger,
+                      epoch_table: list | None = None) -> tuple[ReadStats, RaimParams]:  # fmt: skip
     """Read an NMEA log chunk by chunk: each chunk's satellites, RAIM and geo-object pairs are done
     before the next, and handed to ``charger`` with the few per-epoch columns it needs.
 
     Memory is the chunk's and the charger's tail, not the log's (``epoch_table``, a list for batch
-    outputs, receives the whole per-epoch table and so grows with the log).
+    outputs, receives the whole per-epoch table and so grows with the log). Returns the reader's
+    statistics and ``params`` with the integrity sources the log settled on.
     """
     date = dt.date.fromisoformat(settings.date) if settings.date else None
     model = settings.sigma_model if settings.sigma_model != "input" else "nominal"
@@ -198,6 +208,8 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
         if epochs.empty:
             continue
         meas = nmea_measurements(epochs, chunk.satellites, model, settings.sigma_m, nominal, carry=carry)
+        params = settle_sources(params, meas)  # the log's level, from its first epoch with a source
+        epoch_raim = replace(epoch_raim, sources=params.sources)
         geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)  # once for the epoch RAIM and every HAL
         raim = run_raim(meas, epoch_raim, geometry=geometry)
         pairs = inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry)
@@ -213,7 +225,7 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
         raise DataError(f"{log}: no epoch with a time of day")
     if epoch_table is not None:
         epoch_table.append(pd.concat(table_parts, ignore_index=True))
-    return stats
+    return stats, params
 
 
 def _policy_checks(epochs, settings: ChargeSettings, roads: str | None):

@@ -1,7 +1,8 @@
 """Assemble epochs from sentences decoded in bulk, with the rules of :mod:`tollcli.readers.nmea.assembler`.
 
-The bulk path assembles the common epoch: at most one GGA, RMC, VTG, GST, GLL and
-ZDA, any number of GSA and GSV, each satellite reported once per epoch. Epochs outside that
+The bulk path assembles the common epoch: at most one GGA, GNS, RMC, VTG, GST, GBS, GLL and
+ZDA, any number of GSA and GSV (a satellite reported on several signals keeps its
+report as the reference assembler chooses it). Epochs outside that
 (:func:`unsupported_epochs`) are assembled per line by the reference assembler.
 Every function here works on all epochs of a block at once.
 """
@@ -11,9 +12,10 @@ from __future__ import annotations
 import numpy as np
 
 from tollcli.readers.nmea.assembler import FLOAT_COLUMNS
+from tollcli.readers.nmea.bulk_sentences import GBS_COLUMNS
 from tollcli.readers.nmea.satellite_ids import CONSTELLATIONS
 
-SENTENCE_TYPES = ("GGA", "RMC", "VTG", "GSA", "GSV", "GST", "GLL", "ZDA", "GRS")
+SENTENCE_TYPES = ("GGA", "RMC", "VTG", "GSA", "GSV", "GST", "GLL", "ZDA", "GRS", "GBS", "GNS")
 SAT_FIELDS = ("sat_row", "sat_k", "sat_const", "sat_svid", "sat_prn", "sat_signal", "sat_elev", "sat_azim", "sat_cn0")
 _A, _V = ord("A"), ord("V")
 _NOT_FIX = np.array([ord(c) for c in "ENMS"])
@@ -38,16 +40,10 @@ def subset(decoded: dict, keep: np.ndarray) -> dict:
 
 
 def unsupported_epochs(n_epochs: int, s: dict[str, dict]) -> np.ndarray:
-    """Epochs the bulk rules do not cover: a repeated GGA/RMC/VTG/GST/GLL/ZDA or a satellite twice in GSV."""
+    """Epochs the bulk rules do not cover: a repeated GGA/GNS/RMC/VTG/GST/GBS/GLL/ZDA, or a GRS with a satellite used twice."""
     bad = np.zeros(n_epochs, bool)
-    for t in ("GGA", "RMC", "VTG", "GST", "GLL", "ZDA"):
+    for t in ("GGA", "GNS", "RMC", "VTG", "GST", "GBS", "GLL", "ZDA"):
         bad |= np.bincount(s[t]["e"], minlength=n_epochs) > 1
-    g = s["GSV"]
-    if g["sat_row"].size:
-        code = _sat_code(g["sat_const"], g["sat_svid"])
-        rank, n_codes = _code_ranks(code)
-        counts = np.bincount(g["e"][g["sat_row"]] * n_codes + rank[code], minlength=n_epochs * n_codes)
-        bad |= (counts.reshape(n_epochs, n_codes) > 1).any(axis=1)
     g, r = s["GSA"], s["GRS"]
     if r["e"].size and g["sat_row"].size:  # residuals go by satellite: a satellite used twice is left to the reference
         code = _sat_code(g["sat_const"], g["sat_svid"])
@@ -56,6 +52,34 @@ def unsupported_epochs(n_epochs: int, s: dict[str, dict]) -> np.ndarray:
         with_grs = np.bincount(r["e"], minlength=n_epochs) > 0
         bad |= (counts.reshape(n_epochs, n_codes) > 1).any(axis=1) & with_grs
     return bad
+
+
+def _gsv_reports(e: np.ndarray, code: np.ndarray, signal: np.ndarray) -> np.ndarray:
+    """Which GSV satellite rows (in line order) stand for their satellite in their epoch.
+
+    As the reference assembler, which goes through the reports in order and replaces the kept one
+    when the new signal id is lower or equal, or the kept one has none (-1): the kept report is,
+    after the last report without a signal id, the last one with the lowest signal id (the report
+    without one itself when it is the last).
+    """
+    m = e.size
+    if m == 0:
+        return np.zeros(0, np.int64)
+    key = e.astype(np.int64) * (16 * 1024) + code
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    start = np.flatnonzero(np.concatenate(([True], k[1:] != k[:-1])))
+    if start.size == m:
+        return np.arange(m)  # every satellite once: all rows
+    size = np.diff(np.append(start, m))
+    group = np.repeat(np.arange(start.size), size)
+    pos = np.arange(m) - start[group]
+    sig = signal[order].astype(np.int64)
+    last_none = np.maximum.reduceat(np.where(sig < 0, pos, -1), start)[group]
+    candidate = (pos > last_none) | ((pos == last_none) & (last_none == size[group] - 1))
+    pick = np.lexsort((-pos, np.where(candidate, sig, 1 << 20), group))
+    first = np.flatnonzero(np.concatenate(([True], group[pick][1:] != group[pick][:-1])))
+    return np.sort(order[pick[first]])
 
 
 def _sat_code(const: np.ndarray, svid: np.ndarray) -> np.ndarray:
@@ -108,6 +132,39 @@ def _first_given(n: int, sources: list[tuple[dict, np.ndarray]]) -> np.ndarray:
         out = np.where(take, v, out)
         first_line = np.where(take, line, first_line)
     return out
+
+
+def _first_finite(n: int, sources: list[tuple[dict, np.ndarray]]) -> np.ndarray:
+    """Per epoch, the first finite value in line order among the sources (NaN when none)."""
+    out = np.full(n, np.nan)
+    first_line = np.full(n, np.iinfo(np.int64).max, np.int64)
+    for rows, values in sources:
+        v, line = _by_epoch(n, rows, np.asarray(values, float), np.nan)
+        take = np.isfinite(v) & (line < first_line)
+        out = np.where(take, v, out)
+        first_line = np.where(take, line, first_line)
+    return out
+
+
+def _altitude(n: int, gga: dict, gns: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Altitude and geoid separation, as the reference assembler sets them from GGA (fix) and GNS (fix).
+
+    GGA sets both (each where given); GNS sets both only while no altitude is set, so its order matters.
+    """
+    fixed = gga["quality"] != 0
+    ga, g_line = _by_epoch(n, {"e": gga["e"][fixed], "order": gga["order"][fixed]}, gga["alt"][fixed], np.nan)
+    gs, _ = _by_epoch(n, {"e": gga["e"][fixed], "order": gga["order"][fixed]}, gga["sep"][fixed], np.nan)
+    fix = gns["has_fix"]
+    na, n_line = _by_epoch(n, {"e": gns["e"][fix], "order": gns["order"][fix]}, gns["alt"][fix], np.nan)
+    ns, _ = _by_epoch(n, {"e": gns["e"][fix], "order": gns["order"][fix]}, gns["sep"][fix], np.nan)
+    has_gns = n_line < np.iinfo(np.int64).max
+    gns_first = has_gns & (n_line < g_line)
+    gga_first = ~gns_first
+    alt = np.where(np.isfinite(ga), ga, np.where(has_gns, na, np.nan))
+    # GNS first: GGA's separation where given, else GNS's; GGA first: GNS's only when GGA gave no altitude
+    sep_after_gns = np.where(np.isfinite(gs), gs, ns)
+    sep_after_gga = np.where(has_gns & ~np.isfinite(ga) & np.isfinite(ns), ns, gs)
+    return alt, np.where(gga_first, sep_after_gga, sep_after_gns)
 
 
 def _dates(n: int, sources: list[tuple[dict, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
@@ -209,18 +266,17 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
     position in ``epoch_ids``) and ``order`` (the line index, for "which came first").
     """
     n = epoch_ids.size
-    gga, rmc, vtg, gsa, gsv, gst, gll, zda, grs = (s[t] for t in SENTENCE_TYPES)
+    gga, rmc, vtg, gsa, gsv, gst, gll, zda, grs, gbs, gns = (s[t] for t in SENTENCE_TYPES)
     out: dict[str, np.ndarray] = {"epoch": epoch_ids.astype(np.int64), "tod_s": tod_s, "line": line.astype(np.int64)}
     floats = {k: np.full(n, np.nan) for k in FLOAT_COLUMNS}
 
     # GGA: quality, satellites, position (rank 0) when quality != 0, altitude, HDOP fallback
     q = _scatter(n, gga["e"], gga["quality"], -1, np.int64)
     n_used_gga = _scatter(n, gga["e"], gga["n_used"], -1, np.int64)
+    n_used_gga = np.where(n_used_gga >= 0, n_used_gga, _scatter(n, gns["e"], gns["n_used"], -1, np.int64))  # GNS: when GGA gives none
     gga_pos = (gga["quality"] != 0) & np.isfinite(gga["lat"]) & np.isfinite(gga["lon"])
-    fixed = gga["quality"] != 0
-    floats["alt_m"] = _scatter(n, gga["e"][fixed], gga["alt"][fixed], np.nan)
-    floats["geoid_sep_m"] = _scatter(n, gga["e"][fixed], gga["sep"][fixed], np.nan)
-    hdop_gga = _scatter(n, gga["e"], gga["hdop"], np.nan)
+    floats["alt_m"], floats["geoid_sep_m"] = _altitude(n, gga, gns)
+    hdop_gga = _first_finite(n, [(gga, gga["hdop"]), (gns, gns["hdop"])])
 
     # RMC: position (rank 2) and velocity (rank 0) when 'A'
     active = rmc["status"] == _A
@@ -229,12 +285,13 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
     # RMC and GLL: status and mode letter, the first given in line order
     status = _first_given(n, [(rmc, np.where((rmc["status"] == _A) | (rmc["status"] == _V), rmc["status"], 0)),
                               (gll, np.where((gll["status"] == _A) | (gll["status"] == _V), gll["status"], 0))])  # fmt: skip
-    mode = _first_given(n, [(rmc, rmc["mode"]), (gll, gll["mode"])])
+    mode = _first_given(n, [(rmc, rmc["mode"]), (gll, gll["mode"]), (gns, gns["mode"])])
     # RMC and ZDA: the date, the last given; a second, different one is a disagreement
     date, floats["date_disagreement_days"] = _dates(n, [(rmc, rmc["date"]), (zda, zda["date"])])
     # position: GGA, RMC ('A'), GLL (not 'V'), the best rank wins; each later one is measured against the best so far
     candidates = [
         (gga, gga_pos, 0),
+        (gns, gns["has_fix"] & np.isfinite(gns["lat"]) & np.isfinite(gns["lon"]), 1),
         (rmc, active & np.isfinite(rmc["lat"]) & np.isfinite(rmc["lon"]), 2),
         (gll, (gll["status"] != _V) & np.isfinite(gll["lat"]) & np.isfinite(gll["lon"]), 3),
     ]
@@ -262,10 +319,18 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
     for name in ("rms_residual_m", "sigma_major_m", "sigma_minor_m", "ellipse_orient_deg", "sigma_lat_m", "sigma_lon_m", "sigma_alt_m"):
         floats[name] = _scatter(n, gst["e"], gst[name], np.nan)
 
+    # GBS
+    for name in GBS_COLUMNS:
+        floats[name] = _scatter(n, gbs["e"], gbs[name], np.nan)
+    failed = _scatter(n, gbs["e"], gbs["gbs_failed_svid"], -1, np.int64)
+
     # satellites: the union of GSV "in view" and GSA "used", ordered by constellation and number:
     # cells of an (epoch × satellite present in the block) grid, read in order
     view_e = gsv["e"][gsv["sat_row"]]
     view_code = _sat_code(gsv["sat_const"], gsv["sat_svid"])
+    kept = _gsv_reports(view_e, view_code, gsv["sat_signal"])
+    gsv = {**gsv, **{k: gsv[k][kept] for k in SAT_FIELDS if k in gsv and k != "sat_k"}}
+    view_e, view_code = view_e[kept], view_code[kept]
     used_e = gsa["e"][gsa["sat_row"]]
     used_code = _sat_code(gsa["sat_const"], gsa["sat_svid"])
     rank, n_codes = _code_ranks(view_code, used_code)
@@ -316,6 +381,6 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
     out["mode_indicator"] = _ONE_CHAR[mode]
     out["n_used"] = np.where(has_gsa, n_used_gsa, n_used_gga).astype(np.int16)
     out["n_in_view"] = np.where(np.bincount(gsv["e"], minlength=n) > 0, n_in_view, -1).astype(np.int16)
-    out["gbs_failed_svid"] = np.full(n, -1, np.int16)
+    out["gbs_failed_svid"] = failed.astype(np.int16)
     out.update(floats)
     return out

@@ -5,8 +5,7 @@ Per block (≈ 2 MB of whole lines):
 1. :func:`~tollcli.readers.nmea.bulk_lines.split_block` frames every line and verifies the
    checksums of the plain ones with array operations;
 2. :mod:`~tollcli.readers.nmea.bulk_sentences` decodes GGA, RMC, VTG, GSA, GSV, GST, GRS,
-   GLL and ZDA in bulk; lines it cannot read plainly, other lines and the rarer
-   sentence types (GNS, GBS) go through the reference reader's per-line classifier
+   GBS, GNS, GLL and ZDA in bulk; lines it cannot read plainly and other lines go through the reference reader's per-line classifier
    and converters, which also decide what is malformed;
 3. epochs are cut where the time of day changes (as the reference assembler does),
    the last, possibly unfinished epoch is carried into the next block;
@@ -39,7 +38,8 @@ _TIMED_FIRST = {"GGA", "RMC", "GNS", "GST", "GRS", "GBS", "ZDA"}
 _BULK = {pack_address("XX" + t) >> 16: t for t in bulk_epochs.SENTENCE_TYPES}
 _DECODERS = {"GGA": bulk_sentences.gga, "RMC": bulk_sentences.rmc, "VTG": bulk_sentences.vtg,
              "GSA": bulk_sentences.gsa, "GSV": bulk_sentences.gsv, "GST": bulk_sentences.gst,
-             "GLL": bulk_sentences.gll, "ZDA": bulk_sentences.zda, "GRS": bulk_sentences.grs}  # fmt: skip
+             "GLL": bulk_sentences.gll, "ZDA": bulk_sentences.zda, "GRS": bulk_sentences.grs,
+             "GBS": bulk_sentences.gbs, "GNS": bulk_sentences.gns}  # fmt: skip
 #: an epoch longer than this (bytes) is not waited for: the rest of the log goes the reference way
 MAX_CARRY_BYTES = 16 << 20
 SAME_TIME_S = 5e-4  # as the reference assembler
@@ -88,7 +88,7 @@ class BulkReader:
         feed_lines(lines, self.reference, self.stats, self.strict, self.name)
         if final:
             self.reference.finish()
-        self.slow_epochs += self.reference.n_ready
+        self._count_slow(self.reference.n_ready)
         return self.reference.take()
 
     # ------------------------------------------------------------------ bulk path
@@ -166,6 +166,10 @@ class BulkReader:
         if n_done == 0:
             return None
         return self._assemble(bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, decoded, parsed)
+
+    def _count_slow(self, n: int) -> None:
+        self.slow_epochs += n
+        self.stats.per_line_epochs += n
 
     def _per_line(self, bl: BlockLines, lines, first_line, kind, why, stype, tod, slow, inert, parsed) -> None:
         """Classify and check lines one by one, as the reference reader does (the rare ones)."""
@@ -266,7 +270,7 @@ class BulkReader:
         slow_ids = np.flatnonzero(keep_epoch & is_slow)
         if slow_ids.size:
             parts.append(self._reference_epochs(bl, first_line, dec, local, slow_ids, ep_global, parsed))
-            self.slow_epochs += slow_ids.size
+            self._count_slow(slow_ids.size)
         return merge_arrays(parts)
 
     def _reference_epochs(self, bl, first_line, dec, local, epoch_ids, ep_global, parsed):

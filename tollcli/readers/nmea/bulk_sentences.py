@@ -119,6 +119,30 @@ def gga(bl: BlockLines, idx: np.ndarray) -> dict:
                 ok=(nf >= 9) & ok & ok_pos & ok_q & ok_n & oks[4] & oks[5] & ok_s)  # fmt: skip
 
 
+#: GNS mode letters (one per constellation) that mean a fix
+_GNS_FIX = np.array([ord(c) for c in "ADPRFM"])
+GNS_MODE_CHARS = 8  # longer mode fields go the per-line way
+
+
+def gns(bl: BlockLines, idx: np.ndarray) -> dict:
+    """GNS: position, a mode letter per constellation (a fix when any is A, D, P, R, F or M), satellites, HDOP, altitude."""
+    nf = bl.n_fields[idx]
+    tod, ok = _tod(bl, idx)
+    v, oks, empty, dotted = _numbers(bl, idx, (2, 4, 7, 8, 9, 10))
+    lat, lon, ok_pos = _latlon(bl, idx, v, oks, empty, 0, 2)
+    n_used, ok_n = _as_int(v[2], oks[2], empty[2], dotted[2], 0, 9_999)
+    sep = np.where(nf > 9, v[5], np.nan)
+    s, e = _span(bl, idx, 6)
+    width = e - s
+    has_fix = np.zeros(idx.size, bool)
+    for j in range(GNS_MODE_CHARS):
+        ch = bl.buf[np.minimum(s + j, bl.buf.size - 1)]
+        has_fix |= (j < width) & np.isin(ch, _GNS_FIX)
+    return dict(tod=tod, lat=lat, lon=lon, mode=_first_char(bl, idx, 6), has_fix=has_fix, n_used=n_used, hdop=v[3],
+                alt=v[4], sep=sep, ok=(nf >= 9) & ok & ok_pos & ok_n & oks[3] & oks[4] & (oks[5] | (nf <= 9))
+                & (width <= GNS_MODE_CHARS))  # fmt: skip
+
+
 def rmc(bl: BlockLines, idx: np.ndarray) -> dict:
     nf = bl.n_fields[idx]
     tod, ok = _tod(bl, idx)
@@ -155,6 +179,20 @@ def gst(bl: BlockLines, idx: np.ndarray) -> dict:
     out = dict(zip(GST_COLUMNS, v))
     out["tod"] = tod
     out["ok"] = ok & (nf >= 8) & oks.all(axis=0)
+    return out
+
+
+GBS_COLUMNS = ("gbs_err_lat_m", "gbs_err_lon_m", "gbs_err_alt_m", "gbs_p_md", "gbs_bias_m", "gbs_bias_sd_m")
+
+
+def gbs(bl: BlockLines, idx: np.ndarray) -> dict:
+    """GBS: expected errors, the most likely failed satellite (-1 none), its P_MD, bias and bias σ."""
+    nf = bl.n_fields[idx]
+    tod, ok = _tod(bl, idx)
+    v, oks, empty, dotted = _numbers(bl, idx, (2, 3, 4, 5, 6, 7, 8))
+    svid, ok_sv = _as_int(v[3], oks[3], empty[3], dotted[3], 0, 9_999)
+    out = dict(zip(GBS_COLUMNS, (v[0], v[1], v[2], v[4], v[5], v[6])))
+    out.update(tod=tod, gbs_failed_svid=svid, ok=ok & (nf >= 8) & oks.all(axis=0) & ok_sv)
     return out
 
 

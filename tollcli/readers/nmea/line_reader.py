@@ -34,6 +34,7 @@ class ReadStats:
     not_nmea: int = 0
     discarded_text: int = 0  # lines whose sentence was read but text before it was dropped (junk, a glued sentence)
     epochs: int = 0
+    per_line_epochs: int = 0  # of which assembled line by line (the bulk reader's slow path; all with the reference reader)
     satellite_rows: int = 0
     undated_epochs: int = 0
     first_problem: str = ""
@@ -66,6 +67,8 @@ class ReadStats:
             text += f"; text before the sentence dropped on {self.discarded_text} lines"
         if self.undated_epochs:
             text += f"; {self.undated_epochs} epochs without a date (no RMC/ZDA; use --date)"
+        if self.per_line_epochs:
+            text += f"; {self.per_line_epochs} epochs read line by line"
         return text
 
     def as_dict(self) -> dict:

@@ -100,12 +100,17 @@ def iter_nmea_tables(
         for lines in iter_text_blocks(stream, name, block_bytes):
             feed_lines(lines, asm, stats, strict, name)
             if asm.n_ready >= chunk_epochs:
-                yield from _emit(asm.take(), pending, carry, stats, final=False)
+                yield from _emit(_all_per_line(asm.take(), stats), pending, carry, stats, final=False)
         asm.finish()
-        yield from _emit(asm.take(), pending, carry, stats, final=True)
+        yield from _emit(_all_per_line(asm.take(), stats), pending, carry, stats, final=True)
     finally:
         if isinstance(source, (str, os.PathLike)) and os.fspath(source) != "-":
             stream.close()
+
+
+def _all_per_line(arrays: dict[str, np.ndarray], stats: ReadStats) -> dict[str, np.ndarray]:
+    stats.per_line_epochs += arrays["epoch"].size  # the reference reader: every epoch line by line
+    return arrays
 
 
 def _bulk_chunks(stream, name, stats, strict, chunk_epochs, block_bytes, pending, carry) -> Iterator[NmeaTables]:

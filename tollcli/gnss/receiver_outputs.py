@@ -1,0 +1,100 @@
+"""What a receiver says about its own integrity, per epoch: GBS (its RAIM) and GST (its error ellipse).
+
+* GBS (satellite fault detection): the expected 1σ errors in latitude and longitude (m)
+  and the most likely failed satellite (none when the receiver's RAIM found no fault).
+  ``gbs_sigma_major_m`` = the larger of the two σ's (GBS gives no correlation: the
+  largest the horizontal σ can be along any axis is at most this, and the bound
+  uses it as the major axis).
+* GST (pseudorange error statistics): the error ellipse (semi-major, semi-minor axis,
+  1σ, m) and the 1σ latitude/longitude errors. ``gst_sigma_major_m`` = the largest
+  of the semi-major axis and the two σ's (receivers disagree on which they fill and
+  some fill the axis inconsistently: the bound takes the most conservative).
+* The GST RMS field is meant as the RMS of the range residuals (m). Many receivers
+  write something else there (u-blox: 837, 235 111 "m" beside an ellipse of
+  2.3 × 3.5 m). It counts as a residual statistic only where it is plausible: a
+  range RMS at most ``RMS_RANGE_RATIO_MAX`` times the range σ the ellipse implies
+  (σ_major / HDOP; HDOP 1 when unknown). Once one epoch of a log shows an implausible
+  value, the receiver's field is ignored for the rest of the log: it is not a range
+  RMS on that receiver (``gst_rms_note``: ``implausible`` on the epoch that showed it,
+  ``implausible_earlier`` after it; '' where used or absent).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import pandas as pd
+
+#: a range RMS more than this many times the range σ the ellipse implies is not a range RMS
+RMS_RANGE_RATIO_MAX = 10.0
+GST_RMS_NOTES = ("", "implausible", "implausible_earlier")
+#: what each note tells an auditor (the integrity summary and the invoice quote it)
+GST_RMS_NOTE_MEANINGS = {
+    "implausible": "the GST RMS field is more than {ratio:g}× the range σ its own error ellipse implies: not a "
+    "range-residual RMS; ignored (neither validates nor faults the epoch)",
+    "implausible_earlier": "an earlier epoch showed this receiver's GST RMS field is not a range-residual RMS: ignored",
+}
+
+
+@dataclass
+class ReceiverOutputs:
+    """Per-epoch arrays (E,) of the receiver's own integrity outputs (NaN / -1 where absent)."""
+
+    gbs_sigma_major_m: np.ndarray
+    gbs_failed_svid: np.ndarray
+    gst_sigma_major_m: np.ndarray
+    gst_rms_m: np.ndarray  # the RMS where it counts as a residual statistic, else NaN
+    gst_rms_note: np.ndarray  # codes into GST_RMS_NOTES
+
+    def take(self, rows: np.ndarray) -> ReceiverOutputs:
+        return ReceiverOutputs(**{f.name: getattr(self, f.name)[rows] for f in fields(self)})
+
+
+class RmsCarry:
+    """Across the chunks of one log: the line of the first epoch whose GST RMS was implausible (-1: none yet)."""
+
+    def __init__(self) -> None:
+        self.implausible_line = -1
+
+
+def _column(epochs: pd.DataFrame, name: str) -> np.ndarray:
+    return epochs[name].to_numpy(float) if name in epochs else np.full(len(epochs), np.nan)
+
+
+def _largest(*arrays: np.ndarray) -> np.ndarray:
+    """Element-wise the largest finite value (NaN where none is)."""
+    stack = np.stack(arrays)
+    with np.errstate(invalid="ignore"):
+        out = np.nanmax(np.where(np.isfinite(stack), stack, -np.inf), axis=0)
+    return np.where(np.isfinite(out), out, np.nan)
+
+
+def rms_plausible(rms_m: np.ndarray, sigma_major_m: np.ndarray, hdop: np.ndarray) -> np.ndarray:
+    """Whether each GST RMS can be a range-residual RMS given the ellipse and the geometry (False where unknown)."""
+    h = np.where(np.isfinite(hdop) & (hdop > 0), hdop, 1.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.isfinite(rms_m) & (rms_m >= 0) & (rms_m <= RMS_RANGE_RATIO_MAX * sigma_major_m / h)
+
+
+def receiver_outputs(epochs: pd.DataFrame, carry: RmsCarry | None = None) -> ReceiverOutputs:
+    """The GBS and GST integrity outputs of every row of ``epochs`` (``carry``: the log's earlier chunks)."""
+    n = len(epochs)
+    gbs = _largest(_column(epochs, "gbs_err_lat_m"), _column(epochs, "gbs_err_lon_m"))
+    failed = epochs["gbs_failed_svid"].to_numpy(np.int64) if "gbs_failed_svid" in epochs else np.full(n, -1, np.int64)
+    gst = _largest(_column(epochs, "sigma_major_m"), _column(epochs, "sigma_lat_m"), _column(epochs, "sigma_lon_m"))
+    rms = _column(epochs, "rms_residual_m")
+    given = np.isfinite(rms)
+    bad = given & ~rms_plausible(rms, gst, _column(epochs, "hdop"))
+    note = np.where(bad, 1, 0)
+    earlier = np.zeros(n, bool)
+    carry = carry if carry is not None else RmsCarry()
+    if carry.implausible_line >= 0:
+        earlier[:] = True
+    elif bad.any():
+        first = int(np.argmax(bad))
+        earlier[first + 1 :] = True
+        carry.implausible_line = int(epochs["line"].iat[first]) if "line" in epochs else first
+    note = np.where(given & earlier & ~bad, 2, note)
+    used = given & (note == 0)
+    return ReceiverOutputs(gbs, failed, gst, np.where(used, rms, np.nan), note.astype(np.int8))
