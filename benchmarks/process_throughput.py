@@ -34,6 +34,8 @@ import tollcli as tollcli_package
 from tollcli.charging.geoobjects import build_geoobjects
 from tollcli.readers.nmea.compose import straight_drive
 
+from reader_throughput import plain_pynmea2  # noqa: E402  the same baseline as the reader's benchmark (benchmarks/ is on sys.path)
+
 START = (42.6987, 2.8956)
 COURSE = math.radians(45.0)
 SPEED = 13.9
@@ -78,19 +80,6 @@ def ublox_mix(lines):
         hh, mm, ss = t[0:2], t[2:4], t[4:]
         yield with_checksum(f"GNZDA,{hh}{mm}{ss},06,05,2024,00,00")
         k += 1
-
-
-def pynmea2_seconds(path: Path) -> float:
-    import pynmea2
-
-    start = time.perf_counter()
-    with open(path, encoding="latin-1") as fh:
-        for line in fh:
-            try:
-                pynmea2.parse(line.rstrip("\n"))
-            except pynmea2.ParseError:
-                pass
-    return time.perf_counter() - start
 
 
 def timed(cmd: list[str], env: dict | None = None) -> tuple[float, float]:
@@ -150,7 +139,7 @@ def main() -> None:
               f"findings: {sorted({f['kind'] for f in invoice['findings']['items']}) or 'none'}; "
               f"level {invoice['parameters']['integrity_sources_used']}, vouched by "
               f"{sorted({s for line in invoice['lines'] for s in line['vouched_by']})}")  # fmt: skip
-        t_py = pynmea2_seconds(log)
+        t_py = plain_pynmea2(log)
         print(f"pynmea2.parse alone on the same file: {t_py:6.2f} s; ratio process / pynmea2: {t_proc / t_py:.2f}")
         memory = []
         for hours in sorted(args.memory_hours):

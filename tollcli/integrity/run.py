@@ -101,8 +101,8 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
             "raim_status": pd.array(status_names(final), dtype="string"),
             "integrity_source": pd.array(deciding, dtype="string"),
             "residual_status": _names(verdicts["grs"] if "grs" in verdicts else verdicts["pseudorange"]),
-            "gbs_status": _names(verdicts.get("gbs")),
-            "gst_status": _names(verdicts.get("gst")),
+            "gbs_status": _names(verdicts["gbs"]),
+            "gst_status": _names(verdicts["gst"]),
             **extra,
             "excluded_sv": pd.array(excluded_sv, dtype="string"),
             "fde_shift_e_m": shift[:, 0],
@@ -112,8 +112,8 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     )
 
 
-def _names(verdict: np.ndarray | None):
-    return pd.array(_STATUS_OR_NONE[verdict], dtype="string") if verdict is not None else pd.array([], dtype="string")
+def _names(verdict: np.ndarray):
+    return pd.array(_STATUS_OR_NONE[verdict], dtype="string")
 
 
 def _source_verdicts(meas: Measurements, status: np.ndarray, source: np.ndarray, hal_m: np.ndarray, params: RaimParams):
