@@ -29,6 +29,7 @@ JUDGEMENTS = {
     "ericsson-gru04.log": "log artefact: hand-made example, unrelated times",
     "garmin-10x.log": "true event: signal loss of a weak receiver (likely indoors)",
     "gp-320fw-2019-04-07-coldboot.log": "receiver quirk: cold boot with week-rollover dates before the fix",
+    "iTrek.log": "log artefact: two recordings concatenated (the first one's two no-fix epochs take the second's date)",
     "humminbird-M37.log": "receiver quirk: RMC time lags GGA by 13 s",
     "meinberg-gps164.log": "receiver quirk: a static timing receiver reports speed 0 while converging",
     "nl2008u.log": "true event: a 20 min gap of a handheld log",

@@ -267,3 +267,35 @@ def test_text_dropped_before_a_sentence_is_counted(engine):
     assert stats.discarded_text == 2
     assert "text before the sentence dropped on 2 lines" in stats.summary()
     assert _read(good, engine=engine).stats.discarded_text == 0
+
+
+def _sentence(body: str) -> str:
+    return f"${body}*{checksum(body):02X}"
+
+
+@pytest.mark.parametrize("engine", ["bulk", "reference"])
+def test_a_sentence_without_a_fix_is_not_malformed_for_its_placeholder_position(engine):
+    """MediaTek chips write ``8960.000000`` (89°60′) and the date 05-01-1980 until their first fix
+    (``mtk-3301.log``): a sentence that says it has no fix carries no position and no date, so those
+    placeholders are neither read nor counted malformed; the same position with a fix is malformed."""
+    no_fix = [
+        _sentence("GPGGA,154512.414,8960.000000,N,00000.000000,E,0,0,,137.000,M,13.000,M,,"),
+        _sentence("GPRMC,154512.414,V,8960.000000,N,00000.000000,E,0.000,0.00,050180,,,N"),
+        _sentence("GPGLL,8960.000000,N,00000.000000,E,154512.414,V,N"),
+        _sentence("GPGNS,154512.414,8960.000000,N,00000.000000,E,NN,00,,137.0,13.0,,"),
+        _sentence("GPRMC,154513.414,A,5212.978993,N,00653.097906,E,0.052,0.00,230808,,,A"),
+    ]
+    tables = _read(no_fix, engine=engine)
+    assert tables.stats.malformed == 0
+    ep = tables.epochs
+    assert len(ep) == 2 and np.isnan(ep["lat_deg"].iloc[0]) and not ep["fix_valid"].iloc[0]
+    # the date of the fix, not the chip's 1980 guess, dates both epochs
+    assert [str(t.date()) for t in ep["time_utc"]] == ["2008-08-23", "2008-08-23"]
+    assert ep["date_jump_days"].isna().all()
+    with_fix = [
+        _sentence("GPGGA,154512.414,8960.000000,N,00000.000000,E,1,5,,137.000,M,13.000,M,,"),
+        _sentence("GPRMC,154512.414,A,8960.000000,N,00000.000000,E,0.000,0.00,050180,,,A"),
+        _sentence("GPGLL,8960.000000,N,00000.000000,E,154512.414,A,A"),
+        _sentence("GPGNS,154512.414,8960.000000,N,00000.000000,E,AN,05,,137.0,13.0,,"),
+    ]
+    assert _read(with_fix, engine=engine).stats.malformed == 4

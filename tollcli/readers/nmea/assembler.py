@@ -346,9 +346,8 @@ class EpochAssembler:
     def _gga(self, talker: str, f: list[str], line: int) -> None:
         _need(f, 9)
         tod = time_of_day_s(f[0])
-        lat = lat_deg(f[1], f[2])
-        lon = lon_deg(f[3], f[4])
         quality = integer(f[5], hi=127)
+        lat, lon = _latlon(f, 1, quality != 0)
         n_used = integer(f[6], hi=9_999)
         hdop = num(f[7])
         alt = num(f[8])
@@ -366,15 +365,14 @@ class EpochAssembler:
     def _gns(self, talker: str, f: list[str], line: int) -> None:
         _need(f, 9)
         tod = time_of_day_s(f[0])
-        lat = lat_deg(f[1], f[2])
-        lon = lon_deg(f[3], f[4])
         mode = f[5]
+        has_fix = any(c in "ADPRFM" for c in mode)
+        lat, lon = _latlon(f, 1, has_fix)
         n_used = integer(f[6], hi=9_999)
         hdop = num(f[7])
         alt = num(f[8])
         sep = num(f[9]) if len(f) > 9 else NAN
         ep = self._at(tod, line)
-        has_fix = any(c in "ADPRFM" for c in mode)
         if mode and not ep.mode_indicator:
             ep.mode_indicator = mode[0]
         if n_used >= 0 and ep.n_used_gga < 0:
@@ -389,11 +387,10 @@ class EpochAssembler:
         _need(f, 9)
         tod = time_of_day_s(f[0])
         status = f[1]
-        lat = lat_deg(f[2], f[3])
-        lon = lon_deg(f[4], f[5])
+        lat, lon = _latlon(f, 2, status == "A")
         speed = num(f[6]) * KNOT_MPS
         course = num(f[7])
-        date = rmc_date_days(f[8])
+        date = rmc_date_days(f[8]) if status == "A" else -1  # without a fix the date is the chip's guess
         mode = f[11] if len(f) > 11 else ""
         ep = self._at(tod, line)
         self._date(ep, date)
@@ -407,10 +404,9 @@ class EpochAssembler:
 
     def _gll(self, talker: str, f: list[str], line: int) -> None:
         _need(f, 4)
-        lat = lat_deg(f[0], f[1])
-        lon = lon_deg(f[2], f[3])
         tod = time_of_day_s(f[4]) if len(f) > 4 else NAN
         status = f[5] if len(f) > 5 else ""
+        lat, lon = _latlon(f, 0, status != "V")
         mode = f[6] if len(f) > 6 else ""
         ep = self._at(tod, line)
         if status in ("A", "V"):
@@ -541,6 +537,17 @@ class EpochAssembler:
             date = civil_days(int(f[1]), int(f[2]), int(f[3]))
         ep = self._at(tod, line)
         self._date(ep, date)
+
+
+def _latlon(f: list[str], k: int, fix: bool) -> tuple[float, float]:
+    """Latitude and longitude from fields ``k`` … ``k + 3``, read only when the sentence says it has a fix.
+
+    A sentence that says it has none carries no position: what its position fields hold is a
+    placeholder, not an error (MediaTek chips write ``8960.000000``, 89°60′, until their first fix).
+    """
+    if not fix:
+        return NAN, NAN
+    return lat_deg(f[k], f[k + 1]), lon_deg(f[k + 2], f[k + 3])
 
 
 def _need(f: list[str], n: int) -> None:

@@ -27,6 +27,7 @@ MAX_PRN = 1_023  # satellite numbers in the look-up table; larger ones go the pe
 #: constellation hints, in the order of the satellite look-up table's rows
 HINTS = (None, "GLONASS", "Galileo", "BeiDou", "QZSS", "NavIC")
 _CONST_INDEX = {name: i for i, name in enumerate(CONSTELLATIONS)}
+_A, _V = ord("A"), ord("V")
 
 
 @lru_cache(maxsize=1)
@@ -112,6 +113,7 @@ def gga(bl: BlockLines, idx: np.ndarray) -> dict:
     v, oks, empty, dotted = _numbers(bl, idx, (2, 4, 6, 7, 8, 9, 11))
     lat, lon, ok_pos = _latlon(bl, idx, v, oks, empty, 0, 2)
     quality, ok_q = _as_int(v[2], oks[2], empty[2], dotted[2], 0, 127)
+    ok_pos |= quality == 0  # no fix: the position fields are not read (assembler._latlon)
     n_used, ok_n = _as_int(v[3], oks[3], empty[3], dotted[3], 0, 9_999)
     sep = np.where(nf > 10, v[6], np.nan)
     ok_s = oks[6] | (nf <= 10)
@@ -138,6 +140,7 @@ def gns(bl: BlockLines, idx: np.ndarray) -> dict:
     for j in range(GNS_MODE_CHARS):
         ch = bl.buf[np.minimum(s + j, bl.buf.size - 1)]
         has_fix |= (j < width) & np.isin(ch, _GNS_FIX)
+    ok_pos |= ~has_fix
     return dict(tod=tod, lat=lat, lon=lon, mode=_first_char(bl, idx, 6), has_fix=has_fix, n_used=n_used, hdop=v[3],
                 alt=v[4], sep=sep, ok=(nf >= 9) & ok & ok_pos & ok_n & oks[3] & oks[4] & (oks[5] | (nf <= 9))
                 & (width <= GNS_MODE_CHARS))  # fmt: skip
@@ -149,8 +152,11 @@ def rmc(bl: BlockLines, idx: np.ndarray) -> dict:
     status = _letter(bl, idx, 2)
     v, oks, empty, _ = _numbers(bl, idx, (3, 5, 7, 8))
     lat, lon, ok_pos = _latlon(bl, idx, v, oks, empty, 0, 3)
+    ok_pos |= status != _A
     s, e = _span(bl, idx, 9)
     date, ok_d = bf.rmc_date_days(bl, s, e)
+    fix = status == _A  # without a fix the date is not read either (assembler._rmc)
+    date, ok_d = np.where(fix, date, -1), ok_d | ~fix
     mode = np.where(nf > 11, _first_char(bl, idx, 12), 0)
     return dict(tod=tod, status=status, lat=lat, lon=lon, speed=v[2] * KNOT_MPS, course=v[3], date=date, mode=mode,
                 ok=(nf >= 9) & ok & ok_pos & oks[2] & oks[3] & ok_d)  # fmt: skip
@@ -275,6 +281,7 @@ def gll(bl: BlockLines, idx: np.ndarray) -> dict:
     tod, ok_t = _tod(bl, idx, 5)
     tod = np.where(nf > 4, tod, np.nan)
     status = np.where(nf > 5, _letter(bl, idx, 6), 0)
+    ok_pos |= status == _V
     mode = np.where(nf > 6, _first_char(bl, idx, 7), 0)
     return {"tod": tod, "lat": lat, "lon": lon, "status": status, "mode": mode,
             "ok": (nf >= 4) & ok_pos & (ok_t | (nf <= 4))}  # fmt: skip
