@@ -240,3 +240,57 @@ def test_gns_is_read_in_bulk_as_the_reference_does(tmp_path, readers, gns_first,
     readers.clear()
     assert_same(log)
     assert readers[0].slow_epochs == 0
+    per_line = []
+    original = bulk_reader.classify_line
+    with monkeypatch.context() as m:
+        m.setattr(bulk_reader, "classify_line", lambda text: per_line.append(text) or original(text))
+        _read(log, "bulk")
+    left = sum(_left_to_the_per_line_classifier(a, f) for _, a, f in others)
+    assert len(per_line) == left, per_line  # only what a whole sentence of another address is not
+
+
+def _left_to_the_per_line_classifier(address: str, form: str) -> bool:
+    """Lower-case or missing checksums, an empty or too long address, text after the checksum of a
+    sentence of another address, and a GGA too short to decode; the rest is classified in bulk."""
+    if form in ("lower", "none"):
+        return True
+    if len(address) == 5 and address[0] != "P":  # plain lines: what follows the checksum is ignored
+        return address == "GPGGA" and form != "bad"
+    return address in ("", "ABCDEFGHI") or form == "tail"
+
+
+_OTHER_ADDRESSES = ["PSTI", "GYOACC", "PUBX", "GNTXT", "P", "ABCDEFGH", "ABCDEFGHI", "GPGGA", "", "GP,GGA"]
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(others=st.lists(st.tuples(st.integers(0, 39), st.sampled_from(_OTHER_ADDRESSES), st.sampled_from(["ok", "bad", "lower", "tail", "none"])),
+                       min_size=1, max_size=30))  # fmt: skip
+def test_sentences_of_other_addresses_are_classified_in_bulk_as_the_reference_does(tmp_path, readers, monkeypatch, others):
+    """Unused sentences with four-, six- or more-character addresses (SkyTraq ``$PSTI``, Unicore ``$GYOACC``)
+    with a right, wrong, lower-case or missing checksum or text after it: the same statistics as the reference
+    reader, and no epoch read line by line because of them."""
+    lines = list(compose.straight_drive(40))
+    for at, address, form in sorted(others, reverse=True):
+        line = compose.with_checksum(f"{address},1,2.5,X")
+        if form == "bad":
+            line = line[:-2] + ("00" if line[-2:] != "00" else "11")
+        elif form == "lower":
+            line = line.lower() if any(c in "ABCDEF" for c in line[-2:]) else line[:-2] + "0a"
+        elif form == "tail":
+            line += " x"
+        elif form == "none":
+            line = line[: line.rfind("*")]
+        lines.insert(at, line)
+    log = tmp_path / "others.nmea"
+    log.write_bytes(("\n".join(lines) + "\n").encode("latin-1"))
+    readers.clear()
+    assert_same(log)
+    assert readers[0].slow_epochs == 0
+    per_line = []
+    original = bulk_reader.classify_line
+    with monkeypatch.context() as m:
+        m.setattr(bulk_reader, "classify_line", lambda text: per_line.append(text) or original(text))
+        _read(log, "bulk")
+    left = sum(_left_to_the_per_line_classifier(a, f) for _, a, f in others)
+    assert len(per_line) == left, per_line  # only what a whole sentence of another address is not
+    assert sum(_read(log, "bulk")[1].unused_types.values()) >= sum(f == "ok" and a not in ("GPGGA", "GP,GGA") for _, a, f in others)

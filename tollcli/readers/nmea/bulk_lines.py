@@ -168,3 +168,58 @@ def type_code(address: np.ndarray) -> np.ndarray:
 def talker_code(address: np.ndarray) -> np.ndarray:
     """The talker (characters 1–2) of packed addresses."""
     return address & 0xFFFF
+
+
+#: longest address :func:`other_sentences` names (longer ones go the per-line way)
+MAX_OTHER_ADDRESS = 8
+MAX_OTHER_LINE = 256  # characters (NMEA allows 82)
+
+
+def other_sentences(bl: BlockLines, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Of the non-plain lines ``idx``: those that are whole sentences the reader does not use.
+
+    That is ``$ADDRESS,...*HH`` with nothing before the ``$`` or after the checksum, no
+    other ``$``, ``!``, ``*`` or carriage return, an upper-case hex checksum and an address
+    that is not five characters or is proprietary (``$PSTI``, u-blox ``$GYOACC``): what the
+    per-line classifier calls ``unused`` (or ``bad_checksum``). Returns ``(framed,
+    given, computed, names)`` for every line of ``idx``: the checksum written and the one of
+    the body, and the address of each framed line (``""`` elsewhere); lines longer than
+    :data:`MAX_OTHER_LINE` and the other lines stay with the per-line classifier.
+    """
+    n = idx.size
+    if n == 0:
+        return np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, object)
+    buf = np.append(bl.buf, np.zeros(MAX_OTHER_ADDRESS + 2, np.uint8))  # room to look past the last line
+    s, e = bl.start[idx], bl.end[idx]
+    length = e - s
+    framed = (length >= 5) & (length <= MAX_OTHER_LINE)
+    star = np.where(framed, e - 3, s)
+    framed &= (buf[s] == _DOLLAR) & (buf[star] == _STAR)
+    hi = _hex_value(buf[np.where(framed, e - 2, s)])
+    lo = _hex_value(buf[np.where(framed, e - 1, s)])
+    framed &= (hi >= 0) & (lo >= 0)
+    # no other '$', '!', '*' or carriage return; the XOR of the body
+    bounds = np.empty(2 * n, np.int64)
+    bounds[0::2] = s
+    bounds[1::2] = np.where(framed, e, s + 1)
+    special = ((buf == _DOLLAR) | (buf == _BANG) | (buf == _STAR) | (buf == _CR)).astype(np.int64)
+    framed &= np.add.reduceat(special, bounds)[0::2] == 2
+    body = np.empty(2 * n, np.int64)
+    body[0::2] = s + 1
+    body[1::2] = np.maximum(star, s + 1)
+    computed = np.where(star > s + 1, np.bitwise_xor.reduceat(buf, body)[0::2].astype(np.int64), 0)
+    # the address: up to the first comma or the '*'
+    c = np.searchsorted(bl.commas, s + 1)
+    stop = np.minimum(bl.commas[c], star)
+    name_len = stop - s - 1
+    framed &= (name_len >= 1) & (name_len <= MAX_OTHER_ADDRESS) & ((name_len != 5) | (buf[s + 1] == ord("P")))
+    names = np.full(n, "", dtype=object)
+    if framed.any():
+        packed = np.zeros(n, np.uint64)
+        for k in range(MAX_OTHER_ADDRESS - 1, -1, -1):
+            ch = np.where(k < name_len, buf[s + 1 + k], 0).astype(np.uint64)
+            packed = (packed << np.uint64(8)) | ch
+        codes, inverse = np.unique(packed[framed], return_inverse=True)
+        text = np.array([int(c).to_bytes(8, "little").rstrip(b"\0").decode("latin-1") for c in codes], dtype=object)
+        names[framed] = text[inverse.ravel()]
+    return framed, hi * 16 + lo, computed, names

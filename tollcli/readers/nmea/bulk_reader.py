@@ -25,7 +25,7 @@ import numpy as np
 from tollcli.errors import DataError
 from tollcli.readers.nmea import bulk_epochs, bulk_sentences
 from tollcli.readers.nmea.assembler import EpochAssembler
-from tollcli.readers.nmea.bulk_lines import BlockLines, pack_address, split_block, type_code, unpack_address
+from tollcli.readers.nmea.bulk_lines import BlockLines, other_sentences, pack_address, split_block, type_code, unpack_address
 from tollcli.readers.nmea.fields import time_of_day_s
 from tollcli.readers.nmea.line_reader import DISCARDED, HANDLED_TYPES, classify_line, feed_lines
 
@@ -114,7 +114,7 @@ class BulkReader:
         kind[good & ~handled] = UNUSED
 
         decoded: dict[str, dict] = {}
-        python_lines = list(np.flatnonzero(~bl.plain))
+        python_lines = list(self._other_sentences(bl, kind, why, stype))
         for code, t in _BULK.items():
             idx = np.flatnonzero(handled & (type3 == code))
             d = _DECODERS[t](bl, idx)
@@ -166,6 +166,20 @@ class BulkReader:
         if n_done == 0:
             return None
         return self._assemble(bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, decoded, parsed)
+
+    @staticmethod
+    def _other_sentences(bl: BlockLines, kind, why, stype) -> np.ndarray:
+        """Classify the non-plain lines that are whole unused sentences (``$PSTI``, ``$GYOACC``); the rest, to read per line."""
+        lines = np.flatnonzero(~bl.plain)
+        framed, given, computed, names = other_sentences(bl, lines)
+        ok = framed & (given == computed)
+        kind[lines[ok]] = UNUSED
+        stype[lines[ok]] = names[ok]
+        bad = framed & ~ok
+        kind[lines[bad]] = BAD_CHECKSUM
+        for i, g, c in zip(lines[bad].tolist(), given[bad].tolist(), computed[bad].tolist()):
+            why[i] = f"bad checksum (*{g:02X} given, {c:02X} computed)"
+        return lines[~framed]
 
     def _count_slow(self, n: int) -> None:
         self.slow_epochs += n
@@ -230,9 +244,15 @@ class BulkReader:
         stats.discarded_text += sum(1 for i, w in why.items() if i < cut and w == DISCARDED and k[i] in (UNUSED, DECODED))
         unused = np.flatnonzero(k == UNUSED)
         if unused.size:
-            names = [stype[i] if stype[i] is not None else unpack_address(int(bl.address[i])) for i in unused]
-            for name in names:  # first-seen order, as the reference reader's dict
-                stats.unused_types[name] = stats.unused_types.get(name, 0) + 1
+            names = stype[unused]
+            unnamed = np.equal(names, None)
+            if unnamed.any():  # plain lines: their packed five-character address
+                codes, inverse = np.unique(bl.address[unused[unnamed]], return_inverse=True)
+                names[unnamed] = np.array([unpack_address(int(c)) for c in codes], dtype=object)[inverse.ravel()]
+            uniq, first, counts = np.unique(names.astype(str), return_index=True, return_counts=True)
+            for j in np.argsort(first, kind="stable"):  # first-seen order, as the reference reader's dict
+                name = str(uniq[j])
+                stats.unused_types[name] = stats.unused_types.get(name, 0) + int(counts[j])
         stats.lines = first_line + cut
 
     def _assemble(self, bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, decoded, parsed):
