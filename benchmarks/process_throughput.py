@@ -1,8 +1,8 @@
 """``tollcli process`` on a 10-hour 1 Hz drive through a network of 10 000 geo-objects.
 
-The drive: ``compose.straight_drive`` (GPS+Galileo, 9 sentences per epoch), 36 000
+The drive: ``compose.straight_drive`` (GPS+Galileo, 9 sentences per epoch, 13.9 m/s), 36 000
 epochs. The network: the motorway under the drive cut into 250 m tolled segments,
-plus parallel tolled roads 200 m apart, all cut the same way, to 10 000
+plus parallel tolled roads 300 m apart, all cut the same way, to 10 000
 geo-objects (built by ``build_geoobjects``; HAL 50 m). Reported, each in a fresh
 process: wall time and peak RSS of ``tollcli process``, and of ``tollcli epochs``
 (the reader alone, the baseline) on the same log. ``process`` runs twice: first
@@ -10,10 +10,12 @@ with an empty cache directory (it parses the geo-object GeoJSON and compiles it)
 then again (it reads the compiled copy: what every later log of a fleet sees). The commands run as an
 installed package does, with tollcli's bytecode compiled (``compileall`` first; the environment
 variable ``PYTHONDONTWRITEBYTECODE`` is dropped for them).
-``--mix ublox`` gives the drive a u-blox ZED-F9P/NEO-M9N sentence mix (as ``ublox-zed-f9p-nmea.log``): its
-GST with an RMS field that is no range RMS (10⁵ "m") and 2.3/3.5/4.0 m σ's, its GBS (the receiver's RAIM, no
-failed satellite), ZDA, no GRS; the share of the segments under the track that are charged, the parallel
-roads charged, the findings, and the time ``pynmea2.parse`` alone needs for the file are printed beside.
+``--mix ublox``: a 25 m/s drive written with the sentences of a real u-blox ZED-F9P (``ublox-zed-f9p-nmea.log``
+of ``../shared/data/gpsd/``, epoch by epoch, as :func:`real_patterns.drive` replays it): RMC VTG GGA 4×GSA
+24×GSV GLL GST ZDA GBS, its GST with an RMS field that is no range RMS (10⁵ "m") and 2.3/3.5/4.0 m σ's, its
+GBS (the receiver's RAIM, no failed satellite), no GRS; the share of the segments under the track that are
+charged, the parallel roads (300 m apart) charged, the findings, and the time ``pynmea2.parse`` alone needs
+for the file are printed beside.
 ``--memory-hours 1 10 100`` adds the peak RSS of ``process`` over those drive
 lengths (same network), with the ratio of the longest to the shortest.
 """
@@ -38,7 +40,9 @@ from reader_throughput import plain_pynmea2  # noqa: E402  the same baseline as 
 
 START = (42.6987, 2.8956)
 COURSE = math.radians(45.0)
-SPEED = 13.9
+SPEED = 13.9  # compose.straight_drive's
+UBLOX_SPEED = 25.0
+PARALLEL_M = 300.0  # between neighbouring parallel roads
 
 
 def point(s_m: float, offset_m: float) -> list[float]:
@@ -49,11 +53,12 @@ def point(s_m: float, offset_m: float) -> list[float]:
 
 
 def roads(n_objects: int, length_m: float, seg_m: float = 250.0) -> dict:
+    """The road under the drive (R0) and parallel roads ``PARALLEL_M`` apart, cut into ``seg_m`` segments."""
     per_road = int(length_m // seg_m)
     n_roads = math.ceil(n_objects / per_road)
     feats = []
     for r in range(n_roads):
-        offset = 200.0 * ((r + 1) // 2) * (1 if r % 2 else -1)
+        offset = PARALLEL_M * ((r + 1) // 2) * (1 if r % 2 else -1)
         for k in range(per_road):
             if len(feats) == n_objects:
                 break
@@ -62,24 +67,18 @@ def roads(n_objects: int, length_m: float, seg_m: float = 250.0) -> dict:
     return {"type": "FeatureCollection", "features": feats}
 
 
-UBLOX_RMS = (235111, 348874, 43, 239130, 837, 228650)  # ublox-zed-f9p-nmea.log's GST RMS fields, in turn
+UBLOX_LOG = "ublox-zed-f9p-nmea.log"  # the real u-blox pattern (GST with a 10⁵ "m" RMS field, GBS, ZDA, no GRS)
 
 
-def ublox_mix(lines):
-    """The drive's sentences with a u-blox receiver's integrity sentences instead of its GST."""
-    from tollcli.readers.nmea.compose import with_checksum
+def ublox_drive(path: Path, n_epochs: int) -> None:
+    """A drive along the motorway at ``UBLOX_SPEED`` with the real u-blox log's sentences, epoch by epoch."""
+    import real_patterns
 
-    k = 0
-    for line in lines:
-        if "GST," not in line:
-            yield line
-            continue
-        t = line.split(",")[1]
-        yield with_checksum(f"GNGST,{t},{UBLOX_RMS[k % len(UBLOX_RMS)]},,,,2.3,3.5,4.0")
-        yield with_checksum(f"GNGBS,{t},2.3,3.5,4.0,,,,,,")
-        hh, mm, ss = t[0:2], t[2:4], t[4:]
-        yield with_checksum(f"GNZDA,{hh}{mm}{ss},06,05,2024,00,00")
-        k += 1
+    def track(k: int):
+        lon, lat = point(k * UBLOX_SPEED, 0.0)
+        return lat, lon, UBLOX_SPEED, math.degrees(COURSE)
+
+    real_patterns.drive(real_patterns.DATA / UBLOX_LOG, path, n_epochs, track)
 
 
 def timed(cmd: list[str], env: dict | None = None) -> tuple[float, float]:
@@ -103,10 +102,13 @@ def main() -> None:
     tariff = Path(__file__).resolve().parents[1] / "geoobjects" / "example-tariff.toml"
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "drive.nmea"
-        drive = straight_drive(n_epochs)
-        log.write_text("\n".join(ublox_mix(drive) if args.mix == "ublox" else drive) + "\n")
+        speed = UBLOX_SPEED if args.mix == "ublox" else SPEED
+        if args.mix == "ublox":
+            ublox_drive(log, n_epochs)
+        else:
+            log.write_text("\n".join(straight_drive(n_epochs)) + "\n")
         road_file = Path(tmp) / "roads.geojson"
-        road_file.write_text(json.dumps(roads(args.objects, n_epochs * SPEED)))
+        road_file.write_text(json.dumps(roads(args.objects, n_epochs * speed)))
         start = time.perf_counter()
         geo = build_geoobjects(str(road_file))
         t_build = time.perf_counter() - start
@@ -132,7 +134,7 @@ def main() -> None:
         print(f"ratio process / reader time: {t_proc / t_read:.2f}; invoice: {len(invoice['lines'])} lines, total {invoice['total']}; "
               f"cold and warm invoices {'byte-identical' if same else 'DIFFER'}")  # fmt: skip
         under = {f["properties"]["id"] for f in geo["features"] if f["properties"]["id"].startswith("R0-")}
-        driven = {i for i in under if int(i.split("-")[1]) * 250.0 + 250.0 <= n_epochs * SPEED}
+        driven = {i for i in under if int(i.split("-")[1]) * 250.0 + 250.0 <= n_epochs * speed}
         charged = {line["geoobject"] for line in invoice["lines"]}
         print(f"mix {args.mix}: {len(charged & driven)} of {len(driven)} segments under the track charged "
               f"({len(charged & driven) / max(len(driven), 1):.1%}), {len(charged - under)} on parallel roads; "

@@ -99,3 +99,79 @@ def replay(log: Path, out: Path, min_lines: int) -> int:
             written += len(batch)
             copy += 1
     return written
+
+
+def _epochs(lines: list[tuple[str, list[str], int, float | None]]) -> list[list[tuple[str, list[str], int, float | None]]]:
+    """The template's sentences grouped into epochs (a new one where a time of day changes)."""
+    out: list[list] = []
+    current_t = None
+    for item in lines:
+        t = item[3]
+        if not out or (t is not None and current_t is not None and abs(t - current_t) >= 5e-4):
+            out.append([])
+        if t is not None:
+            current_t = t
+        out[-1].append(item)
+    return out
+
+
+def _ddmm(value_deg: float, width: int, decimals: int) -> tuple[str, bool]:
+    a = abs(value_deg)
+    deg = int(a)
+    minutes = (a - deg) * 60.0
+    text = f"{deg:0{width}d}{minutes:0{3 + decimals}.{decimals}f}"
+    return text, value_deg < 0
+
+
+def drive(log: Path, out: Path, n_epochs: int, track, day0: tuple[int, int, int] = (6, 5, 2024)) -> int:
+    """A drive of ``n_epochs`` 1 Hz epochs with ``log``'s sentences, on ``track``; returns the number of lines.
+
+    Epoch k is the log's epoch k mod (its number of epochs), as the receiver wrote it (satellites,
+    GSA/GSV, GST, GBS, …), with its time set to k s after midnight of ``day0`` (d, m, y) and its
+    position, speed and course (GGA, GNS, RMC, GLL, VTG) set to ``track(k)`` → (lat_deg, lon_deg,
+    speed_mps, course_deg); RMC and ZDA dates follow the time.
+    """
+    import datetime as dt
+
+    epochs = _epochs(template(log))
+    written = 0
+    start = dt.datetime(day0[2], day0[1], day0[0])
+    with open(out, "w", encoding="latin-1", newline="\n") as fh:
+        for k in range(n_epochs):
+            lat, lon, speed, course = track(k)
+            when = start + dt.timedelta(seconds=k)
+            batch = []
+            for address, fields, i_time, _ in epochs[k % len(epochs)]:
+                f = _moved(address[2:], list(fields), lat, lon, speed, course, when)
+                body = f"{address},{','.join(f)}"
+                batch.append(f"${body}*{checksum(body)}")
+            fh.write("\n".join(batch) + "\n")
+            written += len(batch)
+    return written
+
+
+#: sentence type → (time field, latitude field) after the address (-1: none)
+_DRIVE_FIELDS = {"GGA": (0, 1), "GNS": (0, 1), "RMC": (0, 2), "GLL": (4, 0), "GST": (0, -1), "GBS": (0, -1),
+                 "GRS": (0, -1), "ZDA": (0, -1)}  # fmt: skip
+
+
+def _moved(kind: str, f: list[str], lat, lon, speed_mps, course_deg, when) -> list[str]:
+    """One sentence's fields with the drive's time, position, speed, course and date."""
+    t_field, lat_field = _DRIVE_FIELDS.get(kind, (-1, -1))
+    if 0 <= t_field < len(f) and f[t_field]:
+        decimals = len(f[t_field].split(".")[1]) if "." in f[t_field] else 0
+        f[t_field] = _hhmmss(when.hour * 3600 + when.minute * 60 + when.second, decimals)
+    if 0 <= lat_field and lat_field + 3 < len(f) and f[lat_field] and f[lat_field + 2]:
+        dec = len(f[lat_field].split(".")[1]) if "." in f[lat_field] else 4
+        f[lat_field], south = _ddmm(lat, 2, dec)
+        f[lat_field + 1] = "S" if south else "N"
+        f[lat_field + 2], west = _ddmm(lon, 3, dec)
+        f[lat_field + 3] = "W" if west else "E"
+    knots = speed_mps * 3600.0 / 1852.0
+    if kind == "RMC" and len(f) > 8:
+        f[6], f[7], f[8] = f"{knots:.3f}", f"{course_deg:.2f}", when.strftime("%d%m%y")
+    elif kind == "VTG" and len(f) > 6 and f[1] in ("T", ""):
+        f[0], f[1], f[4], f[6] = f"{course_deg:.2f}", "T", f"{knots:.3f}", f"{speed_mps * 3.6:.3f}"
+    elif kind == "ZDA" and len(f) > 3:
+        f[1], f[2], f[3] = f"{when.day:02d}", f"{when.month:02d}", f"{when.year:04d}"
+    return f
