@@ -223,30 +223,69 @@ def test_satellites_on_several_signals_and_gbs_are_read_in_bulk_as_the_reference
     assert tables.stats.per_line_epochs == 0 and tables.stats.epochs == 3
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(gns_first=st.booleans(), gga_quality=st.sampled_from(["0", "1", ""]), gga_alt=st.sampled_from(["", "500.0"]),
-       gga_sep=st.sampled_from(["", "47.0"]), gns_mode=st.sampled_from(["", "NN", "AN", "NNNNNA", "RRNN"]),
-       gns_alt=st.sampled_from(["", "510.0"]), gns_sep=st.sampled_from(["", "46.0"]), gns_n=st.sampled_from(["", "12"]))  # fmt: skip
-def test_gns_is_read_in_bulk_as_the_reference_does(tmp_path, readers, gns_first, gga_quality, gga_alt, gga_sep, gns_mode,
-                                                   gns_alt, gns_sep, gns_n):  # fmt: skip
+_GGA_PARTS = st.tuples(st.sampled_from(["0", "1", ""]), st.sampled_from(["", "500.0", "505.0"]), st.sampled_from(["", "47.0", "48.0"]),
+                       st.sampled_from(["", "8", "10"]))  # fmt: skip
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(ggas=st.lists(_GGA_PARTS, min_size=0, max_size=3), gns_at=st.integers(0, 3),
+       gns_mode=st.sampled_from(["", "NN", "AN", "NNNNNA", "RRNN"]), gns_alt=st.sampled_from(["", "510.0"]),
+       gns_sep=st.sampled_from(["", "46.0"]), gns_n=st.sampled_from(["", "12"]))  # fmt: skip
+def test_gns_and_ggas_are_read_in_bulk_as_the_reference_does(tmp_path, readers, ggas, gns_at, gns_mode, gns_alt, gns_sep, gns_n):
+    """A GNS among any number of GGAs (a receiver writing one GGA per constellation, as the Telit PLS83):
+    altitude, separation, satellites and quality as the reference assembler folds them, in bulk."""
     lines = []
     for k in range(2):
         t = f"0100{k:02d}.00"
-        gga = compose.with_checksum(f"GPGGA,{t},4806.000,N,01130.000,E,{gga_quality},,0.9,{gga_alt},M,{gga_sep},M,,")
+        epoch = [compose.with_checksum(f"GPGGA,{t},4806.00{j},N,01130.000,E,{q},{n_used},0.9,{alt},M,{sep},M,,")
+                 for j, (q, alt, sep, n_used) in enumerate(ggas)]  # fmt: skip
         gns = compose.with_checksum(f"GNGNS,{t},4806.010,N,01130.000,E,{gns_mode},{gns_n},1.1,{gns_alt},{gns_sep},,")
-        lines += [gns, gga] if gns_first else [gga, gns]
+        epoch.insert(min(gns_at, len(epoch)), gns)
+        lines += epoch
     log = tmp_path / "gns.nmea"
     log.write_text("\n".join(lines) + "\n")
     readers.clear()
     assert_same(log)
     assert readers[0].slow_epochs == 0
-    per_line = []
-    original = bulk_reader.classify_line
-    with monkeypatch.context() as m:
-        m.setattr(bulk_reader, "classify_line", lambda text: per_line.append(text) or original(text))
-        _read(log, "bulk")
-    left = sum(_left_to_the_per_line_classifier(a, f) for _, a, f in others)
-    assert len(per_line) == left, per_line  # only what a whole sentence of another address is not
+
+
+_REPEATS = st.lists(st.sampled_from(["rmc-a", "rmc-a2", "rmc-v", "rmc-nodate", "vtg", "vtg-n", "vtg-fast", "gll-a", "gll-v",
+                                     "gst", "gst2", "gbs", "gbs-sv", "zda", "zda2"]), min_size=1, max_size=12)  # fmt: skip
+
+
+def _repeated(kind: str, t: str) -> str:
+    body = {
+        "rmc-a": f"GPRMC,{t},A,4806.000,N,01130.000,E,10.0,90.0,060524,,,A",
+        "rmc-a2": f"GARMC,{t},A,4806.020,N,01130.000,E,,45.0,070524,,,D",
+        "rmc-v": f"GLRMC,{t},V,4806.040,N,01130.000,E,12.0,91.0,080524,,,N",
+        "rmc-nodate": f"GBRMC,{t},A,,,,,11.0,,,,,A",
+        "vtg": "GPVTG,92.0,T,,M,9.0,N,16.7,K,A",
+        "vtg-n": "GAVTG,93.0,T,,M,9.5,N,17.6,K,N",
+        "vtg-fast": "GLVTG,,T,,M,20.0,N,,K,A",
+        "gll-a": f"GPGLL,4806.030,N,01130.000,E,{t},A,A",
+        "gll-v": f"GAGLL,4806.050,N,01130.000,E,{t},V,N",
+        "gst": f"GPGST,{t},1.5,2.0,1.0,30.0,1.8,1.2,3.0",
+        "gst2": f"GAGST,{t},,2.5,,,1.9,,",
+        "gbs": f"GPGBS,{t},2.3,3.5,4.0,,,,",
+        "gbs-sv": f"GAGBS,{t},2.0,,4.1,07,0.01,5.0,1.0",
+        "zda": f"GPZDA,{t},06,05,2024,00,00",
+        "zda2": f"GNZDA,{t},07,05,2024,00,00",
+    }[kind]
+    return compose.with_checksum(body)
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(first=_REPEATS, second=_REPEATS)
+def test_sentences_repeated_in_an_epoch_are_read_in_bulk_as_the_reference_does(tmp_path, readers, first, second):
+    """RMC, VTG, GLL, GST, GBS and ZDA written several times in one epoch (once per talker): position, velocity,
+    status, mode, date and its disagreement, error ellipse and GBS as the reference folds them, in bulk."""
+    lines = [compose.gga(3600.0, 48.1, 11.5)] + [_repeated(k, "010000.00") for k in first]
+    lines += [compose.gga(3601.0, 48.1, 11.5)] + [_repeated(k, "010001.00") for k in second]
+    log = tmp_path / "repeated.nmea"
+    log.write_text("\n".join(lines) + "\n")
+    readers.clear()
+    assert_same(log)
+    assert readers[0].slow_epochs == 0
 
 
 def _left_to_the_per_line_classifier(address: str, form: str) -> bool:

@@ -1,8 +1,8 @@
 """Assemble epochs from sentences decoded in bulk, with the rules of :mod:`tollcli.readers.nmea.assembler`.
 
-The bulk path assembles the common epoch: at most one GGA, GNS, RMC, VTG, GST, GBS, GLL and
-ZDA, any number of GSA and GSV (a satellite reported on several signals keeps its
-report as the reference assembler chooses it). Epochs outside that
+The bulk path assembles the common epoch: at most one GNS, any number of GGA, RMC, VTG, GST,
+GBS, GLL, ZDA (a receiver that writes them once per constellation), GSA and GSV (a satellite
+reported on several signals keeps its report as the reference assembler chooses it). Epochs outside that
 (:func:`unsupported_epochs`) are assembled per line by the reference assembler.
 Every function here works on all epochs of a block at once.
 """
@@ -40,10 +40,8 @@ def subset(decoded: dict, keep: np.ndarray) -> dict:
 
 
 def unsupported_epochs(n_epochs: int, s: dict[str, dict]) -> np.ndarray:
-    """Epochs the bulk rules do not cover: a repeated GGA/GNS/RMC/VTG/GST/GBS/GLL/ZDA, or a GRS with a satellite used twice."""
-    bad = np.zeros(n_epochs, bool)
-    for t in ("GGA", "GNS", "RMC", "VTG", "GST", "GBS", "GLL", "ZDA"):
-        bad |= np.bincount(s[t]["e"], minlength=n_epochs) > 1
+    """Epochs the bulk rules do not cover: a repeated GNS, or a GRS with a satellite used twice."""
+    bad = np.bincount(s["GNS"]["e"], minlength=n_epochs) > 1
     g, r = s["GSA"], s["GRS"]
     if r["e"].size and g["sat_row"].size:  # residuals go by satellite: a satellite used twice is left to the reference
         code = _sat_code(g["sat_const"], g["sat_svid"])
@@ -102,81 +100,81 @@ def _scatter(n: int, e: np.ndarray, values: np.ndarray, fill, dtype=None) -> np.
     return out
 
 
-def _last_finite(n: int, e: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Per epoch, the last finite value in line order (NaN when none); ``e`` is non-decreasing."""
-    fin = np.isfinite(values)
-    e, values = e[fin], values[fin]
-    out = np.full(n, np.nan)
+def _pick(n: int, sources: list[tuple[dict, np.ndarray, np.ndarray]], fill, last: bool = False) -> np.ndarray:
+    """Per epoch, the value of the first (``last``: the last) row in line order where the mask holds.
+
+    ``sources``: (rows with ``e`` and ``order``, values, mask) of one or more sentence types; an epoch
+    may have any number of rows of each. ``fill`` where no row qualifies.
+    """
+    e = np.concatenate([rows["e"][mask] for rows, _, mask in sources])
+    order = np.concatenate([rows["order"][mask] for rows, _, mask in sources])
+    values = np.concatenate([np.asarray(v)[mask] for _, v, mask in sources])
+    out = np.full(n, fill, dtype=values.dtype if values.size else np.asarray(fill).dtype)
     if e.size:
-        last = np.flatnonzero(np.append(e[1:] != e[:-1], True))
-        out[e[last]] = values[last]
+        sort = np.lexsort((order, e))
+        e, values = e[sort], values[sort]
+        edge = np.flatnonzero(np.append(e[1:] != e[:-1], True)) if last else np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
+        out[e[edge]] = values[edge]
     return out
 
 
-def _by_epoch(n: int, rows: dict, values: np.ndarray, fill) -> tuple[np.ndarray, np.ndarray]:
-    """One sentence type's values and line per epoch (at most one per epoch; ``fill`` and a huge line elsewhere)."""
-    v = np.full(n, fill, dtype=np.asarray(values).dtype)
-    v[rows["e"]] = values
-    line = np.full(n, np.iinfo(np.int64).max, np.int64)
-    line[rows["e"]] = rows["order"]
-    return v, line
+def _last_finite(n: int, rows: dict, values: np.ndarray) -> np.ndarray:
+    """Per epoch, the last finite value in line order (NaN when none)."""
+    return _pick(n, [(rows, np.asarray(values, float), np.isfinite(values))], np.nan, last=True)
 
 
 def _first_given(n: int, sources: list[tuple[dict, np.ndarray]]) -> np.ndarray:
     """Per epoch, the first non-zero code in line order among the sources (0 when none)."""
-    out = np.zeros(n, np.int64)
-    first_line = np.full(n, np.iinfo(np.int64).max, np.int64)
-    for rows, values in sources:
-        v, line = _by_epoch(n, rows, np.asarray(values, np.int64), 0)
-        take = (v != 0) & (line < first_line)
-        out = np.where(take, v, out)
-        first_line = np.where(take, line, first_line)
-    return out
+    return _pick(n, [(rows, np.asarray(v, np.int64), np.asarray(v) != 0) for rows, v in sources], 0)
 
 
 def _first_finite(n: int, sources: list[tuple[dict, np.ndarray]]) -> np.ndarray:
     """Per epoch, the first finite value in line order among the sources (NaN when none)."""
-    out = np.full(n, np.nan)
-    first_line = np.full(n, np.iinfo(np.int64).max, np.int64)
-    for rows, values in sources:
-        v, line = _by_epoch(n, rows, np.asarray(values, float), np.nan)
-        take = np.isfinite(v) & (line < first_line)
-        out = np.where(take, v, out)
-        first_line = np.where(take, line, first_line)
-    return out
+    return _pick(n, [(rows, np.asarray(v, float), np.isfinite(v)) for rows, v in sources], np.nan)
 
 
 def _altitude(n: int, gga: dict, gns: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Altitude and geoid separation, as the reference assembler sets them from GGA (fix) and GNS (fix).
+    """Altitude and geoid separation, as the reference assembler sets them from GGAs (fix) and a GNS (fix).
 
-    GGA sets both (each where given); GNS sets both only while no altitude is set, so its order matters.
+    Every GGA with a fix sets each where given; the GNS sets both only while no altitude is
+    set, so the order matters: the altitude is the last GGA's given one, else the GNS's; the
+    separation the last GGA's given one, except where the GNS set it (no GGA altitude before
+    it): then only a GGA after the GNS replaces it.
     """
     fixed = gga["quality"] != 0
-    ga, g_line = _by_epoch(n, {"e": gga["e"][fixed], "order": gga["order"][fixed]}, gga["alt"][fixed], np.nan)
-    gs, _ = _by_epoch(n, {"e": gga["e"][fixed], "order": gga["order"][fixed]}, gga["sep"][fixed], np.nan)
+    alt_given = fixed & np.isfinite(gga["alt"])
+    sep_given = fixed & np.isfinite(gga["sep"])
     fix = gns["has_fix"]
-    na, n_line = _by_epoch(n, {"e": gns["e"][fix], "order": gns["order"][fix]}, gns["alt"][fix], np.nan)
-    ns, _ = _by_epoch(n, {"e": gns["e"][fix], "order": gns["order"][fix]}, gns["sep"][fix], np.nan)
-    has_gns = n_line < np.iinfo(np.int64).max
-    gns_first = has_gns & (n_line < g_line)
-    gga_first = ~gns_first
-    alt = np.where(np.isfinite(ga), ga, np.where(has_gns, na, np.nan))
-    # GNS first: GGA's separation where given, else GNS's; GGA first: GNS's only when GGA gave no altitude
-    sep_after_gns = np.where(np.isfinite(gs), gs, ns)
-    sep_after_gga = np.where(has_gns & ~np.isfinite(ga) & np.isfinite(ns), ns, gs)
-    return alt, np.where(gga_first, sep_after_gga, sep_after_gns)
+    big = np.iinfo(np.int64).max
+    gns_line = _scatter(n, gns["e"][fix], gns["order"][fix], big, np.int64)
+    na = _scatter(n, gns["e"][fix], gns["alt"][fix], np.nan)
+    ns = _scatter(n, gns["e"][fix], gns["sep"][fix], np.nan)
+    ga = _last_finite(n, {"e": gga["e"][alt_given], "order": gga["order"][alt_given]}, gga["alt"][alt_given])
+    first_alt_line = _pick(n, [(gga, gga["order"], alt_given)], big)
+    alt = np.where(np.isfinite(ga), ga, na)
+    gns_sets = (gns_line < big) & (first_alt_line > gns_line) & np.isfinite(ns)
+    after = sep_given & (gga["order"] > gns_line[gga["e"]])
+    sep_after = _pick(n, [(gga, gga["sep"], after)], np.nan, last=True)
+    sep_all = _pick(n, [(gga, gga["sep"], sep_given)], np.nan, last=True)
+    return alt, np.where(gns_sets, np.where(np.isfinite(sep_after), sep_after, ns), sep_all)
 
 
 def _dates(n: int, sources: list[tuple[dict, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Per epoch, the last date given in line order, and the later minus the earlier one when two differ."""
-    (a_rows, a_date), (b_rows, b_date) = sources
-    a, a_line = _by_epoch(n, a_rows, np.asarray(a_date, np.int64), -1)
-    b, b_line = _by_epoch(n, b_rows, np.asarray(b_date, np.int64), -1)
-    b_later = b_line > a_line
-    first, last = np.where(b_later, a, b), np.where(b_later, b, a)
-    date = np.where(last >= 0, last, first)
-    differ = (first >= 0) & (last >= 0) & (first != last)
-    return date, np.where(differ, (last - first).astype(float), np.nan)
+    """Per epoch, the last date given in line order, and the last change between two given in turn (later minus earlier)."""
+    e = np.concatenate([rows["e"][np.asarray(d) >= 0] for rows, d in sources])
+    order = np.concatenate([rows["order"][np.asarray(d) >= 0] for rows, d in sources])
+    dates = np.concatenate([np.asarray(d, np.int64)[np.asarray(d) >= 0] for _, d in sources])
+    date = np.full(n, -1, np.int64)
+    change = np.full(n, np.nan)
+    if e.size:
+        sort = np.lexsort((order, e))
+        e, dates = e[sort], dates[sort]
+        last = np.flatnonzero(np.append(e[1:] != e[:-1], True))
+        date[e[last]] = dates[last]
+        differs = np.flatnonzero((e[1:] == e[:-1]) & (dates[1:] != dates[:-1])) + 1  # in turn, ascending
+        last_change = differs[np.append(e[differs][1:] != e[differs][:-1], True)] if differs.size else differs
+        change[e[last_change]] = (dates[last_change] - dates[last_change - 1]).astype(float)
+    return date, change
 
 
 def _positions(n: int, candidates: list[tuple[dict, np.ndarray, int]]):
@@ -184,27 +182,28 @@ def _positions(n: int, candidates: list[tuple[dict, np.ndarray, int]]):
 
     As the reference assembler: a candidate of another rank than the best so far is
     measured against it (the largest distance is kept); a better rank replaces it.
+    Any number of candidates of each type per epoch.
     """
-    k = len(candidates)
+    e = np.concatenate([rows["e"] for rows, _, _ in candidates])
+    order = np.concatenate([rows["order"] for rows, _, _ in candidates])
+    lat_all = np.concatenate([rows["lat"] for rows, _, _ in candidates])
+    lon_all = np.concatenate([rows["lon"] for rows, _, _ in candidates])
+    ok_all = np.concatenate([usable for _, usable, _ in candidates])
+    rank_all = np.concatenate([np.full(rows["e"].size, r) for rows, _, r in candidates])
+    sort = np.lexsort((order, e))
+    e = e[sort]
+    seq = np.arange(e.size) - np.searchsorted(e, e, side="left")
+    k = int(seq.max()) + 1 if e.size else 0
     lat = np.full((n, k), np.nan)
     lon = np.full((n, k), np.nan)
     ok = np.zeros((n, k), bool)
-    line = np.full((n, k), np.iinfo(np.int64).max, np.int64)
-    rank = np.array([c[2] for c in candidates])
-    for j, (rows, usable, _) in enumerate(candidates):
-        lat[rows["e"], j], lon[rows["e"], j] = rows["lat"], rows["lon"]
-        ok[rows["e"], j] = usable
-        line[rows["e"], j] = rows["order"]
-    order = np.argsort(line, axis=1, kind="stable")
+    rank = np.full((n, k), 99)
+    lat[e, seq], lon[e, seq], ok[e, seq], rank[e, seq] = lat_all[sort], lon_all[sort], ok_all[sort], rank_all[sort]
     best_lat, best_lon = np.full(n, np.nan), np.full(n, np.nan)
     best_rank = np.full(n, 99)
     gap_max = np.full(n, -1.0)
     for j in range(k):
-        c = order[:, j]
-        c_ok = np.take_along_axis(ok, c[:, None], 1)[:, 0]
-        c_lat = np.take_along_axis(lat, c[:, None], 1)[:, 0]
-        c_lon = np.take_along_axis(lon, c[:, None], 1)[:, 0]
-        c_rank = rank[c]
+        c_ok, c_lat, c_lon, c_rank = ok[:, j], lat[:, j], lon[:, j], rank[:, j]
         measure = c_ok & (best_rank < 99) & (c_rank != best_rank)
         with np.errstate(invalid="ignore"):
             gap = np.hypot((c_lat - best_lat) * 111_195.0, (c_lon - best_lon) * 111_195.0 * np.cos(np.radians(c_lat)))
@@ -271,8 +270,8 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
     floats = {k: np.full(n, np.nan) for k in FLOAT_COLUMNS}
 
     # GGA: quality, satellites, position (rank 0) when quality != 0, altitude, HDOP fallback
-    q = _scatter(n, gga["e"], gga["quality"], -1, np.int64)
-    n_used_gga = _scatter(n, gga["e"], gga["n_used"], -1, np.int64)
+    q = _pick(n, [(gga, gga["quality"].astype(np.int64), gga["quality"] >= 0)], -1, last=True)
+    n_used_gga = _pick(n, [(gga, gga["n_used"].astype(np.int64), gga["n_used"] >= 0)], -1, last=True)
     n_used_gga = np.where(n_used_gga >= 0, n_used_gga, _scatter(n, gns["e"], gns["n_used"], -1, np.int64))  # GNS: when GGA gives none
     gga_pos = (gga["quality"] != 0) & np.isfinite(gga["lat"]) & np.isfinite(gga["lon"])
     floats["alt_m"], floats["geoid_sep_m"] = _altitude(n, gga, gns)
@@ -280,8 +279,8 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
 
     # RMC: position (rank 2) and velocity (rank 0) when 'A'
     active = rmc["status"] == _A
-    speed = _scatter(n, rmc["e"][active], rmc["speed"][active], np.nan)
-    course = _scatter(n, rmc["e"][active], rmc["course"][active], np.nan)
+    speed = _first_finite(n, [(rmc, np.where(active, rmc["speed"], np.nan))])
+    course = _first_finite(n, [(rmc, np.where(active, rmc["course"], np.nan))])
     # RMC and GLL: status and mode letter, the first given in line order
     status = _first_given(n, [(rmc, np.where((rmc["status"] == _A) | (rmc["status"] == _V), rmc["status"], 0)),
                               (gll, np.where((gll["status"] == _A) | (gll["status"] == _V), gll["status"], 0))])  # fmt: skip
@@ -299,15 +298,15 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
 
     # VTG: velocity (rank 1) unless its mode is 'N'
     use = ~vtg["mode_n"]
-    vtg_speed = _scatter(n, vtg["e"][use], vtg["speed"][use], np.nan)
-    vtg_course = _scatter(n, vtg["e"][use], vtg["course"][use], np.nan)
+    vtg_speed = _first_finite(n, [(vtg, np.where(use, vtg["speed"], np.nan))])
+    vtg_course = _first_finite(n, [(vtg, np.where(use, vtg["course"], np.nan))])
     floats["speed_mps"] = np.where(np.isfinite(speed), speed, vtg_speed)
     floats["course_deg"] = np.where(np.isfinite(course), course, vtg_course)
 
     # GSA: DOPs (last given), fix mode (highest), satellites used
-    floats["pdop"] = _last_finite(n, gsa["e"], gsa["pdop"])
-    floats["vdop"] = _last_finite(n, gsa["e"], gsa["vdop"])
-    hdop_gsa = _last_finite(n, gsa["e"], gsa["hdop"])
+    floats["pdop"] = _last_finite(n, gsa, gsa["pdop"])
+    floats["vdop"] = _last_finite(n, gsa, gsa["vdop"])
+    hdop_gsa = _last_finite(n, gsa, gsa["hdop"])
     floats["hdop"] = np.where(np.isfinite(hdop_gsa), hdop_gsa, hdop_gga)
     fix_mode = np.full(n, -1, np.int64)
     if gsa["e"].size:
@@ -317,12 +316,12 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
 
     # GST
     for name in ("rms_residual_m", "sigma_major_m", "sigma_minor_m", "ellipse_orient_deg", "sigma_lat_m", "sigma_lon_m", "sigma_alt_m"):
-        floats[name] = _scatter(n, gst["e"], gst[name], np.nan)
+        floats[name] = _last_finite(n, gst, gst[name])
 
     # GBS
     for name in GBS_COLUMNS:
-        floats[name] = _scatter(n, gbs["e"], gbs[name], np.nan)
-    failed = _scatter(n, gbs["e"], gbs["gbs_failed_svid"], -1, np.int64)
+        floats[name] = _last_finite(n, gbs, gbs[name])
+    failed = _pick(n, [(gbs, gbs["gbs_failed_svid"].astype(np.int64), gbs["gbs_failed_svid"] >= 0)], -1, last=True)
 
     # satellites: the union of GSV "in view" and GSA "used", ordered by constellation and number:
     # cells of an (epoch × satellite present in the block) grid, read in order
