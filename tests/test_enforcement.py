@@ -193,7 +193,8 @@ def test_locate_last_trusted_and_later_untrusted(tmp_path):
 GPSD_FINDINGS = {
     "ac12.log": ["time_jump"] * 6, "ac12_binary.log": ["time_jump"] * 5, "bt451.log": ["time_jump"],
     "bu353-glonass.log": ["satellite_collapse"], "ericsson-gru04.log": ["time_jump"],
-    "garmin-10x.log": ["cn0_collapse", "satellite_collapse"], "gp-320fw-2019-04-07-coldboot.log": ["date_jump", "time_jump", "time_jump"],  # cold boot: 2010 dates, then 1999 with the time of day running on
+    "garmin-10x.log": ["cn0_collapse", "satellite_collapse"], "gp-320fw-2019-04-07-coldboot.log": ["time_jump", "time_jump"],  # cold boot: the clock jumps, then to 1999 (no-fix dates are not read)
+    "iTrek.log": ["time_jump"],  # two recordings concatenated
     "humminbird-M37.log": ["time_jump"], "meinberg-gps164.log": ["doppler_mismatch"], "nl2008u.log": ["gap"],
     "sl869.log": ["position_jump"], "ublox-lea-4h.log": ["gap"], "unicore-um621.log": ["cn0_collapse", "satellite_collapse"],
 }  # fmt: skip
