@@ -163,7 +163,7 @@ class EpochAssembler:
         self.e_n_view: list[int] = []
         self.e_gbs_svid: list[int] = []
         self.s_epoch: list[int] = []
-        self.s_const: list[str] = []
+        self.s_const: list[int] = []  # index into satellite_ids.CONSTELLATIONS
         self.s_svid: list[int] = []
         self.s_prn: list[int] = []
         self.s_signal: list[int] = []
@@ -208,7 +208,7 @@ class EpochAssembler:
             "n_in_view": np.asarray(self.e_n_view, dtype=np.int16),
             "gbs_failed_svid": np.asarray(self.e_gbs_svid, dtype=np.int16),
             "sat_epoch": np.asarray(self.s_epoch, dtype=np.int64).reshape(n_sat),
-            "sat_constellation": np.asarray(self.s_const, dtype=object).reshape(n_sat),
+            "sat_constellation": np.asarray(self.s_const, dtype=np.int8).reshape(n_sat),
             "sat_svid": np.asarray(self.s_svid, dtype=np.int16).reshape(n_sat),
             "sat_prn": np.asarray(self.s_prn, dtype=np.int16).reshape(n_sat),
             "sat_signal_id": np.asarray(self.s_signal, dtype=np.int8).reshape(n_sat),
@@ -284,7 +284,7 @@ class EpochAssembler:
         for key in keys:
             signal, prn, elev, azim, cn0 = cur.view.get(key, (-1, -1, NAN, NAN, NAN))
             self.s_epoch.append(epoch)
-            self.s_const.append(key[0])
+            self.s_const.append(_CONST_INDEX[key[0]])
             self.s_svid.append(key[1])
             self.s_prn.append(prn)
             self.s_signal.append(signal)

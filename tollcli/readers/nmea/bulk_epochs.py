@@ -13,14 +13,12 @@ import numpy as np
 
 from tollcli.readers.nmea.assembler import FLOAT_COLUMNS
 from tollcli.readers.nmea.bulk_sentences import GBS_COLUMNS
-from tollcli.readers.nmea.satellite_ids import CONSTELLATIONS
 
 SENTENCE_TYPES = ("GGA", "RMC", "VTG", "GSA", "GSV", "GST", "GLL", "ZDA", "GRS", "GBS", "GNS")
 SAT_FIELDS = ("sat_row", "sat_k", "sat_const", "sat_svid", "sat_prn", "sat_signal", "sat_elev", "sat_azim", "sat_cn0")
 _A, _V = ord("A"), ord("V")
 _NOT_FIX = np.array([ord(c) for c in "ENMS"])
 _GGA_VALID = (1, 2, 3, 4, 5)
-_CONSTELLATION_NAMES = np.array(CONSTELLATIONS, dtype=object)
 _ONE_CHAR = np.array([""] + [chr(i) for i in range(1, 256)], dtype=object)
 
 
@@ -111,8 +109,9 @@ def _pick(n: int, sources: list[tuple[dict, np.ndarray, np.ndarray]], fill, last
     values = np.concatenate([np.asarray(v)[mask] for _, v, mask in sources])
     out = np.full(n, fill, dtype=values.dtype if values.size else np.asarray(fill).dtype)
     if e.size:
-        sort = np.lexsort((order, e))
-        e, values = e[sort], values[sort]
+        if len(sources) > 1:  # one source is in line order already; epochs follow line order
+            sort = np.argsort(order, kind="stable")
+            e, values = e[sort], values[sort]
         edge = np.flatnonzero(np.append(e[1:] != e[:-1], True)) if last else np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
         out[e[edge]] = values[edge]
     return out
@@ -167,7 +166,7 @@ def _dates(n: int, sources: list[tuple[dict, np.ndarray]]) -> tuple[np.ndarray, 
     date = np.full(n, -1, np.int64)
     change = np.full(n, np.nan)
     if e.size:
-        sort = np.lexsort((order, e))
+        sort = np.argsort(order, kind="stable")  # epochs follow line order
         e, dates = e[sort], dates[sort]
         last = np.flatnonzero(np.append(e[1:] != e[:-1], True))
         date[e[last]] = dates[last]
@@ -190,15 +189,17 @@ def _positions(n: int, candidates: list[tuple[dict, np.ndarray, int]]):
     lon_all = np.concatenate([rows["lon"] for rows, _, _ in candidates])
     ok_all = np.concatenate([usable for _, usable, _ in candidates])
     rank_all = np.concatenate([np.full(rows["e"].size, r) for rows, _, r in candidates])
-    sort = np.lexsort((order, e))
+    sort = np.argsort(order, kind="stable")  # epochs follow line order
     e = e[sort]
-    seq = np.arange(e.size) - np.searchsorted(e, e, side="left")
+    seq = _group_seq(e)
     k = int(seq.max()) + 1 if e.size else 0
     lat = np.full((n, k), np.nan)
     lon = np.full((n, k), np.nan)
     ok = np.zeros((n, k), bool)
     rank = np.full((n, k), 99)
-    lat[e, seq], lon[e, seq], ok[e, seq], rank[e, seq] = lat_all[sort], lon_all[sort], ok_all[sort], rank_all[sort]
+    cell = e * k + seq
+    for grid, values in ((lat, lat_all), (lon, lon_all), (ok, ok_all), (rank, rank_all)):
+        grid.ravel()[cell] = values[sort]
     best_lat, best_lon = np.full(n, np.nan), np.full(n, np.nan)
     best_rank = np.full(n, 99)
     gap_max = np.full(n, -1.0)
@@ -217,7 +218,10 @@ def _positions(n: int, candidates: list[tuple[dict, np.ndarray, int]]):
 
 def _group_seq(e: np.ndarray) -> np.ndarray:
     """Each row's place among the rows of its epoch (``e`` non-decreasing)."""
-    return np.arange(e.size) - np.searchsorted(e, e, side="left")
+    if e.size == 0:
+        return np.zeros(0, np.int64)
+    starts = np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
+    return np.arange(e.size) - np.repeat(starts, np.diff(np.append(starts, e.size)))
 
 
 def _gsa_residuals(gsa: dict, grs: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -354,7 +358,7 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
         return np.where(v, values[vi] if values.size else fill, fill).astype(dtype)
 
     out["sat_epoch"] = epoch_ids[sat_epoch].astype(np.int64)
-    out["sat_constellation"] = _CONSTELLATION_NAMES[code // 1024]
+    out["sat_constellation"] = (code // 1024).astype(np.int8)
     out["sat_svid"] = (code % 1024).astype(np.int16)
     out["sat_prn"] = pick(gsv["sat_prn"], -1, np.int16)
     out["sat_signal_id"] = pick(gsv["sat_signal"], -1, np.int8)

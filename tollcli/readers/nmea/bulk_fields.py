@@ -146,8 +146,9 @@ def decimal_numpy(block, start: np.ndarray, end: np.ndarray, integer_only: bool 
 def integer(block, start, end, lo: int = 0, hi: int = 32_767, missing: int = -1) -> tuple[np.ndarray, np.ndarray]:
     """Integer fields in [lo, hi] → (int64 value, ok); empty → ``missing``."""
     value, ok, empty, _ = decimal(block, start, end, integer_only=True)
-    out = np.where(ok & ~empty, np.nan_to_num(value), missing).astype(np.int64)
-    ok = ok & (empty | ((out >= lo) & (out <= hi)))
+    value[~ok | empty] = missing  # a fresh array: NaN where empty or not ok
+    out = value.astype(np.int64)
+    ok &= empty | ((out >= lo) & (out <= hi))
     return out, ok
 
 

@@ -43,6 +43,13 @@ def satellite_table() -> tuple[np.ndarray, np.ndarray]:
     return const, svid
 
 
+def _satellites(hint_row: np.ndarray, prn: np.ndarray) -> dict[str, np.ndarray]:
+    """Constellation index and system number of each (hint row, number ≤ MAX_PRN), from :func:`satellite_table`."""
+    const_t, svid_t = satellite_table()
+    cell = hint_row * (MAX_PRN + 1) + prn
+    return {"sat_const": const_t.ravel()[cell], "sat_svid": svid_t.ravel()[cell]}
+
+
 def _hint_row(name: str | None) -> int:
     return HINTS.index(name) if name in HINTS else 0
 
@@ -76,7 +83,7 @@ def _numbers(bl: BlockLines, idx: np.ndarray, ks: tuple[int, ...]):
 
 def _as_int(v: np.ndarray, ok: np.ndarray, empty: np.ndarray, dotted: np.ndarray, lo: int, hi: int, missing: int = -1):
     """Decimals read by :func:`_numbers` as integers in [lo, hi], as ``fields.integer`` (``int("5.0")`` fails)."""
-    out = np.where(ok & ~empty, np.nan_to_num(v), missing).astype(np.int64)
+    out = np.where(ok & ~empty, v, missing).astype(np.int64)
     return out, ok & ~dotted & (empty | ((out >= lo) & (out <= hi)))
 
 
@@ -226,12 +233,11 @@ def gsa(bl: BlockLines, idx: np.ndarray) -> dict:
     ok &= ok_prn.reshape(idx.size, 12).all(axis=1)
     present = e > s
     k = np.cumsum(present.reshape(idx.size, 12), axis=1).ravel() - 1  # a satellite's place in its GSA's list
-    const_t, svid_t = satellite_table()
     rows, prn, k = rows[present], prn[present], k[present]
     safe = np.clip(prn, 0, MAX_PRN)
     return {"fix_mode": fix_mode, "pdop": pdop, "hdop": hdop, "vdop": vdop, "sysid": sysid, "ok": ok,
             "n_keys": present.reshape(idx.size, 12).sum(axis=1), "sat_row": rows, "sat_k": k,
-            "sat_const": const_t[hint[rows], safe], "sat_svid": svid_t[hint[rows], safe]}  # fmt: skip
+            **_satellites(hint[rows], safe)}  # fmt: skip
 
 
 def gsv(bl: BlockLines, idx: np.ndarray) -> dict:
@@ -266,10 +272,9 @@ def gsv(bl: BlockLines, idx: np.ndarray) -> dict:
     ok &= np.bincount(rows[~sat_ok], minlength=idx.size) == 0
     keep = present
     hint = talker_rows(bl.address[idx])
-    const_t, svid_t = satellite_table()
     safe = np.clip(prn[keep], 0, MAX_PRN)
     r = rows[keep]
-    return dict(ok=ok, sat_row=r, sat_const=const_t[hint[r], safe], sat_svid=svid_t[hint[r], safe],
+    return dict(ok=ok, sat_row=r, **_satellites(hint[r], safe),
                 sat_prn=prn[keep], sat_signal=signal[r], sat_elev=elev[keep], sat_azim=azim[keep], sat_cn0=cn0[keep])  # fmt: skip
 
 

@@ -49,6 +49,9 @@ import pandas as pd
 import pyarrow as pa
 
 from tollcli.readers.nmea.assembler import FLOAT_COLUMNS
+from tollcli.readers.nmea.satellite_ids import CONSTELLATIONS
+
+_NAMES = np.array(CONSTELLATIONS, dtype=object)
 
 EPOCH_COLUMNS = (
     "epoch", "time_utc", "tod_s", "line", "lat_deg", "lon_deg", "alt_m", "geoid_sep_m",
@@ -73,7 +76,7 @@ _EPOCH_DTYPES = {
     **{k: np.float64 for k in FLOAT_COLUMNS}, "date_jump_days": np.float64,
 }  # fmt: skip
 _SAT_SOURCES = {
-    "constellation": ("sat_constellation", object), "svid": ("sat_svid", np.int16),
+    "constellation": ("sat_constellation", np.int8), "svid": ("sat_svid", np.int16),
     "prn": ("sat_prn", np.int16), "signal_id": ("sat_signal_id", np.int8),
     "elev_deg": ("sat_elev_deg", np.float64), "azim_deg": ("sat_azim_deg", np.float64),
     "cn0_dbhz": ("sat_cn0_dbhz", np.float64), "used": ("sat_used", bool),
@@ -86,6 +89,14 @@ def _strings(values: np.ndarray) -> pd.api.extensions.ExtensionArray:
     if pd.StringDtype().storage != "pyarrow":  # pragma: no cover - pandas configured for Python strings
         return pd.array(values, dtype="string")
     return pd.arrays.ArrowStringArray(pa.array(values, type=pa.string(), from_pandas=True))
+
+
+def _constellation_names(codes: np.ndarray) -> pd.api.extensions.ExtensionArray:
+    """Indices into ``satellite_ids.CONSTELLATIONS`` → the ``string`` column of their names."""
+    if pd.StringDtype().storage != "pyarrow":  # pragma: no cover - pandas configured for Python strings
+        return pd.array(_NAMES[codes], dtype="string")
+    names = pa.DictionaryArray.from_arrays(pa.array(codes, type=pa.int8()), pa.array(CONSTELLATIONS, type=pa.string()))
+    return pd.arrays.ArrowStringArray(names.cast(pa.string()))
 
 
 def _utc(values: np.ndarray) -> pd.DatetimeIndex:
@@ -122,5 +133,5 @@ def satellite_frame(arrays: dict[str, np.ndarray] | None, time_utc: np.ndarray |
     data = {"epoch": sat_epoch, "time_utc": _utc(time_utc[sat_epoch - first])}
     for name, (key, dtype) in _SAT_SOURCES.items():
         values = np.asarray(arrays[key], dtype=dtype)
-        data[name] = _strings(values) if name == "constellation" else values
+        data[name] = _constellation_names(values) if name == "constellation" else values
     return pd.DataFrame(data)
