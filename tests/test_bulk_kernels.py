@@ -80,6 +80,10 @@ def test_every_real_log_frames_and_reads_the_same_compiled_and_numpy():
         s1, e1 = bl.field_span(plain, 3)  # one field number for every line
         assert _same(s1, s_ref[2 * plain.size : 3 * plain.size]) and _same(e1, e_ref[2 * plain.size : 3 * plain.size])
         assert_fields_same(bl, s, e)
+        for integer_only in (False, True):  # span and decimal in one compiled pass: the same as both in turn
+            fused = bl.field_decimals(lines, k, integer_only)
+            for a, b in zip(fused, bulk_fields.decimal_numpy(bl, s_ref, e_ref, integer_only)):
+                assert _same(a, b), path.name
         n_fields += int(np.count_nonzero(e > s))
     assert n_fields > 150_000  # the comparison covered real fields, not empty ones (201 202 on 2026-11-23)
 
@@ -164,3 +168,8 @@ def test_kernels_reject_mismatched_buffers():
     bl = bulk_lines.split_block(buf.tobytes())
     with pytest.raises(IndexError):
         bl.field_span(np.array([5]), 1)
+    with pytest.raises(IndexError):
+        bl.field_decimals(np.array([5]), 1)
+    with pytest.raises(ValueError):
+        kernels.compiled.field_decimal(bl.buf, bl.first_comma, bl.end, bl.commas, np.array([0, 1]), np.array([1, 1]), False,
+                                       np.empty(1), *[np.empty(2, bool)] * 3)  # fmt: skip

@@ -1,5 +1,6 @@
 /* Compiled twins of the bulk NMEA reader's kernels: line framing (bulk_lines.split_block),
- * field spans (BlockLines.field_span), decimal, time-of-day and date fields (bulk_fields).
+ * field spans (BlockLines.field_span), decimal, time-of-day and date fields (bulk_fields), and spans
+ * read as decimals in one pass (BlockLines.field_decimals).
  *
  * Each function reads the block's bytes and fills arrays that the caller
  * allocated (numpy arrays passed through the buffer protocol), with exactly the
@@ -280,6 +281,57 @@ done:
     return result;
 }
 
+/* field_decimal(buf, first_comma, end, commas, lines, k, integer_only, value, ok, empty, has_dot)
+ *
+ * field_span and decimal in one pass: field k of each line read as a decimal (the rules of
+ * both), without the spans in between. k has one item (for every line) or one per line.
+ */
+static PyObject *field_decimal(PyObject *self, PyObject *args) {
+    Py_buffer b_buf, b_first, b_end, b_commas, b_lines, b_k, b_value, b_ok, b_empty, b_dot;
+    int integer_only;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*pw*w*w*w*", &b_buf, &b_first, &b_end, &b_commas, &b_lines, &b_k,
+                          &integer_only, &b_value, &b_ok, &b_empty, &b_dot))
+        return NULL;
+    PyObject *result = NULL;
+    const uint8_t *buf = (const uint8_t *)b_buf.buf;
+    const Py_ssize_t n = b_buf.len;
+    Py_ssize_t m = b_lines.len / 8, n_lines = b_first.len / 8, n_k = b_k.len / 8, top = b_commas.len / 8 - 2;
+    if (top < 0 || (n_k != 1 && n_k != m) || b_end.len / 8 != n_lines || !check(&b_value, m, 8, "value") ||
+        !check(&b_ok, m, 1, "ok") || !check(&b_empty, m, 1, "empty") || !check(&b_dot, m, 1, "has_dot")) {
+        PyErr_SetString(PyExc_ValueError, "field_decimal: sizes do not match");
+        goto done;
+    }
+    const int64_t *first = b_first.buf, *end = b_end.buf, *commas = b_commas.buf, *lines = b_lines.buf, *ks = b_k.buf;
+    double *value = b_value.buf;
+    uint8_t *ok = b_ok.buf, *empty = b_empty.buf, *has_dot = b_dot.buf;
+    int bad = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < m; i++) {
+        int64_t line = lines[i];
+        if (line < 0 || line >= n_lines) { bad = 1; break; }
+        int64_t c = first[line] + ks[n_k == 1 ? 0 : i] - 1;
+        if (c > top) c = top;
+        if (c < 0) { bad = 1; break; }
+        int64_t star = end[line] - 3, s = commas[c] + 1, e = commas[c + 1];
+        if (e < s) e = s;
+        if (e > star) e = star;
+        if (s > star) s = star;
+        ok[i] = (uint8_t)parse_decimal(buf, n, s, e, integer_only, value + i, empty + i, has_dot + i);
+    }
+    Py_END_ALLOW_THREADS
+    if (bad) {
+        PyErr_SetString(PyExc_IndexError, "field_decimal: line or field out of range");
+        goto done;
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    PyBuffer_Release(&b_buf); PyBuffer_Release(&b_first); PyBuffer_Release(&b_end); PyBuffer_Release(&b_commas);
+    PyBuffer_Release(&b_lines); PyBuffer_Release(&b_k); PyBuffer_Release(&b_value); PyBuffer_Release(&b_ok);
+    PyBuffer_Release(&b_empty); PyBuffer_Release(&b_dot);
+    return result;
+}
+
 /* time_of_day(buf, start, end, tod, ok): hhmmss[.sss] fields → seconds after midnight
  * (float64, NaN when empty or bad) and ok (uint8: empty or good). The rules of
  * bulk_fields.time_of_day_s_numpy: six leading digits, hh <= 23, mm <= 59, the seconds
@@ -382,6 +434,7 @@ static PyMethodDef methods[] = {
     {"field_span", field_span, METH_VARARGS, "Field spans of plain lines (see BlockLines.field_span)."},
     {"frame", frame, METH_VARARGS, "Frame the lines of a block (see bulk_lines.split_block)."},
     {"decimal", decimal, METH_VARARGS, "Read decimal fields (see bulk_fields.decimal)."},
+    {"field_decimal", field_decimal, METH_VARARGS, "Read field k of lines as decimals (see BlockLines.field_decimals)."},
     {NULL, NULL, 0, NULL},
 };
 

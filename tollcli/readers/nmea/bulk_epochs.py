@@ -73,9 +73,13 @@ def _gsv_reports(e: np.ndarray, code: np.ndarray, signal: np.ndarray) -> np.ndar
     sig = signal[order].astype(np.int64)
     last_none = np.maximum.reduceat(np.where(sig < 0, pos, -1), start)[group]
     candidate = (pos > last_none) | ((pos == last_none) & (last_none == size[group] - 1))
-    pick = np.lexsort((-pos, np.where(candidate, sig, 1 << 20), group))
-    first = np.flatnonzero(np.concatenate(([True], group[pick][1:] != group[pick][:-1])))
-    return np.sort(order[pick[first]])
+    # per group, the candidate with the lowest signal id, the last of those: the least of (signal id, −place)
+    span = int(size.max()) + 1
+    rank = np.where(candidate, sig + 1, 1 << 20) * span + (span - 1 - pos)
+    best = np.minimum.reduceat(rank, start)[group] == rank
+    chosen = np.zeros(m, bool)
+    chosen[order[best]] = True
+    return np.flatnonzero(chosen)
 
 
 def _sat_code(const: np.ndarray, svid: np.ndarray) -> np.ndarray:

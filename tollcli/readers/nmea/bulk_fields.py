@@ -146,7 +146,13 @@ def decimal_numpy(block, start: np.ndarray, end: np.ndarray, integer_only: bool 
 def integer(block, start, end, lo: int = 0, hi: int = 32_767, missing: int = -1) -> tuple[np.ndarray, np.ndarray]:
     """Integer fields in [lo, hi] → (int64 value, ok); empty → ``missing``."""
     value, ok, empty, _ = decimal(block, start, end, integer_only=True)
-    value[~ok | empty] = missing  # a fresh array: NaN where empty or not ok
+    return as_integer(value, ok, empty, lo, hi, missing)
+
+
+def as_integer(value: np.ndarray, ok: np.ndarray, empty: np.ndarray, lo: int = 0, hi: int = 32_767,
+               missing: int = -1) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Fields read by :func:`decimal` with ``integer_only`` → (int64 value, ok) in [lo, hi]; ``value`` is overwritten."""
+    value[~ok | empty] = missing
     out = value.astype(np.int64)
     ok &= empty | ((out >= lo) & (out <= hi))
     return out, ok

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tollcli.readers.nmea import kernels
-from tollcli.readers.nmea.bulk_fields import byte_windows
+from tollcli.readers.nmea.bulk_fields import byte_windows, decimal
 
 _NL, _CR, _DOLLAR, _BANG, _STAR, _COMMA = 10, 13, 36, 33, 42, 44
 
@@ -65,6 +65,20 @@ class BlockLines:
             kernels.compiled.field_span(self.first_comma, self.end, self.commas, lines.ravel(), k, s, e)
             return s.reshape(lines.shape), e.reshape(lines.shape)
         return self.field_span_numpy(lines, k)
+
+    def field_decimals(self, lines: np.ndarray, k: np.ndarray | int, integer_only: bool = False):
+        """Field ``k`` of plain ``lines`` read as decimals: (value, ok, empty, has_dot), as
+        :func:`~tollcli.readers.nmea.bulk_fields.decimal` of :meth:`field_span` (in one compiled pass where built)."""
+        if kernels.compiled is None:
+            return decimal(self, *self.field_span_numpy(lines, k), integer_only)
+        lines = np.ascontiguousarray(lines, np.int64).ravel()
+        k = np.ascontiguousarray(k, np.int64).ravel()
+        n = lines.size
+        value = np.empty(n, np.float64)
+        ok, empty, has_dot = np.empty(n, bool), np.empty(n, bool), np.empty(n, bool)
+        kernels.compiled.field_decimal(self.buf, self.first_comma, self.end, self.commas, lines, k, integer_only,
+                                       value, ok, empty, has_dot)  # fmt: skip
+        return value, ok, empty, has_dot
 
     def field_span_numpy(self, lines: np.ndarray, k: np.ndarray | int) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`field_span` in numpy only (the reference for the compiled kernel)."""

@@ -76,9 +76,8 @@ def _numbers(bl: BlockLines, idx: np.ndarray, ks: tuple[int, ...]):
     """Fields ``ks`` of lines ``idx`` read as decimals in one pass: (values, ok, empty, dotted), each (len(ks), n)."""
     lines = np.tile(idx, len(ks))
     k = np.repeat(np.asarray(ks, np.int64), idx.size)
-    s, e = bl.field_span(lines, k)
     shape = (len(ks), idx.size)
-    return tuple(a.reshape(shape) for a in bf.decimal(bl, s, e))
+    return tuple(a.reshape(shape) for a in bl.field_decimals(lines, k))
 
 
 def _as_int(v: np.ndarray, ok: np.ndarray, empty: np.ndarray, dotted: np.ndarray, lo: int, hi: int, missing: int = -1):
@@ -227,11 +226,11 @@ def gsa(bl: BlockLines, idx: np.ndarray) -> dict:
     # the twelve satellite slots
     rows = np.repeat(np.arange(idx.size), 12)
     slot = np.tile(np.arange(3, 15), idx.size)
-    s, e = bl.field_span(idx[rows], slot)
-    prn, ok_prn = bf.integer(bl, s, e, lo=1, hi=9_999)
+    value, ok_prn, empty, _ = bl.field_decimals(idx[rows], slot, integer_only=True)
+    present = ~empty
+    prn, ok_prn = bf.as_integer(value, ok_prn, empty, lo=1, hi=9_999)
     ok_prn &= prn <= MAX_PRN  # beyond the look-up table: the per-line path
     ok &= ok_prn.reshape(idx.size, 12).all(axis=1)
-    present = e > s
     k = np.cumsum(present.reshape(idx.size, 12), axis=1).ravel() - 1  # a satellite's place in its GSA's list
     rows, prn, k = rows[present], prn[present], k[present]
     safe = np.clip(prn, 0, MAX_PRN)
@@ -258,8 +257,7 @@ def gsv(bl: BlockLines, idx: np.ndarray) -> dict:
     k0 = 4 + 4 * g
     line = idx[rows]
     lines4 = np.tile(line, 4)
-    s, e = bl.field_span(lines4, np.concatenate([k0, k0 + 1, k0 + 2, k0 + 3]))
-    v, oks, empty, dotted = bf.decimal(bl, s, e)
+    v, oks, empty, dotted = bl.field_decimals(lines4, np.concatenate([k0, k0 + 1, k0 + 2, k0 + 3]))
     m = line.size
     present = ~empty[:m]
     prn, ok_prn = _as_int(v[:m], oks[:m], empty[:m], dotted[:m], 1, 9_999)
