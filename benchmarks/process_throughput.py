@@ -134,7 +134,7 @@ def main() -> None:
         print(f"ratio process / reader time: {t_proc / t_read:.2f}; invoice: {len(invoice['lines'])} lines, total {invoice['total']}; "
               f"cold and warm invoices {'byte-identical' if same else 'DIFFER'}")  # fmt: skip
         under = {f["properties"]["id"] for f in geo["features"] if f["properties"]["id"].startswith("R0-")}
-        driven = {i for i in under if int(i.split("-")[1]) * 250.0 + 250.0 <= n_epochs * speed}
+        driven = {i for i in under if int(i.split("-")[1]) * 250.0 + 250.0 <= (n_epochs - 1) * speed}  # wholly under the track
         charged = {line["geoobject"] for line in invoice["lines"]}
         print(f"mix {args.mix}: {len(charged & driven)} of {len(driven)} segments under the track charged "
               f"({len(charged & driven) / max(len(driven), 1):.1%}), {len(charged - under)} on parallel roads; "
