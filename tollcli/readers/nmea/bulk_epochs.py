@@ -24,8 +24,15 @@ _ONE_CHAR = np.array([""] + [chr(i) for i in range(1, 256)], dtype=object)
 
 def subset(decoded: dict, keep: np.ndarray) -> dict:
     """The decoded rows where ``keep`` holds (satellite rows follow their sentence)."""
-    if keep.all():
+    n_keep = int(np.count_nonzero(keep))
+    if n_keep == keep.size:
         return dict(decoded)
+    if keep[:n_keep].all():  # the first rows (the usual case: the epoch carried to the next block is the last): views
+        out = {k: v[:n_keep] for k, v in decoded.items() if not k.startswith("sat_")}
+        if "sat_row" in decoded:  # satellite rows follow their sentence's rows in order
+            m = int(np.searchsorted(decoded["sat_row"], n_keep))
+            out.update({k: decoded[k][:m] for k in SAT_FIELDS if k in decoded})
+        return out
     out = {k: v[keep] for k, v in decoded.items() if not k.startswith("sat_")}
     if "sat_row" in decoded:
         new_index = np.cumsum(keep) - 1
@@ -108,14 +115,17 @@ def _pick(n: int, sources: list[tuple[dict, np.ndarray, np.ndarray]], fill, last
     ``sources``: (rows with ``e`` and ``order``, values, mask) of one or more sentence types; an epoch
     may have any number of rows of each. ``fill`` where no row qualifies.
     """
-    e = np.concatenate([rows["e"][mask] for rows, _, mask in sources])
-    order = np.concatenate([rows["order"][mask] for rows, _, mask in sources])
-    values = np.concatenate([np.asarray(v)[mask] for _, v, mask in sources])
+    if len(sources) == 1:  # one source is in line order already
+        (rows, v, mask), = sources
+        e, values = rows["e"][mask], np.asarray(v)[mask]
+    else:  # epochs follow line order: sorting by line sorts by epoch too
+        e = np.concatenate([rows["e"][mask] for rows, _, mask in sources])
+        order = np.concatenate([rows["order"][mask] for rows, _, mask in sources])
+        values = np.concatenate([np.asarray(v)[mask] for _, v, mask in sources])
+        sort = np.argsort(order, kind="stable")
+        e, values = e[sort], values[sort]
     out = np.full(n, fill, dtype=values.dtype if values.size else np.asarray(fill).dtype)
     if e.size:
-        if len(sources) > 1:  # one source is in line order already; epochs follow line order
-            sort = np.argsort(order, kind="stable")
-            e, values = e[sort], values[sort]
         edge = np.flatnonzero(np.append(e[1:] != e[:-1], True)) if last else np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
         out[e[edge]] = values[edge]
     return out

@@ -265,7 +265,8 @@ class BulkReader:
         self.next_epoch += int(keep_epoch.sum())
         ep_line = first_line + dec[first_dec[:n_done]] + 1
         is_slow = np.zeros(n_done, bool)
-        np.logical_or.at(is_slow, local[in_done], slow[dec[in_done]])
+        if slow.any():
+            is_slow[local[in_done][slow[dec[in_done]]]] = True
 
         # the bulk-decoded rows of every type, by epoch
         line_epoch = np.full(bl.start.size, -1, np.int64)
@@ -326,8 +327,9 @@ def _first_timed(local: np.ndarray, tod: np.ndarray, n: int) -> np.ndarray:
     out = np.full(n, np.nan)
     timed = ~np.isnan(tod)
     e = local[timed]
-    if e.size:
-        uniq, first = np.unique(e, return_index=True)
+    if e.size:  # ``local`` never decreases: an epoch's first timed sentence is where ``e`` changes
+        first = np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
+        uniq = e[first]
         keep = uniq < n
         out[uniq[keep]] = tod[timed][first[keep]]
     return out
