@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from tollcli.readers.nmea import bulk_fields, bulk_lines, kernels, read_nmea
 from tollcli.readers.nmea.fields import num
 
-FRAME = ("start", "end", "plain", "checksum_ok", "given", "computed", "address", "commas", "first_comma", "n_fields")
+FRAME = ("start", "end", "plain", "checksum_ok", "given", "computed", "address", "commas", "first_comma", "n_fields", "n_special")
 needs_compiled = pytest.mark.skipif(kernels.compiled is None, reason="compiled kernels not built")
 
 
@@ -152,9 +152,9 @@ def test_kernels_reject_mismatched_buffers():
         pytest.skip("compiled kernels not built")
     buf = np.frombuffer(b"$GPGGA,1,2*00\n$GPGGA,3*00", np.uint8)
     def frame(lines: int, commas: int):
-        i64 = [np.empty(lines, np.int64) for _ in range(7)]
+        i64 = [np.empty(lines, np.int64) for _ in range(8)]
         kernels.compiled.frame(buf, i64[0], i64[1], np.empty(lines, bool), i64[2], i64[3], i64[4],
-                               np.empty(commas, np.int64), i64[5], i64[6])  # fmt: skip
+                               np.empty(commas, np.int64), i64[5], i64[6], i64[7])  # fmt: skip
 
     frame(2, 3 + 2)  # right: two lines, three commas and the two sentinels
     with pytest.raises(ValueError):

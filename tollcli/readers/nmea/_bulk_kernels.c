@@ -52,16 +52,16 @@ static int check(Py_buffer *b, Py_ssize_t items, Py_ssize_t itemsize, const char
     return 1;
 }
 
-/* frame(buf, start, end, plain, given, computed, address, commas, first_comma, n_fields)
+/* frame(buf, start, end, plain, given, computed, address, commas, first_comma, n_fields, n_special)
  *
- * buf: uint8, the block. start/end/given/computed/address/first_comma/n_fields: int64
+ * buf: uint8, the block. start/end/given/computed/address/first_comma/n_fields/n_special: int64
  * with one item per line (line feeds + 1); plain: uint8 (bool), same length;
  * commas: int64 with one item per comma plus two, the last two set to the sentinel.
  */
 static PyObject *frame(PyObject *self, PyObject *args) {
-    Py_buffer b_buf, b_start, b_end, b_plain, b_given, b_computed, b_address, b_commas, b_first, b_nf;
-    if (!PyArg_ParseTuple(args, "y*w*w*w*w*w*w*w*w*w*", &b_buf, &b_start, &b_end, &b_plain, &b_given,
-                          &b_computed, &b_address, &b_commas, &b_first, &b_nf))
+    Py_buffer b_buf, b_start, b_end, b_plain, b_given, b_computed, b_address, b_commas, b_first, b_nf, b_ns;
+    if (!PyArg_ParseTuple(args, "y*w*w*w*w*w*w*w*w*w*w*", &b_buf, &b_start, &b_end, &b_plain, &b_given,
+                          &b_computed, &b_address, &b_commas, &b_first, &b_nf, &b_ns))
         return NULL;
     PyObject *result = NULL;
     const uint8_t *buf = (const uint8_t *)b_buf.buf;
@@ -75,10 +75,10 @@ static PyObject *frame(PyObject *self, PyObject *args) {
     if (!check(&b_end, lines, 8, "end") || !check(&b_plain, lines, 1, "plain") ||
         !check(&b_given, lines, 8, "given") || !check(&b_computed, lines, 8, "computed") ||
         !check(&b_address, lines, 8, "address") || !check(&b_first, lines, 8, "first_comma") ||
-        !check(&b_nf, lines, 8, "n_fields"))
+        !check(&b_nf, lines, 8, "n_fields") || !check(&b_ns, lines, 8, "n_special"))
         goto done;
     int64_t *start = b_start.buf, *end = b_end.buf, *given = b_given.buf, *computed = b_computed.buf;
-    int64_t *address = b_address.buf, *commas = b_commas.buf, *first = b_first.buf, *nf = b_nf.buf;
+    int64_t *address = b_address.buf, *commas = b_commas.buf, *first = b_first.buf, *nf = b_nf.buf, *ns = b_ns.buf;
     uint8_t *plain = b_plain.buf;
     Py_ssize_t line = 0, c = 0;
     int bad = 0;
@@ -139,6 +139,7 @@ static PyObject *frame(PyObject *self, PyObject *args) {
             first[line] = -1;  /* counted over the whole block below */
         }
         plain[line] = (uint8_t)is_plain;
+        ns[line] = n_special;
         line++;
         ls = le + 1;
     }
@@ -159,7 +160,7 @@ static PyObject *frame(PyObject *self, PyObject *args) {
 done:
     PyBuffer_Release(&b_buf); PyBuffer_Release(&b_start); PyBuffer_Release(&b_end); PyBuffer_Release(&b_plain);
     PyBuffer_Release(&b_given); PyBuffer_Release(&b_computed); PyBuffer_Release(&b_address);
-    PyBuffer_Release(&b_commas); PyBuffer_Release(&b_first); PyBuffer_Release(&b_nf);
+    PyBuffer_Release(&b_commas); PyBuffer_Release(&b_first); PyBuffer_Release(&b_nf); PyBuffer_Release(&b_ns);
     return result;
 }
 

@@ -46,6 +46,7 @@ class BlockLines:
     commas: np.ndarray  # positions of every comma in the block, then two sentinels
     first_comma: np.ndarray  # index into ``commas`` of each line's first comma
     n_fields: np.ndarray  # fields after the address (plain lines)
+    n_special: np.ndarray  # '$', '!', '*' and carriage returns in the line (after an Android prefix)
 
     def text(self, i: int) -> str:
         """Line ``i`` as the reference reader sees it (latin-1, carriage returns removed)."""
@@ -105,14 +106,14 @@ def split_block(data: bytes) -> BlockLines:
         return split_block_numpy(data)
     buf = np.frombuffer(data, dtype=np.uint8)
     n = int(np.count_nonzero(buf == _NL)) + 1
-    start, end, given, computed, address, first_comma, n_fields = (np.empty(n, np.int64) for _ in range(7))
+    start, end, given, computed, address, first_comma, n_fields, n_special = (np.empty(n, np.int64) for _ in range(8))
     plain = np.empty(n, bool)
     commas = np.empty(int(np.count_nonzero(buf == _COMMA)) + 2, np.int64)
     commas[-2:] = _SENTINEL
-    kernels.compiled.frame(buf, start, end, plain, given, computed, address, commas, first_comma, n_fields)
+    kernels.compiled.frame(buf, start, end, plain, given, computed, address, commas, first_comma, n_fields, n_special)
     checksum_ok = plain & (computed == given)
     return BlockLines(buf, None, start, end, plain, checksum_ok, given, computed, address, commas,
-                      first_comma, n_fields)  # fmt: skip
+                      first_comma, n_fields, n_special)  # fmt: skip
 
 
 def split_block_numpy(data: bytes) -> BlockLines:
@@ -162,7 +163,8 @@ def split_block_numpy(data: bytes) -> BlockLines:
     last_comma = np.searchsorted(commas, end - 3)
     n_fields = last_comma - first_comma  # commas after the address = fields after it
     commas = np.append(commas, np.full(2, _SENTINEL))  # sentinels: no line reaches them
-    return BlockLines(buf, win, start, end, plain, checksum_ok, given, computed, address, commas, first_comma, n_fields)
+    return BlockLines(buf, win, start, end, plain, checksum_ok, given, computed, address, commas, first_comma, n_fields,
+                      n_special.astype(np.int64))  # fmt: skip
 
 
 def pack_address(text: str) -> int:
@@ -212,12 +214,8 @@ def other_sentences(bl: BlockLines, idx: np.ndarray) -> tuple[np.ndarray, np.nda
     hi = _hex_value(buf[np.where(framed, e - 2, s)])
     lo = _hex_value(buf[np.where(framed, e - 1, s)])
     framed &= (hi >= 0) & (lo >= 0)
-    # no other '$', '!', '*' or carriage return; the XOR of the body
-    bounds = np.empty(2 * n, np.int64)
-    bounds[0::2] = s
-    bounds[1::2] = np.where(framed, e, s + 1)
-    special = ((buf == _DOLLAR) | (buf == _BANG) | (buf == _STAR) | (buf == _CR)).astype(np.int64)
-    framed &= np.add.reduceat(special, bounds)[0::2] == 2
+    framed &= bl.n_special[idx] == 2  # no other '$', '!', '*' or carriage return
+    # the XOR of the body
     body = np.empty(2 * n, np.int64)
     body[0::2] = s + 1
     body[1::2] = np.maximum(star, s + 1)
