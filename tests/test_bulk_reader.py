@@ -289,12 +289,12 @@ def test_sentences_repeated_in_an_epoch_are_read_in_bulk_as_the_reference_does(t
 
 
 def _left_to_the_per_line_classifier(address: str, form: str) -> bool:
-    """Lower-case or missing checksums, an empty or too long address, text after the checksum of a
-    sentence of another address, and a GGA too short to decode; the rest is classified in bulk."""
-    if form in ("lower", "none"):
+    """A missing checksum, an empty or too long address, text after the checksum of a sentence of
+    another address, and a GGA too short to decode; the rest is classified in bulk."""
+    if form == "none":
         return True
     if len(address) == 5 and address[0] != "P":  # plain lines: what follows the checksum is ignored
-        return address == "GPGGA" and form != "bad"
+        return address == "GPGGA" and form in ("ok", "tail")
     return address in ("", "ABCDEFGHI") or form == "tail"
 
 
@@ -306,7 +306,7 @@ _OTHER_ADDRESSES = ["PSTI", "GYOACC", "PUBX", "GNTXT", "P", "ABCDEFGH", "ABCDEFG
                        min_size=1, max_size=30))  # fmt: skip
 def test_sentences_of_other_addresses_are_classified_in_bulk_as_the_reference_does(tmp_path, readers, monkeypatch, others):
     """Unused sentences with four-, six- or more-character addresses (SkyTraq ``$PSTI``, Unicore ``$GYOACC``)
-    with a right, wrong, lower-case or missing checksum or text after it: the same statistics as the reference
+    with a right, wrong, lower-case (a line written in lower case) or missing checksum or text after it: the same statistics as the reference
     reader, and no epoch read line by line because of them."""
     lines = list(compose.straight_drive(40))
     for at, address, form in sorted(others, reverse=True):
@@ -333,3 +333,25 @@ def test_sentences_of_other_addresses_are_classified_in_bulk_as_the_reference_do
     left = sum(_left_to_the_per_line_classifier(a, f) for _, a, f in others)
     assert len(per_line) == left, per_line  # only what a whole sentence of another address is not
     assert sum(_read(log, "bulk")[1].unused_types.values()) >= sum(f == "ok" and a not in ("GPGGA", "GP,GGA") for _, a, f in others)
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(slots=st.lists(st.sampled_from(["", "03", "07", "12", "23", "65", "201"]), min_size=0, max_size=30),
+       sysid=st.sampled_from([None, "", "1", "4", "9"]), lower=st.booleans())  # fmt: skip
+def test_gsa_of_any_length_and_lower_case_checksums_are_read_in_bulk(tmp_path, readers, slots, sysid, lower):
+    """GSA with more or fewer than twelve satellite slots (the CH-4701 writes 24, i.Trek and TomTom fewer),
+    with or without a system id, and sentences whose checksum is written in lower case (Magellan): read in
+    bulk, as the reference reads them."""
+    lines = []
+    for k in range(3):
+        body = f"GPGSA,A,3,{','.join(slots)},1.8,1.1,1.5" + (f",{sysid}" if sysid is not None else "")
+        gsa = compose.with_checksum(body)
+        gga = compose.gga(3600.0 + k, 48.1, 11.5)
+        lines += [gga[:-2] + gga[-2:].lower() if lower else gga, gsa]
+    log = tmp_path / "gsa.nmea"
+    log.write_text("\n".join(lines) + "\n")
+    readers.clear()
+    assert_same(log)
+    ref_stats = _read(log, "reference")[1]
+    if ref_stats.malformed == 0:
+        assert readers[0].slow_epochs == 0

@@ -26,6 +26,7 @@ static const uint8_t CLASS[256] = {[','] = 1, ['$'] = 1, ['!'] = 1, ['*'] = 1, [
 static int hex_value(int c) {
     if (c >= '0' && c <= '9') return c - '0';
     if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
     return -1;
 }
 

@@ -1,10 +1,10 @@
 """A block of NMEA text as arrays: line spans, checksums, addresses and field spans, without a loop per line.
 
 A line is *plain* when it is ``$AAAAA,...*HH``: ``$`` first (after Android's
-``NMEA,`` prefix), a five-letter address, an upper-case hex checksum, no other
+``NMEA,`` prefix), a five-letter address, a hex checksum (either case), no other
 ``$``, ``!``, ``*`` or carriage return; what follows the checksum is ignored, as
 the reference reader does (Android's time stamp). Plain lines are verified and split here in bulk; every other line
-(blank, comment, Android ``NMEA,`` prefix, AIS, lower-case checksum, junk) is left
+(blank, comment, Android ``NMEA,`` prefix, AIS, junk) is left
 to the per-line classifier, which the reference reader uses for every line.
 """
 
@@ -21,12 +21,14 @@ _NL, _CR, _DOLLAR, _BANG, _STAR, _COMMA = 10, 13, 36, 33, 42, 44
 
 
 def _hex_value(chars: np.ndarray) -> np.ndarray:
-    """Upper-case hex digits → 0–15; anything else → -1."""
+    """Hex digits (either case, as ``int(text, 16)``) → 0–15; anything else → -1."""
     out = np.full(chars.shape, -1, np.int64)
     digit = (chars >= 48) & (chars <= 57)
     upper = (chars >= 65) & (chars <= 70)
+    lower = (chars >= 97) & (chars <= 102)
     out[digit] = chars[digit].astype(np.int64) - 48
     out[upper] = chars[upper].astype(np.int64) - 55
+    out[lower] = chars[lower].astype(np.int64) - 87
     return out
 
 
@@ -195,7 +197,7 @@ def other_sentences(bl: BlockLines, idx: np.ndarray) -> tuple[np.ndarray, np.nda
     """Of the non-plain lines ``idx``: those that are whole sentences the reader does not use.
 
     That is ``$ADDRESS,...*HH`` with nothing before the ``$`` or after the checksum, no
-    other ``$``, ``!``, ``*`` or carriage return, an upper-case hex checksum and an address
+    other ``$``, ``!``, ``*`` or carriage return, a hex checksum and an address
     that is not five characters or is proprietary (``$PSTI``, u-blox ``$GYOACC``): what the
     per-line classifier calls ``unused`` (or ``bad_checksum``). Returns ``(framed,
     given, computed, names)`` for every line of ``idx``: the checksum written and the one of

@@ -208,14 +208,23 @@ def gbs(bl: BlockLines, idx: np.ndarray) -> dict:
     return out
 
 
+#: most satellite slots a GSA is read with in bulk (the standard has 12; some receivers write 24)
+GSA_MAX_SLOTS = 32
+
+
 def gsa(bl: BlockLines, idx: np.ndarray) -> dict:
-    """GSA with 17 fields, or 18 with a one-digit NMEA 4.10 system id; satellites as (line, slot) rows."""
+    """GSA: mode, fix mode, satellite slots, PDOP, HDOP, VDOP and (18 fields or more, a one-digit last one) the
+    NMEA 4.10 system id; any number of slots (12 in the standard, 24 or fewer from some receivers), as the
+    per-line reader; satellites as (line, slot) rows."""
     nf = bl.n_fields[idx]
-    last = _letter(bl, idx, 18)
-    has_sys = (nf == 18) & (last >= ord("0")) & (last <= ord("9"))
-    ok = (nf == 17) | has_sys
+    last = _letter(bl, idx, np.maximum(nf, 1))
+    has_sys = (nf >= 18) & (last >= ord("0")) & (last <= ord("9"))
+    n_slots = nf - 5 - has_sys
+    ok = (nf >= 5) & (n_slots <= GSA_MAX_SLOTS)
     sysid = np.where(has_sys, last - ord("0"), -1)
-    v, oks, empty, dotted = _numbers(bl, idx, (2, 15, 16, 17))
+    dop = np.maximum(nf - 2 - has_sys, 1)  # the first of the three DOP fields
+    ks = np.stack([np.full(idx.size, 2), dop, dop + 1, dop + 2], axis=1)
+    v, oks, empty, dotted = (a.reshape(idx.size, 4).T for a in bl.field_decimals(np.repeat(idx, 4), ks.ravel()))
     fix_mode, ok_m = _as_int(v[0], oks[0], empty[0], dotted[0], 0, 127)
     pdop, hdop, vdop = v[1], v[2], v[3]
     ok &= ok_m & oks[1:].all(axis=0)
@@ -223,19 +232,21 @@ def gsa(bl: BlockLines, idx: np.ndarray) -> dict:
     for code, row in _SYSID_ROW.items():
         hint[sysid == code] = row
     hint[(sysid >= 7)] = 0  # an unknown system id: the number decides
-    # the twelve satellite slots
-    rows = np.repeat(np.arange(idx.size), 12)
-    slot = np.tile(np.arange(3, 15), idx.size)
-    value, ok_prn, empty, _ = bl.field_decimals(idx[rows], slot, integer_only=True)
-    present = ~empty
+    # the satellite slots (fields 3 … 2 + n_slots)
+    width = int(np.clip(n_slots, 0, GSA_MAX_SLOTS).max()) if idx.size else 0
+    rows = np.repeat(np.arange(idx.size), width)
+    place = np.tile(np.arange(width), idx.size)
+    inside = place < n_slots[rows]
+    value, ok_prn, empty, _ = bl.field_decimals(idx[rows], place + 3, integer_only=True)
+    present = ~empty & inside
     prn, ok_prn = bf.as_integer(value, ok_prn, empty, lo=1, hi=9_999)
     ok_prn &= prn <= MAX_PRN  # beyond the look-up table: the per-line path
-    ok &= ok_prn.reshape(idx.size, 12).all(axis=1)
-    k = np.cumsum(present.reshape(idx.size, 12), axis=1).ravel() - 1  # a satellite's place in its GSA's list
+    ok &= (ok_prn | ~inside).reshape(idx.size, width).all(axis=1)
+    k = np.cumsum(present.reshape(idx.size, width), axis=1).ravel() - 1  # a satellite's place in its GSA's list
     rows, prn, k = rows[present], prn[present], k[present]
     safe = np.clip(prn, 0, MAX_PRN)
     return {"fix_mode": fix_mode, "pdop": pdop, "hdop": hdop, "vdop": vdop, "sysid": sysid, "ok": ok,
-            "n_keys": present.reshape(idx.size, 12).sum(axis=1), "sat_row": rows, "sat_k": k,
+            "n_keys": present.reshape(idx.size, width).sum(axis=1), "sat_row": rows, "sat_k": k,
             **_satellites(hint[rows], safe)}  # fmt: skip
 
 
