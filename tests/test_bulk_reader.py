@@ -355,3 +355,27 @@ def test_gsa_of_any_length_and_lower_case_checksums_are_read_in_bulk(tmp_path, r
     ref_stats = _read(log, "reference")[1]
     if ref_stats.malformed == 0:
         assert readers[0].slow_epochs == 0
+
+
+_JUNK = st.binary(min_size=1, max_size=40).map(lambda b: b.replace(b"\n", b" "))
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(glued=st.lists(st.tuples(st.integers(0, 59), st.one_of(_JUNK, st.sampled_from([b"$", b"  ", b"#", b"NMEA,", b"\xb5b\x01\x07*",
+                                                                                          b"!AI", b"\r", b"\xa0\x1c"]))),
+                      min_size=1, max_size=20))  # fmt: skip
+def test_sentences_after_binary_bytes_are_read_in_bulk_as_the_reference_does(tmp_path, readers, glued):
+    """A receiver that writes UBX and NMEA on one port leaves binary bytes before sentences (u-blox ZED-F9T,
+    Quectel L76K, ST Teseo's doubled ``$``): the sentence after them is read in bulk, the text before it
+    counted as discarded, exactly as the per-line reader does; junk without ``$ ! * #`` or a carriage
+    return never sends an epoch to the per-line path."""
+    lines = [line.encode("latin-1") for line in compose.straight_drive(6)]
+    for at, junk in glued:
+        lines[at % len(lines)] = junk + lines[at % len(lines)]
+    log = tmp_path / "glued.nmea"
+    log.write_bytes(b"\n".join(lines) + b"\n")
+    readers.clear()
+    assert_same(log, block_bytes=1_000)
+    plain_junk = all(not any(c in junk for c in b"$!*#\r") and not junk.strip().startswith(b"NMEA,") for _, junk in glued)
+    if plain_junk and _read(log, "reference")[1].malformed == 0:
+        assert readers[0].slow_epochs == 0

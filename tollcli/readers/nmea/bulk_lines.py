@@ -49,6 +49,7 @@ class BlockLines:
     first_comma: np.ndarray  # index into ``commas`` of each line's first comma
     n_fields: np.ndarray  # fields after the address (plain lines)
     n_special: np.ndarray  # '$', '!', '*' and carriage returns in the line (after an Android prefix)
+    line_start: np.ndarray | None = None  # where each line starts, where reframe_glued moved a start
 
     def text(self, i: int) -> str:
         """Line ``i`` as the reference reader sees it (latin-1, carriage returns removed)."""
@@ -237,3 +238,68 @@ def other_sentences(bl: BlockLines, idx: np.ndarray) -> tuple[np.ndarray, np.nda
         text = np.array([int(c).to_bytes(8, "little").rstrip(b"\0").decode("latin-1") for c in codes], dtype=object)
         names[framed] = text[inverse.ravel()]
     return framed, hi * 16 + lo, computed, names
+
+
+#: the bytes Python's ``str.strip`` removes (latin-1): text made of them before a sentence is not "discarded"
+_WHITESPACE = bytes(c for c in range(256) if chr(c).isspace())
+
+
+def reframe_glued(bl: BlockLines) -> np.ndarray:
+    """Frame the sentence at the end of lines with text before it (binary UBX bytes, a doubled ``$``).
+
+    As the per-line classifier: the sentence starts at the last ``$`` before the line's last ``*``.
+    A non-plain line whose sentence is ``$AAAAA,...*HH`` at the line's end (no ``!`` after the ``$``,
+    no ``*`` or carriage return inside, not an Android line or a comment) is made plain in ``bl`` (its start,
+    address, fields and checksums); the rest stays with the per-line classifier. Returns the lines
+    reframed whose text before the sentence was not only whitespace (the classifier's "discarded").
+    """
+    cand = np.flatnonzero(~bl.plain)
+    if cand.size == 0 or bl.buf.size < 10:
+        return cand[:0]
+    buf = bl.buf
+    s0, e = bl.start[cand], bl.end[cand]
+    star = e - 3
+    ok = (e - s0 >= 10) & (buf[np.clip(star, 0, buf.size - 1)] == _STAR)
+    hi = _hex_value(buf[np.clip(e - 2, 0, buf.size - 1)])
+    lo = _hex_value(buf[np.clip(e - 1, 0, buf.size - 1)])
+    ok &= (hi >= 0) & (lo >= 0)
+    cand, s0, e, star, hi, lo = cand[ok], s0[ok], e[ok], star[ok], hi[ok], lo[ok]
+    if cand.size == 0:
+        return cand
+
+    def last_before(char: int, at: np.ndarray) -> np.ndarray:
+        """Position of the last ``char`` before ``at`` (-1 when none)."""
+        where = np.flatnonzero(buf == char)
+        i = np.searchsorted(where, at) - 1
+        return np.where(i >= 0, where[np.maximum(i, 0)] if where.size else -1, -1)
+
+    ns = last_before(_DOLLAR, star)
+    ok = (ns > s0) & (star - ns >= 7)
+    ok &= last_before(_BANG, star) < ns
+    ok &= last_before(_STAR, star) < ns
+    ok &= last_before(_CR, star) < ns
+    head = np.clip(ns[:, None] + np.arange(1, 7), 0, buf.size - 1)
+    ok &= (buf[head[:, :5]] != _COMMA).all(axis=1) & (buf[head[:, 5]] == _COMMA)
+    cand, s0, e, star, hi, lo, ns, head = (a[ok] for a in (cand, s0, e, star, hi, lo, ns, head))
+    # the text before the sentence, as the classifier sees it (stripped)
+    before = [bytes(buf[a:b]).lstrip(_WHITESPACE) for a, b in zip(s0.tolist(), ns.tolist())]
+    ok = np.array([not t.startswith((b"NMEA,", b"#")) for t in before], bool)  # an Android line, a comment
+    discarded = np.array([t.rstrip(_WHITESPACE) != b"" for t in before], bool)
+    cand, s0, e, star, hi, lo, ns, head, discarded = (a[ok] for a in (cand, s0, e, star, hi, lo, ns, head, discarded))
+    if cand.size == 0:
+        return cand
+    bounds = np.empty(2 * cand.size, np.int64)
+    bounds[0::2] = ns + 1
+    bounds[1::2] = star
+    computed = np.bitwise_xor.reduceat(buf, bounds)[0::2].astype(np.int64)
+    address = np.zeros(cand.size, np.int64)
+    for k in range(4, -1, -1):
+        address = (address << 8) | buf[head[:, k]].astype(np.int64)
+    first = np.searchsorted(bl.commas, ns + 6)
+    bl.line_start = bl.start.copy()
+    bl.start[cand], bl.end[cand], bl.plain[cand] = ns, e, True
+    bl.given[cand], bl.computed[cand] = hi * 16 + lo, computed
+    bl.checksum_ok[cand] = computed == hi * 16 + lo
+    bl.address[cand], bl.first_comma[cand] = address, first
+    bl.n_fields[cand] = np.searchsorted(bl.commas, star) - first
+    return cand[discarded]

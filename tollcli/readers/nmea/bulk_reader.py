@@ -25,7 +25,15 @@ import numpy as np
 from tollcli.errors import DataError
 from tollcli.readers.nmea import bulk_epochs, bulk_sentences
 from tollcli.readers.nmea.assembler import EpochAssembler
-from tollcli.readers.nmea.bulk_lines import BlockLines, other_sentences, pack_address, split_block, type_code, unpack_address
+from tollcli.readers.nmea.bulk_lines import (
+    BlockLines,
+    other_sentences,
+    pack_address,
+    reframe_glued,
+    split_block,
+    type_code,
+    unpack_address,
+)
 from tollcli.readers.nmea.fields import time_of_day_s
 from tollcli.readers.nmea.line_reader import DISCARDED, HANDLED_TYPES, classify_line, feed_lines
 
@@ -103,6 +111,8 @@ class BulkReader:
         slow = np.zeros(n, bool)
         inert = np.zeros(n, bool)  # decoded, but changes no epoch (a VTG with mode 'N')
         parsed: dict[int, tuple[str, list[str]]] = {}
+        for i in reframe_glued(bl).tolist():  # a sentence after binary bytes: read in bulk, the text before it counted
+            why[i] = DISCARDED
 
         kind[bl.plain & ~bl.checksum_ok] = BAD_CHECKSUM
         for i in np.flatnonzero(bl.plain & ~bl.checksum_ok):
@@ -157,7 +167,7 @@ class BulkReader:
         if not final and n_local:
             cut = int(dec[first_dec[-1]])
             n_done = n_local - 1
-            self.carry = data[bl.start[cut] :]
+            self.carry = data[(bl.start if bl.line_start is None else bl.line_start)[cut] :]
             if len(self.carry) > MAX_CARRY_BYTES:  # no epoch end in sight: go line by line from here
                 data, self.carry = self.carry, b""
                 self._count(bl, kind, why, stype, cut, first_line)
