@@ -13,6 +13,7 @@ import numpy as np
 
 from tollcli.readers.nmea.assembler import FLOAT_COLUMNS
 from tollcli.readers.nmea.bulk_sentences import GBS_COLUMNS
+from tollcli.readers.nmea.bulk_picks import first_finite, first_given, group_seq, last_finite, pick, scatter
 
 SENTENCE_TYPES = ("GGA", "RMC", "VTG", "GSA", "GSV", "GST", "GLL", "ZDA", "GRS", "GBS", "GNS")
 SAT_FIELDS = ("sat_row", "sat_k", "sat_const", "sat_svid", "sat_prn", "sat_signal", "sat_elev", "sat_azim", "sat_cn0")
@@ -103,49 +104,6 @@ def _code_ranks(*codes: np.ndarray) -> tuple[np.ndarray, int]:
     return rank, int(present.sum())
 
 
-def _scatter(n: int, e: np.ndarray, values: np.ndarray, fill, dtype=None) -> np.ndarray:
-    out = np.full(n, fill, dtype=dtype or np.asarray(values).dtype)
-    out[e] = values
-    return out
-
-
-def _pick(n: int, sources: list[tuple[dict, np.ndarray, np.ndarray]], fill, last: bool = False) -> np.ndarray:
-    """Per epoch, the value of the first (``last``: the last) row in line order where the mask holds.
-
-    ``sources``: (rows with ``e`` and ``order``, values, mask) of one or more sentence types; an epoch
-    may have any number of rows of each. ``fill`` where no row qualifies.
-    """
-    if len(sources) == 1:  # one source is in line order already
-        (rows, v, mask), = sources
-        e, values = rows["e"][mask], np.asarray(v)[mask]
-    else:  # epochs follow line order: sorting by line sorts by epoch too
-        e = np.concatenate([rows["e"][mask] for rows, _, mask in sources])
-        order = np.concatenate([rows["order"][mask] for rows, _, mask in sources])
-        values = np.concatenate([np.asarray(v)[mask] for _, v, mask in sources])
-        sort = np.argsort(order, kind="stable")
-        e, values = e[sort], values[sort]
-    out = np.full(n, fill, dtype=values.dtype if values.size else np.asarray(fill).dtype)
-    if e.size:
-        edge = np.flatnonzero(np.append(e[1:] != e[:-1], True)) if last else np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
-        out[e[edge]] = values[edge]
-    return out
-
-
-def _last_finite(n: int, rows: dict, values: np.ndarray) -> np.ndarray:
-    """Per epoch, the last finite value in line order (NaN when none)."""
-    return _pick(n, [(rows, np.asarray(values, float), np.isfinite(values))], np.nan, last=True)
-
-
-def _first_given(n: int, sources: list[tuple[dict, np.ndarray]]) -> np.ndarray:
-    """Per epoch, the first non-zero code in line order among the sources (0 when none)."""
-    return _pick(n, [(rows, np.asarray(v, np.int64), np.asarray(v) != 0) for rows, v in sources], 0)
-
-
-def _first_finite(n: int, sources: list[tuple[dict, np.ndarray]]) -> np.ndarray:
-    """Per epoch, the first finite value in line order among the sources (NaN when none)."""
-    return _pick(n, [(rows, np.asarray(v, float), np.isfinite(v)) for rows, v in sources], np.nan)
-
-
 def _altitude(n: int, gga: dict, gns: dict) -> tuple[np.ndarray, np.ndarray]:
     """Altitude and geoid separation, as the reference assembler sets them from GGAs (fix) and a GNS (fix).
 
@@ -159,16 +117,16 @@ def _altitude(n: int, gga: dict, gns: dict) -> tuple[np.ndarray, np.ndarray]:
     sep_given = fixed & np.isfinite(gga["sep"])
     fix = gns["has_fix"]
     big = np.iinfo(np.int64).max
-    gns_line = _scatter(n, gns["e"][fix], gns["order"][fix], big, np.int64)
-    na = _scatter(n, gns["e"][fix], gns["alt"][fix], np.nan)
-    ns = _scatter(n, gns["e"][fix], gns["sep"][fix], np.nan)
-    ga = _last_finite(n, {"e": gga["e"][alt_given], "order": gga["order"][alt_given]}, gga["alt"][alt_given])
-    first_alt_line = _pick(n, [(gga, gga["order"], alt_given)], big)
+    gns_line = scatter(n, gns["e"][fix], gns["order"][fix], big, np.int64)
+    na = scatter(n, gns["e"][fix], gns["alt"][fix], np.nan)
+    ns = scatter(n, gns["e"][fix], gns["sep"][fix], np.nan)
+    ga = last_finite(n, {"e": gga["e"][alt_given], "order": gga["order"][alt_given]}, gga["alt"][alt_given])
+    first_alt_line = pick(n, [(gga, gga["order"], alt_given)], big)
     alt = np.where(np.isfinite(ga), ga, na)
     gns_sets = (gns_line < big) & (first_alt_line > gns_line) & np.isfinite(ns)
     after = sep_given & (gga["order"] > gns_line[gga["e"]])
-    sep_after = _pick(n, [(gga, gga["sep"], after)], np.nan, last=True)
-    sep_all = _pick(n, [(gga, gga["sep"], sep_given)], np.nan, last=True)
+    sep_after = pick(n, [(gga, gga["sep"], after)], np.nan, last=True)
+    sep_all = pick(n, [(gga, gga["sep"], sep_given)], np.nan, last=True)
     return alt, np.where(gns_sets, np.where(np.isfinite(sep_after), sep_after, ns), sep_all)
 
 
@@ -205,7 +163,7 @@ def _positions(n: int, candidates: list[tuple[dict, np.ndarray, int]]):
     rank_all = np.concatenate([np.full(rows["e"].size, r) for rows, _, r in candidates])
     sort = np.argsort(order, kind="stable")  # epochs follow line order
     e = e[sort]
-    seq = _group_seq(e)
+    seq = group_seq(e)
     k = int(seq.max()) + 1 if e.size else 0
     lat = np.full((n, k), np.nan)
     lon = np.full((n, k), np.nan)
@@ -228,14 +186,6 @@ def _positions(n: int, candidates: list[tuple[dict, np.ndarray, int]]):
         best_lon = np.where(better, c_lon, best_lon)
         best_rank = np.where(better, c_rank, best_rank)
     return best_lat, best_lon, np.where(gap_max >= 0, gap_max, np.nan), best_rank
-
-
-def _group_seq(e: np.ndarray) -> np.ndarray:
-    """Each row's place among the rows of its epoch (``e`` non-decreasing)."""
-    if e.size == 0:
-        return np.zeros(0, np.int64)
-    starts = np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
-    return np.arange(e.size) - np.repeat(starts, np.diff(np.append(starts, e.size)))
 
 
 def _gsa_residuals(gsa: dict, grs: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -264,8 +214,8 @@ def _gsa_residuals(gsa: dict, grs: dict) -> tuple[np.ndarray, np.ndarray]:
     else:
         found = np.zeros(g_e.size, bool)
     # by place in the epoch
-    r_key = r_e * big + _group_seq(r_e)
-    g_key = g_e * big + _group_seq(g_e)
+    r_key = r_e * big + group_seq(r_e)
+    g_key = g_e * big + group_seq(g_e)
     pos = np.clip(np.searchsorted(r_key, g_key), 0, r_key.size - 1)
     same_place = ~found & (r_key[pos] == g_key) & ((r_sys[pos] == -1) | (r_sys[pos] == g_sys))
     matched[same_place] = pos[same_place]
@@ -288,21 +238,21 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
     floats = {k: np.full(n, np.nan) for k in FLOAT_COLUMNS}
 
     # GGA: quality, satellites, position (rank 0) when quality != 0, altitude, HDOP fallback
-    q = _pick(n, [(gga, gga["quality"].astype(np.int64), gga["quality"] >= 0)], -1, last=True)
-    n_used_gga = _pick(n, [(gga, gga["n_used"].astype(np.int64), gga["n_used"] >= 0)], -1, last=True)
-    n_used_gga = np.where(n_used_gga >= 0, n_used_gga, _scatter(n, gns["e"], gns["n_used"], -1, np.int64))  # GNS: when GGA gives none
+    q = pick(n, [(gga, gga["quality"].astype(np.int64), gga["quality"] >= 0)], -1, last=True)
+    n_used_gga = pick(n, [(gga, gga["n_used"].astype(np.int64), gga["n_used"] >= 0)], -1, last=True)
+    n_used_gga = np.where(n_used_gga >= 0, n_used_gga, scatter(n, gns["e"], gns["n_used"], -1, np.int64))  # GNS: when GGA gives none
     gga_pos = (gga["quality"] != 0) & np.isfinite(gga["lat"]) & np.isfinite(gga["lon"])
     floats["alt_m"], floats["geoid_sep_m"] = _altitude(n, gga, gns)
-    hdop_gga = _first_finite(n, [(gga, gga["hdop"]), (gns, gns["hdop"])])
+    hdop_gga = first_finite(n, [(gga, gga["hdop"]), (gns, gns["hdop"])])
 
     # RMC: position (rank 2) and velocity (rank 0) when 'A'
     active = rmc["status"] == _A
-    speed = _first_finite(n, [(rmc, np.where(active, rmc["speed"], np.nan))])
-    course = _first_finite(n, [(rmc, np.where(active, rmc["course"], np.nan))])
+    speed = first_finite(n, [(rmc, np.where(active, rmc["speed"], np.nan))])
+    course = first_finite(n, [(rmc, np.where(active, rmc["course"], np.nan))])
     # RMC and GLL: status and mode letter, the first given in line order
-    status = _first_given(n, [(rmc, np.where((rmc["status"] == _A) | (rmc["status"] == _V), rmc["status"], 0)),
+    status = first_given(n, [(rmc, np.where((rmc["status"] == _A) | (rmc["status"] == _V), rmc["status"], 0)),
                               (gll, np.where((gll["status"] == _A) | (gll["status"] == _V), gll["status"], 0))])  # fmt: skip
-    mode = _first_given(n, [(rmc, rmc["mode"]), (gll, gll["mode"]), (gns, gns["mode"])])
+    mode = first_given(n, [(rmc, rmc["mode"]), (gll, gll["mode"]), (gns, gns["mode"])])
     # RMC and ZDA: the date, the last given; a second, different one is a disagreement
     date, floats["date_disagreement_days"] = _dates(n, [(rmc, rmc["date"]), (zda, zda["date"])])
     # position: GGA, RMC ('A'), GLL (not 'V'), the best rank wins; each later one is measured against the best so far
@@ -316,15 +266,15 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
 
     # VTG: velocity (rank 1) unless its mode is 'N'
     use = ~vtg["mode_n"]
-    vtg_speed = _first_finite(n, [(vtg, np.where(use, vtg["speed"], np.nan))])
-    vtg_course = _first_finite(n, [(vtg, np.where(use, vtg["course"], np.nan))])
+    vtg_speed = first_finite(n, [(vtg, np.where(use, vtg["speed"], np.nan))])
+    vtg_course = first_finite(n, [(vtg, np.where(use, vtg["course"], np.nan))])
     floats["speed_mps"] = np.where(np.isfinite(speed), speed, vtg_speed)
     floats["course_deg"] = np.where(np.isfinite(course), course, vtg_course)
 
     # GSA: DOPs (last given), fix mode (highest), satellites used
-    floats["pdop"] = _last_finite(n, gsa, gsa["pdop"])
-    floats["vdop"] = _last_finite(n, gsa, gsa["vdop"])
-    hdop_gsa = _last_finite(n, gsa, gsa["hdop"])
+    floats["pdop"] = last_finite(n, gsa, gsa["pdop"])
+    floats["vdop"] = last_finite(n, gsa, gsa["vdop"])
+    hdop_gsa = last_finite(n, gsa, gsa["hdop"])
     floats["hdop"] = np.where(np.isfinite(hdop_gsa), hdop_gsa, hdop_gga)
     fix_mode = np.full(n, -1, np.int64)
     if gsa["e"].size:
@@ -334,12 +284,12 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
 
     # GST
     for name in ("rms_residual_m", "sigma_major_m", "sigma_minor_m", "ellipse_orient_deg", "sigma_lat_m", "sigma_lon_m", "sigma_alt_m"):
-        floats[name] = _last_finite(n, gst, gst[name])
+        floats[name] = last_finite(n, gst, gst[name])
 
     # GBS
     for name in GBS_COLUMNS:
-        floats[name] = _last_finite(n, gbs, gbs[name])
-    failed = _pick(n, [(gbs, gbs["gbs_failed_svid"].astype(np.int64), gbs["gbs_failed_svid"] >= 0)], -1, last=True)
+        floats[name] = last_finite(n, gbs, gbs[name])
+    failed = pick(n, [(gbs, gbs["gbs_failed_svid"].astype(np.int64), gbs["gbs_failed_svid"] >= 0)], -1, last=True)
 
     # satellites: the union of GSV "in view" and GSA "used", ordered by constellation and number:
     # cells of an (epoch × satellite present in the block) grid, read in order
@@ -368,17 +318,17 @@ def assemble(epoch_ids: np.ndarray, tod_s: np.ndarray, line: np.ndarray, s: dict
     v = vi >= 0
     vi = np.where(v, vi, 0)
 
-    def pick(values, fill, dtype):
+    def seen(values, fill, dtype):
         return np.where(v, values[vi] if values.size else fill, fill).astype(dtype)
 
     out["sat_epoch"] = epoch_ids[sat_epoch].astype(np.int64)
     out["sat_constellation"] = (code // 1024).astype(np.int8)
     out["sat_svid"] = (code % 1024).astype(np.int16)
-    out["sat_prn"] = pick(gsv["sat_prn"], -1, np.int16)
-    out["sat_signal_id"] = pick(gsv["sat_signal"], -1, np.int8)
-    out["sat_elev_deg"] = pick(gsv["sat_elev"], np.nan, np.float64)
-    out["sat_azim_deg"] = pick(gsv["sat_azim"], np.nan, np.float64)
-    out["sat_cn0_dbhz"] = pick(gsv["sat_cn0"], np.nan, np.float64)
+    out["sat_prn"] = seen(gsv["sat_prn"], -1, np.int16)
+    out["sat_signal_id"] = seen(gsv["sat_signal"], -1, np.int8)
+    out["sat_elev_deg"] = seen(gsv["sat_elev"], np.nan, np.float64)
+    out["sat_azim_deg"] = seen(gsv["sat_azim"], np.nan, np.float64)
+    out["sat_cn0_dbhz"] = seen(gsv["sat_cn0"], np.nan, np.float64)
     out["sat_used"] = used
     residual_grid = np.full(n * n_codes, np.nan)
     has, values = _gsa_residuals(gsa, grs)
