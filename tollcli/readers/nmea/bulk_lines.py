@@ -189,6 +189,23 @@ def talker_code(address: np.ndarray) -> np.ndarray:
     return address & 0xFFFF
 
 
+def _checksum_at_end(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lines ending in ``*HH`` (a hex checksum, either case), at least 10 characters long: (mask, HH's value)."""
+    last = max(buf.size - 1, 0)
+    ok = (end - start >= 10) & (buf[np.clip(end - 3, 0, last)] == _STAR)
+    hi, lo = _hex_value(buf[np.clip(end - 2, 0, last)]), _hex_value(buf[np.clip(end - 1, 0, last)])
+    return ok & (hi >= 0) & (lo >= 0), hi * 16 + lo
+
+
+def _body_xor(buf: np.ndarray, start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """XOR of ``buf[start:stop]`` for each span (0 for an empty one): the checksum of a sentence's body."""
+    bounds = np.empty(2 * start.size, np.int64)
+    bounds[0::2] = start
+    bounds[1::2] = np.maximum(stop, start)
+    xor = np.bitwise_xor.reduceat(np.append(buf, np.uint8(0)), bounds)[0::2].astype(np.int64)
+    return np.where(stop > start, xor, 0)
+
+
 #: longest address :func:`other_sentences` names (longer ones go the per-line way)
 MAX_OTHER_ADDRESS = 8
 MAX_OTHER_LINE = 256  # characters (NMEA allows 82)
@@ -210,19 +227,11 @@ def other_sentences(bl: BlockLines, idx: np.ndarray) -> tuple[np.ndarray, np.nda
         return np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, object)
     buf = np.append(bl.buf, np.zeros(MAX_OTHER_ADDRESS + 2, np.uint8))  # room to look past the last line
     s, e = bl.start[idx], bl.end[idx]
-    length = e - s
-    framed = (length >= 5) & (length <= MAX_OTHER_LINE)
-    star = np.where(framed, e - 3, s)
-    framed &= (buf[s] == _DOLLAR) & (buf[star] == _STAR)
-    hi = _hex_value(buf[np.where(framed, e - 2, s)])
-    lo = _hex_value(buf[np.where(framed, e - 1, s)])
-    framed &= (hi >= 0) & (lo >= 0)
+    framed, given = _checksum_at_end(buf, s, e)
+    framed &= (e - s <= MAX_OTHER_LINE) & (buf[s] == _DOLLAR)
     framed &= bl.n_special[idx] == 2  # no other '$', '!', '*' or carriage return
-    # the XOR of the body
-    body = np.empty(2 * n, np.int64)
-    body[0::2] = s + 1
-    body[1::2] = np.maximum(star, s + 1)
-    computed = np.where(star > s + 1, np.bitwise_xor.reduceat(buf, body)[0::2].astype(np.int64), 0)
+    star = np.where(framed, e - 3, s)
+    computed = _body_xor(buf, s + 1, star)
     # the address: up to the first comma or the '*'
     c = np.searchsorted(bl.commas, s + 1)
     stop = np.minimum(bl.commas[c], star)
@@ -237,7 +246,7 @@ def other_sentences(bl: BlockLines, idx: np.ndarray) -> tuple[np.ndarray, np.nda
         codes, inverse = np.unique(packed[framed], return_inverse=True)
         text = np.array([int(c).to_bytes(8, "little").rstrip(b"\0").decode("latin-1") for c in codes], dtype=object)
         names[framed] = text[inverse.ravel()]
-    return framed, hi * 16 + lo, computed, names
+    return framed, given, computed, names
 
 
 #: the bytes Python's ``str.strip`` removes (latin-1): text made of them before a sentence is not "discarded"
@@ -257,13 +266,10 @@ def reframe_glued(bl: BlockLines) -> np.ndarray:
     if cand.size == 0 or bl.buf.size < 10:
         return cand[:0]
     buf = bl.buf
+    ok, given = _checksum_at_end(buf, bl.start[cand], bl.end[cand])
+    cand, given = cand[ok], given[ok]
     s0, e = bl.start[cand], bl.end[cand]
     star = e - 3
-    ok = (e - s0 >= 10) & (buf[np.clip(star, 0, buf.size - 1)] == _STAR)
-    hi = _hex_value(buf[np.clip(e - 2, 0, buf.size - 1)])
-    lo = _hex_value(buf[np.clip(e - 1, 0, buf.size - 1)])
-    ok &= (hi >= 0) & (lo >= 0)
-    cand, s0, e, star, hi, lo = cand[ok], s0[ok], e[ok], star[ok], hi[ok], lo[ok]
     if cand.size == 0:
         return cand
 
@@ -280,26 +286,23 @@ def reframe_glued(bl: BlockLines) -> np.ndarray:
     ok &= last_before(_CR, star) < ns
     head = np.clip(ns[:, None] + np.arange(1, 7), 0, buf.size - 1)
     ok &= (buf[head[:, :5]] != _COMMA).all(axis=1) & (buf[head[:, 5]] == _COMMA)
-    cand, s0, e, star, hi, lo, ns, head = (a[ok] for a in (cand, s0, e, star, hi, lo, ns, head))
+    cand, s0, e, star, given, ns, head = (a[ok] for a in (cand, s0, e, star, given, ns, head))
     # the text before the sentence, as the classifier sees it (stripped)
     before = [bytes(buf[a:b]).lstrip(_WHITESPACE) for a, b in zip(s0.tolist(), ns.tolist())]
     ok = np.array([not t.startswith((b"NMEA,", b"#")) for t in before], bool)  # an Android line, a comment
     discarded = np.array([t.rstrip(_WHITESPACE) != b"" for t in before], bool)
-    cand, s0, e, star, hi, lo, ns, head, discarded = (a[ok] for a in (cand, s0, e, star, hi, lo, ns, head, discarded))
+    cand, s0, e, star, given, ns, head, discarded = (a[ok] for a in (cand, s0, e, star, given, ns, head, discarded))
     if cand.size == 0:
         return cand
-    bounds = np.empty(2 * cand.size, np.int64)
-    bounds[0::2] = ns + 1
-    bounds[1::2] = star
-    computed = np.bitwise_xor.reduceat(buf, bounds)[0::2].astype(np.int64)
+    computed = _body_xor(buf, ns + 1, star)
     address = np.zeros(cand.size, np.int64)
     for k in range(4, -1, -1):
         address = (address << 8) | buf[head[:, k]].astype(np.int64)
     first = np.searchsorted(bl.commas, ns + 6)
     bl.line_start = bl.start.copy()
     bl.start[cand], bl.end[cand], bl.plain[cand] = ns, e, True
-    bl.given[cand], bl.computed[cand] = hi * 16 + lo, computed
-    bl.checksum_ok[cand] = computed == hi * 16 + lo
+    bl.given[cand], bl.computed[cand] = given, computed
+    bl.checksum_ok[cand] = computed == given
     bl.address[cand], bl.first_comma[cand] = address, first
     bl.n_fields[cand] = np.searchsorted(bl.commas, star) - first
     return cand[discarded]
