@@ -262,10 +262,11 @@ def reframe_glued(bl: BlockLines) -> np.ndarray:
     address, fields and checksums); the rest stays with the per-line classifier. Returns the lines
     reframed whose text before the sentence was not only whitespace (the classifier's "discarded").
     """
-    cand = np.flatnonzero(~bl.plain)
-    if cand.size == 0 or bl.buf.size < 10:
-        return cand[:0]
+    if bl.buf.size < 10:
+        return np.zeros(0, np.int64)
     buf = bl.buf
+    # text before a '$': the line does not start with one, or has another special character
+    cand = np.flatnonzero(~bl.plain & ((buf[np.minimum(bl.start, buf.size - 1)] != _DOLLAR) | (bl.n_special > 2)))
     ok, given = _checksum_at_end(buf, bl.start[cand], bl.end[cand])
     cand, given = cand[ok], given[ok]
     s0, e = bl.start[cand], bl.end[cand]
