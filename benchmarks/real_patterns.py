@@ -49,6 +49,11 @@ def _tod(text: str) -> float | None:
         return None
 
 
+def _decimals(text: str) -> int:
+    """Digits after the point of a number as the receiver wrote it (0 without a point)."""
+    return len(text.split(".")[1]) if "." in text else 0
+
+
 def _hhmmss(t: float, decimals: int) -> str:
     t %= 86_400.0
     h, rest = divmod(t, 3600.0)
@@ -91,8 +96,7 @@ def replay(log: Path, out: Path, min_lines: int) -> int:
                     batch.append(fixed)
                     continue
                 fields = list(fields)
-                decimals = len(fields[k].split(".")[1]) if "." in fields[k] else 0
-                fields[k] = _hhmmss(t + shift, decimals)
+                fields[k] = _hhmmss(t + shift, _decimals(fields[k]))
                 body = f"{address},{','.join(fields)}"
                 batch.append(f"${body}*{checksum(body)}")
             fh.write("\n".join(batch) + "\n")
@@ -159,10 +163,9 @@ def _moved(kind: str, f: list[str], lat, lon, speed_mps, course_deg, when) -> li
     """One sentence's fields with the drive's time, position, speed, course and date."""
     t_field, lat_field = _DRIVE_FIELDS.get(kind, (-1, -1))
     if 0 <= t_field < len(f) and f[t_field]:
-        decimals = len(f[t_field].split(".")[1]) if "." in f[t_field] else 0
-        f[t_field] = _hhmmss(when.hour * 3600 + when.minute * 60 + when.second, decimals)
+        f[t_field] = _hhmmss(when.hour * 3600 + when.minute * 60 + when.second, _decimals(f[t_field]))
     if 0 <= lat_field and lat_field + 3 < len(f) and f[lat_field] and f[lat_field + 2]:
-        dec = len(f[lat_field].split(".")[1]) if "." in f[lat_field] else 4
+        dec = _decimals(f[lat_field]) if "." in f[lat_field] else 4
         f[lat_field], south = _ddmm(lat, 2, dec)
         f[lat_field + 1] = "S" if south else "N"
         f[lat_field + 2], west = _ddmm(lon, 3, dec)
