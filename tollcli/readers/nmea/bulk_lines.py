@@ -239,10 +239,11 @@ def other_sentences(bl: BlockLines, idx: np.ndarray) -> tuple[np.ndarray, np.nda
     framed &= (name_len >= 1) & (name_len <= MAX_OTHER_ADDRESS) & ((name_len != 5) | (buf[s + 1] == ord("P")))
     names = np.full(n, "", dtype=object)
     if framed.any():
+        f = np.flatnonzero(framed)
+        width = np.arange(MAX_OTHER_ADDRESS)
+        head = np.where(width < name_len[f, None], buf[s[f, None] + 1 + width], 0).astype(np.uint8)
         packed = np.zeros(n, np.uint64)
-        for k in range(MAX_OTHER_ADDRESS - 1, -1, -1):
-            ch = np.where(k < name_len, buf[s + 1 + k], 0).astype(np.uint64)
-            packed = (packed << np.uint64(8)) | ch
+        packed[f] = np.ascontiguousarray(head).view("<u8").ravel()  # the address's bytes, first in the lowest
         codes, inverse = np.unique(packed[framed], return_inverse=True)
         text = np.array([int(c).to_bytes(8, "little").rstrip(b"\0").decode("latin-1") for c in codes], dtype=object)
         names[framed] = text[inverse.ravel()]
