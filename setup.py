@@ -11,7 +11,7 @@ setup(
         Extension(
             "tollcli.readers.nmea._bulk_kernels",
             ["tollcli/readers/nmea/_bulk_kernels.c"],
-            extra_compile_args=["-O2"],
+            extra_compile_args=["-O3"],
             optional=True,
         )
     ]

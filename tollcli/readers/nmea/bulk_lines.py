@@ -199,10 +199,12 @@ def _checksum_at_end(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> tup
 
 def _body_xor(buf: np.ndarray, start: np.ndarray, stop: np.ndarray) -> np.ndarray:
     """XOR of ``buf[start:stop]`` for each span (0 for an empty one): the checksum of a sentence's body."""
+    start, stop = np.minimum(start, buf.size), np.minimum(stop, buf.size)
     bounds = np.empty(2 * start.size, np.int64)
     bounds[0::2] = start
     bounds[1::2] = np.maximum(stop, start)
-    xor = np.bitwise_xor.reduceat(np.append(buf, np.uint8(0)), bounds)[0::2].astype(np.int64)
+    data = buf if bounds.size == 0 or bounds.max() < buf.size else np.append(buf, np.uint8(0))  # reduceat's bounds < size
+    xor = np.bitwise_xor.reduceat(data, bounds)[0::2].astype(np.int64)
     return np.where(stop > start, xor, 0)
 
 
@@ -223,12 +225,12 @@ def other_sentences(bl: BlockLines, idx: np.ndarray) -> tuple[np.ndarray, np.nda
     :data:`MAX_OTHER_LINE` and the other lines stay with the per-line classifier.
     """
     n = idx.size
-    if n == 0:
-        return np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, object)
-    buf = np.append(bl.buf, np.zeros(MAX_OTHER_ADDRESS + 2, np.uint8))  # room to look past the last line
+    if n == 0 or bl.buf.size == 0:
+        return np.zeros(n, bool), np.zeros(n, np.int64), np.zeros(n, np.int64), np.full(n, "", dtype=object)
+    buf = bl.buf
     s, e = bl.start[idx], bl.end[idx]
     framed, given = _checksum_at_end(buf, s, e)
-    framed &= (e - s <= MAX_OTHER_LINE) & (buf[s] == _DOLLAR)
+    framed &= (e - s <= MAX_OTHER_LINE) & (buf[np.minimum(s, buf.size - 1)] == _DOLLAR)
     framed &= bl.n_special[idx] == 2  # no other '$', '!', '*' or carriage return
     star = np.where(framed, e - 3, s)
     computed = _body_xor(buf, s + 1, star)
@@ -236,12 +238,12 @@ def other_sentences(bl: BlockLines, idx: np.ndarray) -> tuple[np.ndarray, np.nda
     c = np.searchsorted(bl.commas, s + 1)
     stop = np.minimum(bl.commas[c], star)
     name_len = stop - s - 1
-    framed &= (name_len >= 1) & (name_len <= MAX_OTHER_ADDRESS) & ((name_len != 5) | (buf[s + 1] == ord("P")))
+    framed &= (name_len >= 1) & (name_len <= MAX_OTHER_ADDRESS) & ((name_len != 5) | (buf[np.minimum(s + 1, buf.size - 1)] == ord("P")))
     names = np.full(n, "", dtype=object)
     if framed.any():
         f = np.flatnonzero(framed)
         width = np.arange(MAX_OTHER_ADDRESS)
-        head = np.where(width < name_len[f, None], buf[s[f, None] + 1 + width], 0).astype(np.uint8)
+        head = np.where(width < name_len[f, None], buf[np.minimum(s[f, None] + 1 + width, buf.size - 1)], 0).astype(np.uint8)
         packed = np.zeros(n, np.uint64)
         packed[f] = np.ascontiguousarray(head).view("<u8").ravel()  # the address's bytes, first in the lowest
         codes, inverse = np.unique(packed[framed], return_inverse=True)
