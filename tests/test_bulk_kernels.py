@@ -173,3 +173,32 @@ def test_kernels_reject_mismatched_buffers():
     with pytest.raises(ValueError):
         kernels.compiled.field_decimal(bl.buf, bl.first_comma, bl.end, bl.commas, np.array([0, 1]), np.array([1, 1]), False,
                                        np.empty(1), *[np.empty(2, bool)] * 3)  # fmt: skip
+
+
+@needs_compiled
+def test_gsa_slots_compiled_and_numpy_are_the_same(monkeypatch):
+    """The GSA satellite slots read in one compiled pass equal the numpy reading, on every real log's GSA lines
+    (any slot count, system ids, bad numbers) and on a GSA of 24 and of 40 slots."""
+    from tollcli.readers.nmea import bulk_sentences
+    from tollcli.readers.nmea.bulk_lines import pack_address, type_code
+
+    extra = b"\n".join([b"$GPGSA,A,3," + b",".join(b"%02d" % i for i in range(1, 25)) + b",1.0,2.0,3.0*00",
+                         b"$GPGSA,A,3," + b",".join(b"%02d" % i for i in range(1, 41)) + b",1.0,2.0,3.0*00",
+                         b"$GPGSA,A,3,01,-2,3.5,1024,,x,07,,,,,,1.0,2.0,3.0,4*00", b""])  # fmt: skip
+    n_gsa = 0
+    for path in [*_logs(), None]:
+        data = extra if path is None else path.read_bytes()[:1_500_000]
+        cut = data[: data.rfind(b"\n")] if b"\n" in data else data
+        bl = bulk_lines.split_block(cut)
+        idx = np.flatnonzero(bl.plain & (type_code(bl.address) == pack_address("XXGSA") >> 16))
+        if not idx.size:
+            continue
+        fast = bulk_sentences.gsa(bl, idx)
+        with monkeypatch.context() as m:
+            m.setattr(kernels, "compiled", None)
+            ref = bulk_sentences.gsa(bl, idx)
+        assert fast.keys() == ref.keys()
+        for key in fast:
+            assert _same(fast[key], ref[key]), (path, key)
+        n_gsa += idx.size
+    assert n_gsa > 2_000

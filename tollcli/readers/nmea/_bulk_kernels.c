@@ -10,6 +10,9 @@
  *
  * No numpy headers: only the buffer protocol, so the build needs nothing but a
  * C compiler and Python's headers.
+ *
+ * Why this file is long: one extension module is one C file; each kernel is a short loop, most of
+ * the length is the argument checking and buffer release each entry point needs.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -334,6 +337,73 @@ done:
     return result;
 }
 
+/* gsa_slots(buf, first_comma, end, commas, lines, n_slots, prn, row, k, n_keys, ok) -> number of satellites
+ *
+ * The satellite slots of GSA lines (fields 3 … 2 + n_slots[i] of lines[i], at most 32): each non-empty slot
+ * is read as an integer field (the rules of parse_decimal with integer_only) and written, compacted, to
+ * prn/row/k (its line's place in ``lines`` and its place among that line's satellites); n_keys[i] counts
+ * them; ok[i] is cleared when a slot is not a number in 1…1023 (the look-up table's) — as
+ * bulk_sentences.gsa's numpy path. prn/row/k: int64 with room for every slot; n_keys: int64; ok: uint8.
+ */
+static PyObject *gsa_slots(PyObject *self, PyObject *args) {
+    Py_buffer b_buf, b_first, b_end, b_commas, b_lines, b_slots, b_prn, b_row, b_k, b_keys, b_ok;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*w*w*w*w*w*", &b_buf, &b_first, &b_end, &b_commas, &b_lines, &b_slots,
+                          &b_prn, &b_row, &b_k, &b_keys, &b_ok))
+        return NULL;
+    PyObject *result = NULL;
+    const uint8_t *buf = (const uint8_t *)b_buf.buf;
+    const Py_ssize_t n = b_buf.len;
+    Py_ssize_t m = b_lines.len / 8, n_lines = b_first.len / 8, top = b_commas.len / 8 - 2, room = b_prn.len / 8;
+    if (top < 0 || b_end.len / 8 != n_lines || b_slots.len / 8 != m || b_row.len / 8 != room || b_k.len / 8 != room ||
+        !check(&b_keys, m, 8, "n_keys") || !check(&b_ok, m, 1, "ok")) {
+        PyErr_SetString(PyExc_ValueError, "gsa_slots: sizes do not match");
+        goto done;
+    }
+    const int64_t *first = b_first.buf, *end = b_end.buf, *commas = b_commas.buf, *lines = b_lines.buf,
+                  *slots = b_slots.buf;
+    int64_t *prn = b_prn.buf, *row = b_row.buf, *kk = b_k.buf, *keys = b_keys.buf;
+    uint8_t *ok = b_ok.buf;
+    Py_ssize_t out = 0;
+    int bad = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < m && !bad; i++) {
+        int64_t line = lines[i];
+        if (line < 0 || line >= n_lines) { bad = 1; break; }
+        int64_t w = slots[i] < 0 ? 0 : (slots[i] > 32 ? 32 : slots[i]);
+        int64_t star = end[line] - 3, present = 0;
+        for (int64_t j = 0; j < w; j++) {
+            int64_t c = first[line] + 3 + j - 1;
+            if (c > top) c = top;
+            if (c < 0) { bad = 1; break; }
+            int64_t s = commas[c] + 1, e = commas[c + 1];
+            if (e < s) e = s;
+            if (e > star) e = star;
+            if (s > star) s = star;
+            if (e == s) continue;
+            double v;
+            uint8_t empty, dot;
+            int good = parse_decimal(buf, n, s, e, 1, &v, &empty, &dot);
+            int64_t value = good ? (int64_t)v : -1;  /* as the numpy path: a number out of range is kept */
+            if (!good || value < 1 || value > 1023) ok[i] = 0;
+            if (out >= room) { bad = 1; break; }
+            prn[out] = value; row[out] = i; kk[out] = present;
+            out++; present++;
+        }
+        keys[i] = present;
+    }
+    Py_END_ALLOW_THREADS
+    if (bad) {
+        PyErr_SetString(PyExc_IndexError, "gsa_slots: line or field out of range, or no room");
+        goto done;
+    }
+    result = PyLong_FromSsize_t(out);
+done:
+    PyBuffer_Release(&b_buf); PyBuffer_Release(&b_first); PyBuffer_Release(&b_end); PyBuffer_Release(&b_commas);
+    PyBuffer_Release(&b_lines); PyBuffer_Release(&b_slots); PyBuffer_Release(&b_prn); PyBuffer_Release(&b_row);
+    PyBuffer_Release(&b_k); PyBuffer_Release(&b_keys); PyBuffer_Release(&b_ok);
+    return result;
+}
+
 /* time_of_day(buf, start, end, tod, ok): hhmmss[.sss] fields → seconds after midnight
  * (float64, NaN when empty or bad) and ok (uint8: empty or good). The rules of
  * bulk_fields.time_of_day_s_numpy: six leading digits, hh <= 23, mm <= 59, the seconds
@@ -436,6 +506,7 @@ static PyMethodDef methods[] = {
     {"field_span", field_span, METH_VARARGS, "Field spans of plain lines (see BlockLines.field_span)."},
     {"frame", frame, METH_VARARGS, "Frame the lines of a block (see bulk_lines.split_block)."},
     {"decimal", decimal, METH_VARARGS, "Read decimal fields (see bulk_fields.decimal)."},
+    {"gsa_slots", gsa_slots, METH_VARARGS, "Read the satellite slots of GSA lines (see bulk_sentences.gsa)."},
     {"field_decimal", field_decimal, METH_VARARGS, "Read field k of lines as decimals (see BlockLines.field_decimals)."},
     {NULL, NULL, 0, NULL},
 };

@@ -14,6 +14,7 @@ from functools import lru_cache
 import numpy as np
 
 from tollcli.readers.nmea import bulk_fields as bf
+from tollcli.readers.nmea import kernels
 from tollcli.readers.nmea.bulk_lines import BlockLines, pack_address, talker_code
 from tollcli.readers.nmea.fields import KMH_MPS, KNOT_MPS
 from tollcli.readers.nmea.satellite_ids import (
@@ -232,7 +233,28 @@ def gsa(bl: BlockLines, idx: np.ndarray) -> dict:
     for code, row in _SYSID_ROW.items():
         hint[sysid == code] = row
     hint[(sysid >= 7)] = 0  # an unknown system id: the number decides
-    # the satellite slots (fields 3 … 2 + n_slots)
+    slots = _gsa_slots if kernels.compiled is None else _gsa_slots_compiled  # the compiled one: a single pass
+    rows, prn, k, n_keys, ok_slots = slots(bl, idx, n_slots)
+    ok &= ok_slots
+    safe = np.clip(prn, 0, MAX_PRN)
+    return {"fix_mode": fix_mode, "pdop": pdop, "hdop": hdop, "vdop": vdop, "sysid": sysid, "ok": ok,
+            "n_keys": n_keys, "sat_row": rows, "sat_k": k, **_satellites(hint[rows], safe)}  # fmt: skip
+
+
+def _gsa_slots_compiled(bl: BlockLines, idx: np.ndarray, n_slots: np.ndarray):
+    """:func:`_gsa_slots` by the compiled kernel."""
+    room = int(np.clip(n_slots, 0, GSA_MAX_SLOTS).sum())
+    prn, row, k = (np.empty(room, np.int64) for _ in range(3))
+    n_keys = np.empty(idx.size, np.int64)
+    ok = np.ones(idx.size, bool)
+    m = kernels.compiled.gsa_slots(bl.buf, bl.first_comma, bl.end, bl.commas, np.ascontiguousarray(idx, np.int64),
+                                   np.ascontiguousarray(n_slots, np.int64), prn, row, k, n_keys, ok)  # fmt: skip
+    return row[:m], prn[:m], k[:m], n_keys, ok
+
+
+def _gsa_slots(bl: BlockLines, idx: np.ndarray, n_slots: np.ndarray):
+    """The satellites of GSA lines ``idx`` (fields 3 … 2 + n_slots): (row, PRN, place among the line's
+    satellites, satellites per line, line ok: every non-empty slot a number in 1 … MAX_PRN)."""
     width = int(np.clip(n_slots, 0, GSA_MAX_SLOTS).max()) if idx.size else 0
     rows = np.repeat(np.arange(idx.size), width)
     place = np.tile(np.arange(width), idx.size)
@@ -241,13 +263,9 @@ def gsa(bl: BlockLines, idx: np.ndarray) -> dict:
     present = ~empty & inside
     prn, ok_prn = bf.as_integer(value, ok_prn, empty, lo=1, hi=9_999)
     ok_prn &= prn <= MAX_PRN  # beyond the look-up table: the per-line path
-    ok &= (ok_prn | ~inside).reshape(idx.size, width).all(axis=1)
+    ok = (ok_prn | ~inside).reshape(idx.size, width).all(axis=1)
     k = np.cumsum(present.reshape(idx.size, width), axis=1).ravel() - 1  # a satellite's place in its GSA's list
-    rows, prn, k = rows[present], prn[present], k[present]
-    safe = np.clip(prn, 0, MAX_PRN)
-    return {"fix_mode": fix_mode, "pdop": pdop, "hdop": hdop, "vdop": vdop, "sysid": sysid, "ok": ok,
-            "n_keys": present.reshape(idx.size, width).sum(axis=1), "sat_row": rows, "sat_k": k,
-            **_satellites(hint[rows], safe)}  # fmt: skip
+    return rows[present], prn[present], k[present], present.reshape(idx.size, width).sum(axis=1), ok
 
 
 def gsv(bl: BlockLines, idx: np.ndarray) -> dict:
