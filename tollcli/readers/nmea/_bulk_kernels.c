@@ -240,6 +240,22 @@ done:
     return result;
 }
 
+/* Field k (1 = first after the address) of a plain line: [*s, *e). Field k starts after the line's k-th
+ * comma and ends at the next comma or at the '*'; past the last field it is empty, at the '*'.
+ * Returns 0 when the comma index falls before the first comma (a caller's error). */
+static inline int field_bounds(const int64_t *first, const int64_t *end, const int64_t *commas, Py_ssize_t top,
+                               int64_t line, int64_t k, int64_t *s, int64_t *e) {
+    int64_t c = first[line] + k - 1;
+    if (c > top) c = top;
+    if (c < 0) return 0;
+    int64_t star = end[line] - 3, a = commas[c] + 1, b = commas[c + 1];
+    if (b < a) b = a;
+    if (b > star) b = star;
+    *s = a < star ? a : star;
+    *e = b;
+    return 1;
+}
+
 /* field_span(first_comma, end, commas, lines, k, s_out, e_out)
  *
  * int64 throughout; k has one item (for every line) or one per line. The rules of
@@ -264,14 +280,7 @@ static PyObject *field_span(PyObject *self, PyObject *args) {
     for (Py_ssize_t i = 0; i < m; i++) {
         int64_t line = lines[i];
         if (line < 0 || line >= n_lines) { bad = 1; break; }
-        int64_t c = first[line] + ks[n_k == 1 ? 0 : i] - 1;
-        if (c > top) c = top;
-        if (c < 0) { bad = 1; break; }
-        int64_t star = end[line] - 3, s = commas[c] + 1, e = commas[c + 1];
-        if (e < s) e = s;
-        if (e > star) e = star;
-        so[i] = s < star ? s : star;
-        eo[i] = e;
+        if (!field_bounds(first, end, commas, top, line, ks[n_k == 1 ? 0 : i], so + i, eo + i)) { bad = 1; break; }
     }
     Py_END_ALLOW_THREADS
     if (bad) {
@@ -314,13 +323,8 @@ static PyObject *field_decimal(PyObject *self, PyObject *args) {
     for (Py_ssize_t i = 0; i < m; i++) {
         int64_t line = lines[i];
         if (line < 0 || line >= n_lines) { bad = 1; break; }
-        int64_t c = first[line] + ks[n_k == 1 ? 0 : i] - 1;
-        if (c > top) c = top;
-        if (c < 0) { bad = 1; break; }
-        int64_t star = end[line] - 3, s = commas[c] + 1, e = commas[c + 1];
-        if (e < s) e = s;
-        if (e > star) e = star;
-        if (s > star) s = star;
+        int64_t s, e;
+        if (!field_bounds(first, end, commas, top, line, ks[n_k == 1 ? 0 : i], &s, &e)) { bad = 1; break; }
         ok[i] = (uint8_t)parse_decimal(buf, n, s, e, integer_only, value + i, empty + i, has_dot + i);
     }
     Py_END_ALLOW_THREADS
@@ -370,15 +374,10 @@ static PyObject *gsa_slots(PyObject *self, PyObject *args) {
         int64_t line = lines[i];
         if (line < 0 || line >= n_lines) { bad = 1; break; }
         int64_t w = slots[i] < 0 ? 0 : (slots[i] > 32 ? 32 : slots[i]);
-        int64_t star = end[line] - 3, present = 0;
+        int64_t present = 0;
         for (int64_t j = 0; j < w; j++) {
-            int64_t c = first[line] + 3 + j - 1;
-            if (c > top) c = top;
-            if (c < 0) { bad = 1; break; }
-            int64_t s = commas[c] + 1, e = commas[c + 1];
-            if (e < s) e = s;
-            if (e > star) e = star;
-            if (s > star) s = star;
+            int64_t s, e;
+            if (!field_bounds(first, end, commas, top, line, 3 + j, &s, &e)) { bad = 1; break; }
             if (e == s) continue;
             double v;
             uint8_t empty, dot;
