@@ -25,6 +25,8 @@ def batch(
     force: Annotated[bool, typer.Option("--force", help="Process logs again even when their invoice is up to date.")] = False,
     vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class in the tariff.")] = "car",
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network for map-matching integrity.")] = None,
+    fmt: opt.InputFormat = "auto",
+    nav: opt.Nav = None,
     policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all.")] = None,
     integrity_sources: opt.IntegritySources = "auto",
     raim: opt.RaimMode = "etc",
@@ -45,10 +47,10 @@ def batch(
     """
     logs = expand_inputs(inputs)
     settings = ChargeSettings(vehicle_class=vehicle_class, raim=raim, p_md=p_md, p_fa=p_fa, policy=policy,
-                              integrity_sources=integrity_sources)  # fmt: skip
+                              integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip
     with progress(f"batch of {len(logs)} logs", quiet) as advance:
         summary = run_batch(logs, geo, tariff, settings, output, workers=workers, scheduler=scheduler, force=force,
-                            roads=roads, progress=advance)  # fmt: skip
+                            roads=roads, nav=nav, progress=advance)  # fmt: skip
     line = (f"{output}: {summary['logs']} logs: {summary['done']} done, {summary['skipped']} up to date, {summary['failed']} failed; "
             + ", ".join(f"{v} {k}" for k, v in summary["totals"].items()))  # fmt: skip
     if as_json:

@@ -21,14 +21,12 @@ from tollcli.job.log_integrity import iter_integrity
 from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_partial, check_usable
 
-FORMATS = ("auto", "nmea", "gsdc-derived", "rinex")
-
 
 def integrity(
     log: opt.LogArg,
     output: opt.Output = "-",
-    fmt: Annotated[str, typer.Option("--format", help="Input: auto, nmea, gsdc-derived, rinex (observation file).")] = "auto",
-    nav: Annotated[Optional[str], typer.Option("--nav", help="RINEX navigation file (with --format rinex).")] = None,
+    fmt: opt.InputFormat = "auto",
+    nav: opt.Nav = None,
     integrity_sources: opt.IntegritySources = "auto",
     raim: opt.RaimMode = "etc",
     hal: opt.Hal = 50.0,
@@ -61,8 +59,7 @@ def integrity(
     of a fault), excluded_valid, unavailable, unmonitored (no residuals in the
     log), insufficient (fewer than unknowns + 1 measurements).
     """
-    if fmt not in FORMATS:
-        raise UsageError(f"--format {fmt}: use one of {', '.join(FORMATS)}")
+    opt.check_input_format(fmt)
     if sigma_model not in SIGMA_MODELS:
         raise UsageError(f"--sigma-model {sigma_model}: use one of {', '.join(SIGMA_MODELS)}")
     if iono not in ("single", "sbas", "iono-free"):

@@ -36,6 +36,20 @@ def require_json(output: str) -> str:
     if output != "-" and not output.lower().endswith(".json"):
         raise UsageError(f"{output}: this command writes JSON: name the file .json (or - for stdout)")
     return output
+InputFormat = Annotated[str, typer.Option("--format", help="Input: auto, nmea, gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX).")]
+Nav = Annotated[Optional[str], typer.Option("--nav", help="Navigation file, RINEX 2 or 3 (GPS, Galileo): the orbits for rinex and gnsslogger input; replaces the file's own satellites for device-gnss and ubx.")]
+
+
+def check_input_format(fmt: str) -> str:
+    """UsageError for a --format that is not one of INPUT_FORMATS."""
+    from tollcli.errors import UsageError
+    from tollcli.io.sources import INPUT_KINDS
+
+    if fmt not in INPUT_KINDS:
+        raise UsageError(f"--format {fmt}: use one of {', '.join(INPUT_KINDS)}")
+    return fmt
+
+
 Strict = Annotated[
     bool,
     typer.Option("--strict", help="Stop at the first unusable line (bad checksum, malformed, not NMEA) with its line number."),

@@ -23,7 +23,8 @@ def process(
     vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class in the tariff.")] = "car",
     vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id (default: the log's file name).")] = None,
     output: opt.InvoiceOutput = "-",
-    nav: Annotated[Optional[str], typer.Option("--nav", help="RINEX navigation file (RINEX input).")] = None,
+    fmt: opt.InputFormat = "auto",
+    nav: opt.Nav = None,
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings, tolled and free) for map-matching integrity.")] = None,
     policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")] = None,
     integrity_sources: opt.IntegritySources = "auto",
@@ -53,7 +54,7 @@ def process(
     settings = ChargeSettings(vehicle_class=vehicle_class, vehicle=vehicle, raim=raim, p_md=p_md, p_fa=p_fa, fde=fde,
                               sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
                               date=date.date().isoformat() if date else None, policy=policy,
-                              integrity_sources=integrity_sources)  # fmt: skip
+                              integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip
     invoice, stats = charge_log(log, geo, tariff, settings, nav, roads)
     if output == "-" and sys.stdout.isatty():
         show(lambda: invoice_tables(invoice), False, to_stdout=True)

@@ -1,17 +1,26 @@
-"""Pseudorange inputs by kind: the GSDC derived CSV and RINEX 3 obs + nav → (epochs, measurements)."""
+"""Pseudorange inputs by kind → (epochs, measurements).
+
+* ``gsdc-derived``: the GSDC 2021 derived CSV (Google's satellite positions);
+* ``rinex``: a RINEX 3 observation file with ``--nav`` (broadcast ephemerides);
+* ``gnsslogger``: an Android GnssLogger text file (``Raw`` records) with ``--nav``;
+* ``device-gnss``: a GSDC 2022/2023 ``device_gnss.csv`` — its own satellite columns, or ``--nav``'s orbits;
+* ``ubx``: a u-blox log with ``RXM-RAWX`` — satellites from its own ``RXM-SFRBX`` subframes, or ``--nav``.
+"""
 
 from __future__ import annotations
 
 import pandas as pd
 
-from tollcli.errors import UsageError
+from tollcli.errors import DataError, UsageError
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.sigma_models import NominalModel
 
+PSEUDORANGE_FORMATS = ("gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx")
+
 
 def pseudorange_epochs(log: str, kind: str, nav: str | None, sigma_model: str, sigma_m: float,
-                       nominal: NominalModel) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
-    """WLS epochs and RAIM measurements for a ``gsdc-derived`` or ``rinex`` log."""
+                       nominal: NominalModel, strict: bool = False) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
+    """WLS epochs (with Doppler velocities where the input has rates) and RAIM measurements of a pseudorange log."""
     if kind == "gsdc-derived":
         from tollcli.gnss.gsdc_positions import gsdc_epochs
         from tollcli.readers.gsdc import read_gsdc_derived
@@ -23,4 +32,53 @@ def pseudorange_epochs(log: str, kind: str, nav: str | None, sigma_model: str, s
         if nav is None:
             raise UsageError("RINEX input needs --nav NAVFILE (broadcast ephemerides)")
         return rinex_epochs(log, nav, sigma_model, sigma_m, nominal)
+    if kind in ("gnsslogger", "device-gnss", "ubx"):
+        return _raw_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
     raise UsageError(f"{log}: {kind} is not a pseudorange format")
+
+
+def _raw_epochs(log: str, kind: str, nav: str | None, sigma_model: str, sigma_m: float, nominal: NominalModel,
+                strict: bool) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
+    from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites, with_device_gnss_satellites
+
+    ephemerides, iono = None, None
+    if nav is not None:
+        from tollcli.gnss.satellite_states import rinex_ephemeris_table
+        from tollcli.readers.rinex import load_rinex
+
+        nav_data = load_rinex(nav, "navigation")
+        try:
+            ephemerides = rinex_ephemeris_table(nav_data)
+        except DataError as exc:
+            raise DataError(f"{nav}: {exc}") from None
+        iono = nav_data.attrs.get("ionospheric_corr_GPS")
+    if kind == "gnsslogger":
+        from tollcli.gnss.android_raw import raw_pseudoranges
+        from tollcli.readers.gnsslogger import read_gnsslogger
+
+        if ephemerides is None:
+            raise UsageError(f"{log}: a GnssLogger file carries no satellite orbits: give --nav NAVFILE (RINEX 2 or 3)")
+        m = with_broadcast_satellites(raw_pseudoranges(read_gnsslogger(log, strict).raw), ephemerides)
+    elif kind == "device-gnss":
+        from tollcli.gnss.android_raw import raw_pseudoranges
+        from tollcli.readers.gnsslogger import read_device_gnss
+
+        device = read_device_gnss(log)
+        m = raw_pseudoranges(device)
+        m = with_device_gnss_satellites(m, device) if ephemerides is None else with_broadcast_satellites(m, ephemerides)
+    else:
+        from tollcli.gnss.ubx_measurements import rawx_measurements, sfrbx_ephemerides
+        from tollcli.readers.ubx import read_ubx
+
+        ubx = read_ubx(log, strict)
+        if ubx.rawx.empty:
+            raise DataError(f"{log}: no RXM-RAWX measurements in the UBX log (the receiver was not set to output raw data)")
+        if ephemerides is None:
+            ephemerides = sfrbx_ephemerides(ubx)
+            if ephemerides.empty:
+                raise DataError(f"{log}: no complete GPS ephemeris in the log's RXM-SFRBX subframes: give --nav NAVFILE")
+        m = with_broadcast_satellites(rawx_measurements(ubx), ephemerides)
+    try:
+        return raw_epochs(m, sigma_model, sigma_m, nominal, iono_coeffs=iono)
+    except DataError as exc:
+        raise DataError(f"{log}: {exc}") from None

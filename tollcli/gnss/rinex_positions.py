@@ -3,7 +3,7 @@
 * Observations (:mod:`tollcli.readers.rinex`): code pseudorange on L1/E1 (``C1C``, else ``C1X``/``C1P``
   for Galileo/GPS) and its C/N0 (``S1…``); receiver time from the file (GPS time).
 * Orbits and clocks: the broadcast ephemeris of each satellite nearest in time
-  (:mod:`tollcli.gnss.orbits`) at the transmission time
+  (:mod:`tollcli.gnss.satellite_states`) at the transmission time
   t_tx = t_rx − pr/c − dt_sv, iterated.
 * Corrections inside the WLS: satellite clock (+ c·dt_sv, with relativity and
   group delay), Klobuchar ionosphere from the navigation header (GPSA/GPSB),
@@ -16,37 +16,15 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from tollcli.errors import DataError, UsageError
+from tollcli.errors import UsageError
 from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
 from tollcli.gnss.measurements import Measurements, pad, slots
-from tollcli.gnss.orbits import EPHEMERIS_FIELDS, WEEK_S, kepler_position_clock
+from tollcli.gnss.orbits import WEEK_S
 from tollcli.gnss.pseudorange_wls import C_MPS, final_geometry, solve_positions
+from tollcli.gnss.satellite_states import rinex_ephemeris_table, satellite_states
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.gps_time import gps_millis_to_utc, gps_seconds
 from tollcli.readers.rinex import load_rinex, observations
-
-
-def nearest_ephemerides(nav, sv: np.ndarray, t_s: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """Per query, the fields of the satellite's ephemeris with the nearest clock reference time."""
-    table = nav.to_dataframe().reset_index().dropna(subset=["sqrtA"])
-    if table.empty:
-        raise DataError("no GPS or Galileo ephemerides in the navigation file")
-    table["toc_s"] = gps_seconds(table["time"].to_numpy())
-    week = table["GPSWeek"] if "GPSWeek" in table else np.nan
-    if "GALWeek" in table:
-        week = np.where(table["sv"].str.startswith("E"), table["GALWeek"], week)
-    table["toe_s"] = np.asarray(week, float) * WEEK_S + table["Toe"].to_numpy(float)
-    gd = table["TGD"] if "TGD" in table else 0.0
-    if "BGDe5b" in table:
-        gd = np.where(table["sv"].str.startswith("E"), table["BGDe5b"], gd)
-    table["group_delay_s"] = np.nan_to_num(np.asarray(gd, float))
-    table = table.sort_values("toc_s", kind="stable")
-    queries = pd.DataFrame({"sv": sv, "t_s": t_s, "i": np.arange(sv.size)}).sort_values("t_s", kind="stable")
-    merged = pd.merge_asof(queries, table, left_on="t_s", right_on="toc_s", by="sv", direction="nearest",
-                           tolerance=4 * 3600.0).sort_values("i")  # fmt: skip
-    have = merged["sqrtA"].notna().to_numpy()
-    eph = {k: merged[k].to_numpy(float) for k in (*EPHEMERIS_FIELDS, "toc_s", "toe_s", "group_delay_s")}
-    return eph, have
 
 
 def rinex_epochs(obs_path: str, nav_path: str, sigma_model: str = "nominal", sigma_m: float = 5.0,
@@ -59,14 +37,8 @@ def rinex_epochs(obs_path: str, nav_path: str, sigma_model: str = "nominal", sig
     t_rx = gps_seconds(rows["time"].to_numpy())
     sv = rows["sv"].to_numpy(str)
     pr = rows["pr_m"].to_numpy(float)
-    eph, have = nearest_ephemerides(nav, sv, t_rx)
-    galileo = np.char.startswith(sv, "E")
-    t_tx = t_rx - pr / C_MPS
-    for _ in range(3):
-        pos, clock = kepler_position_clock(eph, t_tx, galileo)
-        t_tx = t_rx - pr / C_MPS - clock
-    pos, clock = kepler_position_clock(eph, t_tx, galileo)
-    usable = have & np.isfinite(pos).all(axis=1) & np.isfinite(clock)
+    states = satellite_states(rinex_ephemeris_table(nav), sv, t_rx, pr)
+    pos, clock, usable = states["pos_m"], states["clock_s"], states["have"]
 
     epoch_times, row = np.unique(rows["time"].to_numpy(), return_inverse=True)
     keep = np.flatnonzero(usable)

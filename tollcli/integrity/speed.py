@@ -3,8 +3,10 @@
 Over a window of N intervals (N + 1 samples at a regular rate), with trapezoidal averages
 (eqs. 4.5, 4.8: (½x₀ + x₁ + … + x_{N−1} + ½x_N)/N):
 
-* ``mase_mps``: the average SDOP — the receiver's Doppler speed accuracy. Standard NMEA carries no
-  SDOP: a configured value is used and ``speed_sigma_source`` says so (``configured``);
+* ``mase_mps``: the average SDOP — the receiver's Doppler speed accuracy. Raw-measurement inputs give
+  it per epoch (``speed_doppler_sigma_mps``, the 1σ of the Doppler WLS speed of
+  :mod:`tollcli.gnss.doppler_velocity`; ``speed_sigma_source`` ``doppler_wls``); standard NMEA carries
+  no SDOP: a configured value is used and ``speed_sigma_source`` says so (``configured``);
 * ``speed_error_mps`` = MASE/√N (eq. 4.6);
 * ``speed_doppler_avg_mps``: the average Doppler speed (RMC/VTG speed over ground) (eq. 4.8);
 * the thesis's test: integrity available iff MASE ≥ 3σ, σ the standard error of the window's Doppler
@@ -104,7 +106,9 @@ def speed_integrity(epochs: pd.DataFrame, params: SpeedParams = SpeedParams(), s
     t = epoch_seconds(epochs)
     lat = epochs["lat_deg"].to_numpy(float)
     lon = epochs["lon_deg"].to_numpy(float)
-    sdop = np.full(len(epochs), params.sdop_mps)
+    given = epochs["speed_doppler_sigma_mps"].to_numpy(float) if "speed_doppler_sigma_mps" in epochs else np.full(len(epochs), np.nan)
+    from_doppler = np.isfinite(given) & (given > 0)
+    sdop = np.where(from_doppler, given, params.sdop_mps)
     mase = trapezoid_average(sdop, n)
     speed_error = mase / np.sqrt(n)
     avg = trapezoid_average(v, n)
@@ -133,6 +137,6 @@ def speed_integrity(epochs: pd.DataFrame, params: SpeedParams = SpeedParams(), s
     return pd.DataFrame({
         "speed_doppler_avg_mps": avg, "speed_position_mps": pos_speed, "speed_error_mps": speed_error,
         "mase_mps": mase, "speed_sigma_mps": sigma, "speed_tolerance_mps": tol,
-        "speed_sigma_source": pd.array(["configured"] * len(epochs), dtype="string"),
+        "speed_sigma_source": pd.array(np.where(from_doppler, "doppler_wls", "configured"), dtype="string"),
         "speed_status": pd.array(status, dtype="string"),
     })  # fmt: skip

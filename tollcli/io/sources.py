@@ -125,13 +125,23 @@ def read_json(path: str, what: str):
         raise DataError(f"{path}: not {what} (nested too deeply)") from None
 
 
+#: the input formats (``--format``): ``auto`` is :func:`sniff_format`
+INPUT_KINDS = ("auto", "nmea", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx")
+#: a u-blox RXM-RAWX frame's first bytes (sync chars, class 0x02, id 0x15)
+UBX_RAWX = b"\xb5\x62\x02\x15"
+SNIFF_BYTES = 1 << 16
+
+
 def sniff_format(log: str) -> str:
-    """The log's kind from its first line: ``nmea``, ``gsdc-derived`` or ``rinex`` (stdin: ``nmea``)."""
+    """The log's kind from its first bytes (stdin: ``nmea``): ``gsdc-derived`` or ``device-gnss`` (their CSV
+    headers), ``rinex`` (the RINEX header), ``gnsslogger`` (a ``# Raw,`` header line), ``ubx`` (a u-blox
+    ``RXM-RAWX`` frame in the first 64 KiB: raw measurements; UBX without them stays with the NMEA reader,
+    which reads the NMEA sentences beside it), else ``nmea``."""
     if log == "-":
         return "nmea"
     stream = open_binary(log)
     try:
-        head = stream.peek(512)[:512] if hasattr(stream, "peek") else stream.read(512)
+        head = stream.read(SNIFF_BYTES)
     except (OSError, EOFError, zlib.error) as exc:
         raise DataError(f"{log}: cannot read compressed data ({exc})") from None
     finally:
@@ -139,8 +149,14 @@ def sniff_format(log: str) -> str:
     first = head.split(b"\n", 1)[0]
     if b"millisSinceGpsEpoch" in first:
         return "gsdc-derived"
+    if b"FullBiasNanos" in first and b"ReceivedSvTimeNanos" in first:
+        return "device-gnss"
     if b"RINEX VERSION" in first:
         return "rinex"
+    if b"\n# Raw," in head or head.startswith(b"# Raw,"):
+        return "gnsslogger"
+    if UBX_RAWX in head:
+        return "ubx"
     return "nmea"
 
 

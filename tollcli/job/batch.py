@@ -54,7 +54,7 @@ from tollcli.errors import DataError, UsageError
 from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
 from tollcli.job.pipeline import ChargeSettings, charge_log
 
-LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv")
+LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv", ".ubx")
 
 
 @dataclass(frozen=True)
@@ -69,6 +69,7 @@ class Job:
     vehicle: str = ""  # the vehicle id (data, as the log or the options give it)
     name: str = ""  # the outputs' file name (a safe path component, unique in OUTDIR)
     input_sha256: tuple = ()  # (key, SHA-256) of the shared inputs, for the resume check
+    nav: str | None = None  # the navigation file shared by the logs (raw-measurement inputs)
 
 
 def path_component(text: str) -> str:
@@ -158,7 +159,8 @@ def _current(done: dict, job: Job, settings: ChargeSettings, log_sha: str) -> bo
     if inputs.get("log_sha256") != log_sha or any(inputs.get(key) != sha for key, sha in job.input_sha256):
         return False
     # ``continued`` depends on the vehicle's other logs: join_passages checks it after every log is done
-    return all(k in parameters and parameters[k] == v for k, v in asdict(settings).items() if k != "continued")
+    recorded = {"input_format": "auto", **parameters}  # an invoice records its format only when one was given
+    return all(k in recorded and recorded[k] == v for k, v in asdict(settings).items() if k != "continued")
 
 
 def run_one(job: Job) -> dict:
@@ -199,7 +201,7 @@ def _failed(job: Job, name: str, outcome: dict, message: str) -> dict:
 
 def _process(job: Job, settings: ChargeSettings, folder: str, name: str, inv_path: str, outcome: dict) -> dict:
     tables: list = []
-    invoice, stats = charge_log(job.log, job.geo, job.tariff, settings, roads=job.roads, epoch_table=tables)
+    invoice, stats = charge_log(job.log, job.geo, job.tariff, settings, job.nav, roads=job.roads, epoch_table=tables)
     table = tables[0]
     dated = table["time_utc"].dropna()
     date = dated.iloc[0].strftime("%Y-%m-%d") if len(dated) else "unknown"
@@ -321,13 +323,16 @@ def _run_in_worker(job: Job) -> dict:
 
 
 def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, outdir: str, *, workers: int = 1,
-              scheduler: str | None = None, force: bool = False, roads: str | None = None, progress=None) -> dict:  # fmt: skip
+              scheduler: str | None = None, force: bool = False, roads: str | None = None, nav: str | None = None,
+              progress=None) -> dict:  # fmt: skip
     """Process every log; returns the summary (also written to OUTDIR/summary.json)."""
     output_folder(outdir)
     shared = [("geoobjects_sha256", file_sha256(geo)), ("tariff_sha256", file_sha256(tariff))]
     if roads is not None:
         shared.append(("roads_sha256", file_sha256(roads)))
-    jobs = [Job(log, geo, tariff, settings, outdir, force, roads, vehicle, name, tuple(shared))
+    if nav is not None:
+        shared.append(("nav_sha256", file_sha256(nav)))
+    jobs = [Job(log, geo, tariff, settings, outdir, force, roads, vehicle, name, tuple(shared), nav)
             for log, (vehicle, _, name) in zip(logs, plan_outputs(logs, settings, outdir))]  # fmt: skip
     outcomes: list[dict] = []
     tick = progress or (lambda n: None)

@@ -34,13 +34,13 @@ def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
 def iter_integrity(log: str, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
                    nominal: NominalModel | None = None, strict: bool = False, stats: ReadStats | None = None,
                    nav: str | None = None, date: dt.date | None = None) -> Iterator[IntegrityChunk]:  # fmt: skip
-    """Integrity tables of ``log`` (``kind``: nmea, gsdc-derived, rinex); NMEA is streamed in chunks.
+    """Integrity tables of ``log`` (``kind``: nmea or a pseudorange format); NMEA is streamed in chunks.
 
     ``date``: the UTC date of the first epoch, for NMEA logs without RMC/ZDA dates.
     """
     nominal = nominal or NominalModel()
     if kind != "nmea":
-        epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal)
+        epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
         yield IntegrityChunk(with_raim_position(pd.concat([epochs, run_raim(meas, params)], axis=1)), None)
         return
     if sigma_model == "input":

@@ -28,7 +28,7 @@ from tollcli.gnss.wls import wls_geometry
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import level_name, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
-from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
+from tollcli.io.sources import INPUT_KINDS, BLOCK_BYTES as SOURCE_BLOCK_BYTES
 from tollcli.io.sources import printable_path, sniff_format
 from tollcli.job.streaming import TailCharger, choose_policy, has_speeds
 from tollcli.readers.nmea import ReadStats, iter_nmea_tables
@@ -57,6 +57,8 @@ class ChargeSettings:
     #: passages the vehicle's previous log charged and ended inside (geo-object id → {"log", "exit_utc"}):
     #: set by ``batch`` so that a passage cut by a file boundary is charged once (see build_invoice)
     continued: dict | None = None
+    #: the log's format (io.sources.sniff_format's kinds; "auto": recognised from the file)
+    input_format: str = "auto"
 
 
 #: the shortest correlation time accepted, s (a 10 Hz receiver's epoch interval)
@@ -85,6 +87,8 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
         bad("vehicle_class (--vehicle-class)", settings.vehicle_class, "a vehicle class of the tariff")
     if settings.continued is not None:
         _check_continued(settings.continued)
+    if settings.input_format not in INPUT_KINDS:
+        bad("input_format (--format)", settings.input_format, f"one of {', '.join(INPUT_KINDS)}")
     if tariff is not None:
         classes = sorted({vc for table in (*tariff.road_class.values(), *tariff.geoobject.values()) for vc in table})
         if settings.vehicle_class not in classes:
@@ -128,7 +132,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     tariff_doc = load_tariff(tariff)
     check_settings(settings, tariff_doc)
     geo_objects = load_geoobjects(geo)
-    kind = sniff_format(log)
+    kind = sniff_format(log) if settings.input_format == "auto" else settings.input_format
     stats = None
     nominal = NominalModel()
     epoch_raim = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, sources=params.sources)
@@ -139,7 +143,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         policy, table, details, found, period = charger.finish()
         positions = None
     else:
-        epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal)
+        epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
         params = settle_sources(params, meas)
         per_epoch = run_raim(meas, replace(epoch_raim, sources=params.sources))
         pairs = inside_pairs(epochs, meas, geo_objects, params)
@@ -163,6 +167,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     inputs.update({k: v for k, v in (as_recorded or {}).items() if k in inputs})
     parameters = {**asdict(settings), "valid_statuses": ["valid", "excluded_valid"], "policy_used": policy,
                   "integrity_sources_used": level_name(params.sources) or "residual"}  # fmt: skip
+    if settings.input_format == "auto":
+        del parameters["input_format"]  # recorded only when given: invoices of auto-recognised logs stay as they were
     if settings.continued is None:
         del parameters["continued"]  # recorded only by an invoice that continues a passage of the log before
     invoice = build_invoice(table, positions, geo_objects, tariff_doc,

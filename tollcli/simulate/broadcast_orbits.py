@@ -13,7 +13,7 @@ import pandas as pd
 
 from tollcli.errors import DataError
 from tollcli.gnss.orbits import kepler_position_clock
-from tollcli.gnss.rinex_positions import nearest_ephemerides
+from tollcli.gnss.satellite_states import nearest_ephemerides, rinex_ephemeris_table
 from tollcli.readers.rinex import NAMES, load_rinex
 
 LETTER = {"gps": "G", "galileo": "E"}
@@ -23,7 +23,7 @@ LETTER = {"gps": "G", "galileo": "E"}
 class BroadcastOrbits:
     """The navigation file's GPS/Galileo satellites (arrays of length S)."""
 
-    nav: object  # the georinex dataset
+    table: pd.DataFrame  # the ephemerides, one per row (:func:`rinex_ephemeris_table`)
     sv: np.ndarray  # RINEX names, e.g. "G05"
     names: np.ndarray  # constellation names
     svid: np.ndarray
@@ -33,7 +33,7 @@ class BroadcastOrbits:
         t = np.asarray(t_s, dtype=float)
         t = t if per_satellite else np.broadcast_to(t[..., None], t.shape + (self.sv.size,))
         mid = float(np.nanmedian(t))
-        eph, have = nearest_ephemerides(self.nav, self.sv, np.full(self.sv.size, mid))
+        eph, have = nearest_ephemerides(self.table, self.sv, np.full(self.sv.size, mid))
         pos, _ = kepler_position_clock(eph, t, self.names == "Galileo")
         return np.where(have[:, None], pos, np.nan)
 
@@ -42,12 +42,12 @@ def load_orbits(path: str, constellations: list[str]) -> BroadcastOrbits:
     """The satellites of ``path`` that belong to ``constellations`` (``gps``, ``galileo``)."""
     nav = load_rinex(path, "navigation")
     letters = {LETTER[c] for c in constellations}
-    table = nav.to_dataframe().reset_index().dropna(subset=["sqrtA"])
+    table = rinex_ephemeris_table(nav)
     sv = np.array(sorted({str(s) for s in table["sv"] if str(s)[:1] in letters}), dtype=object)
     if sv.size == 0:
         raise DataError(f"{path}: no {' or '.join(sorted(constellations))} ephemerides")
     names = np.array([NAMES[s[0]] for s in sv], dtype=object)
-    return BroadcastOrbits(nav, sv, names, np.array([int(s[1:]) for s in sv]))
+    return BroadcastOrbits(table, sv, names, np.array([int(s[1:]) for s in sv]))
 
 
 def gps_seconds_of(ts: pd.Timestamp) -> float:

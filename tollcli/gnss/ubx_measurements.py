@@ -1,0 +1,88 @@
+"""u-blox ``RXM-RAWX`` rows → the raw-measurement table of :mod:`tollcli.gnss.raw_positions`, and
+``RXM-SFRBX`` GPS subframes → an ephemeris table.
+
+RAWX gives the pseudorange directly (m, receiver time ``week``·604 800 + ``rcvTow`` in the GPS scale
+of the receiver's clock); the Doppler D (Hz) becomes the pseudorange rate −D·λ; the standard
+deviations are coded 0.01·2ⁿ m and 0.002·2ⁿ Hz. A pseudorange is used when the receiver flags it
+valid (``prValid``) and it lies in the physical range.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from tollcli.gnss.android_raw import PHYSICAL_RANGE_M
+from tollcli.gnss.lnav_subframes import ephemerides
+from tollcli.gnss.orbits import WEEK_S
+from tollcli.readers.ubx import GNSS_ID, UbxRead
+
+C_MPS = 299_792_458.0
+#: (gnssId, sigId) → (signal, carrier Hz); GLONASS carriers add freqId − 7 channels
+SIGNALS = {(0, 0): ("L1", 1575.42e6), (0, 3): ("L2", 1227.60e6), (0, 4): ("L2", 1227.60e6), (0, 6): ("L5", 1176.45e6),
+           (0, 7): ("L5", 1176.45e6), (1, 0): ("L1", 1575.42e6), (2, 0): ("E1", 1575.42e6), (2, 1): ("E1", 1575.42e6),
+           (2, 3): ("E5a", 1176.45e6), (2, 4): ("E5a", 1176.45e6), (2, 5): ("E5b", 1207.14e6), (2, 6): ("E5b", 1207.14e6),
+           (3, 0): ("B1I", 1561.098e6), (3, 1): ("B1I", 1561.098e6), (3, 2): ("B2I", 1207.14e6), (3, 3): ("B2I", 1207.14e6),
+           (3, 7): ("B2a", 1176.45e6), (5, 0): ("L1", 1575.42e6), (5, 1): ("L1", 1575.42e6), (5, 4): ("L2", 1227.60e6),
+           (5, 5): ("L2", 1227.60e6), (6, 0): ("G1", 1602.0e6), (6, 2): ("G2", 1246.0e6)}  # fmt: skip
+LETTER = {"GPS": "G", "SBAS": "S", "Galileo": "E", "BeiDou": "C", "QZSS": "J", "GLONASS": "R", "NavIC": "I"}
+
+
+def rawx_measurements(ubx: UbxRead) -> pd.DataFrame:
+    """One row per RAWX measurement in the raw-measurement table layout."""
+    r = ubx.rawx
+    gnss = r["gnssId"].to_numpy(np.int64)
+    sig = r["sigId"].to_numpy(np.int64)
+    constellation = np.array([GNSS_ID.get(g, "unknown") for g in gnss.tolist()], dtype=object)
+    found = [SIGNALS.get((g, s), ("", np.nan)) for g, s in zip(gnss.tolist(), sig.tolist())]
+    signal = np.array([f[0] for f in found], dtype=object)
+    carrier = np.array([f[1] for f in found], dtype=float)
+    glo = gnss == 6
+    channel = r["freqId"].to_numpy(float) - 7
+    carrier[glo & (sig == 0)] = 1602.0e6 + channel[glo & (sig == 0)] * 0.5625e6
+    carrier[glo & (sig == 2)] = 1246.0e6 + channel[glo & (sig == 2)] * 0.4375e6
+    t = r["week"].to_numpy(float) * WEEK_S + r["rcvTow"].to_numpy(float)
+    pr = r["prMes"].to_numpy(float)
+    lam = C_MPS / carrier
+    svid = r["svId"].to_numpy(np.int64)
+    valid = (r["prValid"].to_numpy(float) == 1) & (pr > PHYSICAL_RANGE_M[0]) & (pr < PHYSICAL_RANGE_M[1])
+    valid &= np.isin(constellation, ["GPS", "Galileo", "BeiDou", "QZSS", "GLONASS"])
+    why = np.where(valid, "", np.where(r["prValid"].to_numpy(float) == 1, "pseudorange outside the physical range or system not used",
+                                       "receiver flags the pseudorange invalid"))  # fmt: skip
+    return pd.DataFrame({
+        "epoch_key": np.round(t * 1000).astype(np.int64),
+        "t_rx_gps_s": t,
+        "constellation": constellation,
+        "svid": svid,
+        "sv": [f"{LETTER.get(c, 'X')}{s:02d}" for c, s in zip(constellation.tolist(), svid.tolist())],
+        "signal": signal,
+        "carrier_hz": carrier,
+        "pr_m": pr,
+        "pr_sigma_m": 0.01 * 2.0 ** r["prStd"].to_numpy(float),
+        "prr_mps": -r["doMes"].to_numpy(float) * lam,
+        "prr_sigma_mps": 0.002 * 2.0 ** r["doStd"].to_numpy(float) * lam,
+        "cn0_dbhz": r["cno"].to_numpy(float),
+        "pr_valid": valid,
+        "pr_invalid_why": why,
+        "line": r["message"].to_numpy(np.int64),
+    })  # fmt: skip
+
+
+def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.DataFrame:
+    """GPS LNAV ephemerides decoded from the log's RXM-SFRBX subframes (an empty table when there are none)."""
+    sf = ubx.sfrbx
+    gps = sf[(sf["gnssId"] == 0) & (sf["sigId"] == 0) & (sf["words"].map(len) == 10)]  # L1 C/A: LNAV
+    if gps_week_hint is None:
+        weeks = ubx.rawx["week"].to_numpy(float) if len(ubx.rawx) else np.array([])
+        gps_week_hint = float(np.median(weeks)) if weeks.size else _pvt_week(ubx.pvt)
+    return ephemerides(gps[["sv", "words"]].reset_index(drop=True), gps_week_hint)
+
+
+def _pvt_week(pvt: pd.DataFrame) -> float:
+    """The GPS week of the receiver's first dated NAV-PVT (the 10-bit week needs one), else today's."""
+    if len(pvt):
+        first = pvt.iloc[0]
+        when = pd.Timestamp(year=int(first["year"]), month=int(first["month"]), day=int(first["day"]))
+    else:
+        when = pd.Timestamp.now()
+    return float((when - pd.Timestamp("1980-01-06")).days // 7)
