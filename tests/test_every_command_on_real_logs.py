@@ -55,3 +55,32 @@ def test_process_and_verify_over_every_gpsd_log(tmp_path):
             code, err = run_main("verify", str(invoice))
             assert code == 0, f"{log.name}: verify: {err}"
     assert invoiced >= 90
+
+
+#: the raw-measurement files of the shared data (phones, GSDC 2022, a u-blox RAWX log)
+RAW_FILES = [SHARED_DATA / p for p in ("gsdc2022/device_gnss.csv", "android/pixel6_gnsslogger.txt",
+                                       "gsdc2021/Pixel4_GnssLog.txt", "gpsd/ublox-neo-m8t.log", "gsdc2021/Pixel4_derived.csv")]  # fmt: skip
+
+
+@pytest.mark.parametrize("command", [*COMMANDS, "process"])
+def test_every_command_over_the_raw_measurement_files(tmp_path, command):
+    """Each command on each raw file, with and without the day's navigation file: a documented exit code, no
+    traceback, a reason naming the file; the GSDC 2022 file is charged and verifies."""
+    present = [p for p in RAW_FILES if p.exists()]
+    if not present:
+        pytest.skip("real data not available: ../shared/data")
+    nav = SHARED_DATA / "rinex" / "brdc1190.21n"
+    build = COMMANDS.get(command) or (lambda log, out: ["process", log, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", f"{out}/inv.json"])
+    for log in present:
+        for extra in ([], ["--nav", str(nav)]):
+            args = build(str(log), str(tmp_path))
+            if extra and args[0] not in ("integrity", "process"):
+                continue
+            code, err = run_main(*args, *extra)
+            assert code in DOCUMENTED and "Traceback" not in err, f"{log.name} {extra}: exit {code}: {err}"
+            if code:
+                assert err.strip() and log.name in err, f"{log.name}: exit {code} without saying why: {err!r}"
+            if log.name == "device_gnss.csv" and args[0] in ("integrity", "process"):
+                assert code == 0, err
+            if log.name == "device_gnss.csv" and args[0] == "process":
+                assert run_main("verify", f"{tmp_path}/inv.json")[0] == 0
