@@ -384,3 +384,20 @@ def test_process_and_batch_charge_a_ubx_drive_and_record_the_format(tmp_path):
                 "--workers", "1", "--json", "-q")  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["done"] == 1
+
+
+def test_the_receivers_own_nav_pvt_is_kept_beside_each_epoch():
+    """Real NAV-PVT messages (ZED-F9P): each epoch at a PVT instant carries that solution; others carry NaN."""
+    from tollcli.gnss.ubx_measurements import with_receiver_solution
+
+    ubx = read_ubx(str(shared("gpsd", "ublox-zed-f9p-sfrbx.log")))
+    pvt = ubx.pvt
+    assert len(pvt) == 19 and (pvt["fix_type"] == 3).all()
+    first = pvt.iloc[0]
+    t0 = pd.Timestamp(year=int(first["year"]), month=int(first["month"]), day=int(first["day"]), hour=int(first["hour"]),
+                      minute=int(first["minute"]), second=int(first["second"]), tz="UTC") + pd.Timedelta(int(first["nano"]), "ns")  # fmt: skip
+    epochs = pd.DataFrame({"time_utc": [t0, t0 + pd.Timedelta("0.5s")], "lat_deg": [0.0, 0.0]})
+    out = with_receiver_solution(epochs, pvt)
+    assert out["receiver_lat_deg"].iloc[0] == pytest.approx(first["lat_deg"]) and out["receiver_lat_deg"].iloc[0] == pytest.approx(44.0688655)
+    assert out["receiver_speed_mps"].iloc[0] == pytest.approx(0.027)
+    assert np.isnan(out["receiver_lat_deg"].iloc[1])

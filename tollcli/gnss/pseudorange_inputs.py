@@ -79,6 +79,11 @@ def _raw_epochs(log: str, kind: str, nav: str | None, sigma_model: str, sigma_m:
                 raise DataError(f"{log}: no complete GPS ephemeris in the log's RXM-SFRBX subframes: give --nav NAVFILE")
         m = with_broadcast_satellites(rawx_measurements(ubx), ephemerides)
     try:
-        return raw_epochs(m, sigma_model, sigma_m, nominal, iono_coeffs=iono)
+        epochs, meas = raw_epochs(m, sigma_model, sigma_m, nominal, iono_coeffs=iono)
     except DataError as exc:
         raise DataError(f"{log}: {exc}") from None
+    if kind == "ubx":
+        from tollcli.gnss.ubx_measurements import with_receiver_solution
+
+        epochs = with_receiver_solution(epochs, ubx.pvt)  # the receiver's own NAV-PVT beside ours, for comparison
+    return epochs, meas

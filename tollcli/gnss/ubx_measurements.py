@@ -86,3 +86,32 @@ def _pvt_week(pvt: pd.DataFrame) -> float:
     else:
         when = pd.Timestamp.now()
     return float((when - pd.Timestamp("1980-01-06")).days // 7)
+
+
+#: a NAV-PVT further than this from an epoch (s) is not the receiver's solution of that epoch
+PVT_TOLERANCE_S = 0.05
+
+
+def with_receiver_solution(epochs: pd.DataFrame, pvt: pd.DataFrame) -> pd.DataFrame:
+    """``epochs`` with the receiver's own NAV-PVT solution of the same instant, for comparison:
+    ``receiver_lat_deg``, ``receiver_lon_deg``, ``receiver_height_m``, ``receiver_speed_mps``, ``receiver_h_acc_m``
+    (NaN where the log has no NAV-PVT within ``PVT_TOLERANCE_S``)."""
+    names = {"lat_deg": "receiver_lat_deg", "lon_deg": "receiver_lon_deg", "height_m": "receiver_height_m",
+             "speed_mps": "receiver_speed_mps", "h_acc_m": "receiver_h_acc_m"}  # fmt: skip
+    out = epochs.copy()
+    fixed = pvt[pvt["fix_type"].between(2, 5)] if len(pvt) else pvt
+    if fixed.empty or out.empty:
+        for name in names.values():
+            out[name] = np.nan
+        return out
+    when = pd.to_datetime(dict(year=fixed["year"], month=fixed["month"], day=fixed["day"], hour=fixed["hour"],
+                               minute=fixed["minute"], second=fixed["second"]), utc=True)  # fmt: skip
+    when = when + pd.to_timedelta(fixed["nano"].to_numpy(np.int64), unit="ns")
+    table = fixed[list(names)].rename(columns=names).assign(_t=when.to_numpy()).sort_values("_t")
+    left = pd.DataFrame({"_t": out["time_utc"].to_numpy(), "_i": np.arange(len(out))}).sort_values("_t")
+    table["_t"] = table["_t"].astype(left["_t"].dtype)
+    merged = pd.merge_asof(left, table, on="_t", direction="nearest",
+                           tolerance=pd.Timedelta(seconds=PVT_TOLERANCE_S)).sort_values("_i")  # fmt: skip
+    for name in names.values():
+        out[name] = merged[name].to_numpy(float)
+    return out
