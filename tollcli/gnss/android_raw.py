@@ -25,7 +25,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from tollcli.gnss.measurements import sv_labels
 from tollcli.readers.gps_time import LEAP_SECONDS
+from tollcli.readers.gsdc import ANDROID_CONSTELLATION
 
 C_MPS = 299_792_458.0
 WEEK_NS = 604_800 * 10**9
@@ -38,8 +40,6 @@ MAX_TIME_UNCERTAINTY_NS = 500.0
 #: a pseudorange outside these (m) is not a satellite's: MEO ≈ 19 000–26 000 km, BeiDou GEO/IGSO up to ≈ 42 000 km
 PHYSICAL_RANGE_M = (1.8e7, 4.4e7)
 
-ANDROID_CONSTELLATION = {1: "GPS", 2: "SBAS", 3: "GLONASS", 4: "QZSS", 5: "BeiDou", 6: "Galileo", 7: "NavIC"}
-LETTER = {"GPS": "G", "SBAS": "S", "GLONASS": "R", "QZSS": "J", "BeiDou": "C", "Galileo": "E", "NavIC": "I"}
 # Android GnssMeasurement.getState() bits
 STATE_CODE_LOCK = 1
 STATE_TOW_DECODED = 8
@@ -97,7 +97,7 @@ def raw_pseudoranges(raw: pd.DataFrame) -> pd.DataFrame:
     frac = floats("TimeOffsetNanos", 0.0) - floats("BiasNanos", 0.0)
     state = raw["State"].to_numpy(np.int64)
     code = raw["ConstellationType"].to_numpy(np.int64)
-    constellation = np.array([ANDROID_CONSTELLATION.get(c, "unknown") for c in code.tolist()], dtype=object)
+    constellation = pd.Series(code).map(ANDROID_CONSTELLATION).fillna("unknown").to_numpy(object)
 
     tow = np.mod(whole, WEEK_NS)
     period = np.full(whole.shape, WEEK_NS, dtype=np.int64)
@@ -143,7 +143,7 @@ def raw_pseudoranges(raw: pd.DataFrame) -> pd.DataFrame:
         "t_rx_gps_s": np.where(missing, np.nan, t_rx_gps_s),
         "constellation": constellation,
         "svid": svid,
-        "sv": [f"{LETTER.get(c, 'X')}{s:02d}" for c, s in zip(constellation.tolist(), svid.tolist())],
+        "sv": sv_labels(constellation, svid),
         "signal": signal_names(constellation, carrier),
         "carrier_hz": carrier,
         "pr_m": np.where(missing, np.nan, pr_m),

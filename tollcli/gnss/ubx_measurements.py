@@ -14,6 +14,7 @@ import pandas as pd
 
 from tollcli.gnss.android_raw import PHYSICAL_RANGE_M
 from tollcli.gnss.lnav_subframes import ephemerides
+from tollcli.gnss.measurements import sv_labels
 from tollcli.gnss.orbits import WEEK_S
 from tollcli.readers.ubx import GNSS_ID, UbxRead
 
@@ -25,7 +26,6 @@ SIGNALS = {(0, 0): ("L1", 1575.42e6), (0, 3): ("L2", 1227.60e6), (0, 4): ("L2", 
            (3, 0): ("B1I", 1561.098e6), (3, 1): ("B1I", 1561.098e6), (3, 2): ("B2I", 1207.14e6), (3, 3): ("B2I", 1207.14e6),
            (3, 7): ("B2a", 1176.45e6), (5, 0): ("L1", 1575.42e6), (5, 1): ("L1", 1575.42e6), (5, 4): ("L2", 1227.60e6),
            (5, 5): ("L2", 1227.60e6), (6, 0): ("G1", 1602.0e6), (6, 2): ("G2", 1246.0e6)}  # fmt: skip
-LETTER = {"GPS": "G", "SBAS": "S", "Galileo": "E", "BeiDou": "C", "QZSS": "J", "GLONASS": "R", "NavIC": "I"}
 
 
 def rawx_measurements(ubx: UbxRead) -> pd.DataFrame:
@@ -33,7 +33,7 @@ def rawx_measurements(ubx: UbxRead) -> pd.DataFrame:
     r = ubx.rawx
     gnss = r["gnssId"].to_numpy(np.int64)
     sig = r["sigId"].to_numpy(np.int64)
-    constellation = np.array([GNSS_ID.get(g, "unknown") for g in gnss.tolist()], dtype=object)
+    constellation = pd.Series(gnss).map(GNSS_ID).fillna("unknown").to_numpy(object)
     found = [SIGNALS.get((g, s), ("", np.nan)) for g, s in zip(gnss.tolist(), sig.tolist())]
     signal = np.array([f[0] for f in found], dtype=object)
     carrier = np.array([f[1] for f in found], dtype=float)
@@ -54,7 +54,7 @@ def rawx_measurements(ubx: UbxRead) -> pd.DataFrame:
         "t_rx_gps_s": t,
         "constellation": constellation,
         "svid": svid,
-        "sv": [f"{LETTER.get(c, 'X')}{s:02d}" for c, s in zip(constellation.tolist(), svid.tolist())],
+        "sv": sv_labels(constellation, svid),
         "signal": signal,
         "carrier_hz": carrier,
         "pr_m": pr,
@@ -72,6 +72,7 @@ def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.Da
     """GPS LNAV ephemerides decoded from the log's RXM-SFRBX subframes (an empty table when there are none)."""
     sf = ubx.sfrbx
     gps = sf[(sf["gnssId"] == 0) & (sf["sigId"] == 0) & (sf["words"].map(len) == 10)]  # L1 C/A: LNAV
+    gps = gps.assign(sv=sv_labels(np.full(len(gps), "GPS", dtype=object), gps["svId"].to_numpy()))
     if gps_week_hint is None:
         weeks = ubx.rawx["week"].to_numpy(float) if len(ubx.rawx) else np.array([])
         gps_week_hint = float(np.median(weeks)) if weeks.size else _pvt_week(ubx.pvt)

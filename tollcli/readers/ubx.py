@@ -32,7 +32,7 @@ RAWX_COLUMNS = ("rcvTow", "week", "leapS", "prMes", "cpMes", "doMes", "gnssId", 
 @dataclass
 class UbxRead:
     rawx: pd.DataFrame  # one row per RXM-RAWX measurement (RAWX_COLUMNS + ``message``)
-    sfrbx: pd.DataFrame  # one row per RXM-SFRBX: gnssId, svId, sigId, sv, words (10 × uint32), message
+    sfrbx: pd.DataFrame  # one row per RXM-SFRBX: gnssId, svId, sigId, words (10 × uint32), message
     pvt: pd.DataFrame  # one row per NAV-PVT
     n_messages: int
     n_bad: int  # UBX frames that failed their checksum or could not be parsed
@@ -103,8 +103,6 @@ def read_ubx(path: str, strict: bool = False) -> UbxRead:
     for name in ("gnssId", "sigId"):
         raw_table[name] = [_int_id(v) for v in raw_table[name]]
     sf = pd.DataFrame(sfrbx, columns=["gnssId", "svId", "sigId", "words", "message"])
-    sf["sv"] = [f"{'GSECJRI'[[0, 1, 2, 3, 5, 6, 7].index(g)] if g in (0, 1, 2, 3, 5, 6, 7) else 'X'}{s:02d}"
-                for g, s in zip(sf["gnssId"], sf["svId"])]  # fmt: skip
     pvt_table = pd.DataFrame(pvt, columns=["year", "month", "day", "hour", "minute", "second", "nano", "fix_type", "lat_deg",
                                            "lon_deg", "height_m", "speed_mps", "h_acc_m", "speed_acc_mps", "n_sv", "message"])  # fmt: skip
     return UbxRead(raw_table, sf, pvt_table, n, len(errors))
