@@ -6,7 +6,6 @@ import ast
 import shutil
 from pathlib import Path
 
-import pytest
 from layering import ROOMS, cycles, edges, modules, room_of, upward_imports
 
 PACKAGE = Path(__file__).resolve().parents[1] / "tollcli"

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tollcli.integrity.speed import SpeedParams, detrended_standard_error, speed_integrity, trapezoid_average
+from tollcli.integrity.speed import detrended_standard_error, speed_integrity, trapezoid_average
 from tollcli.simulate.drive import SimConfig, simulate
 from tollcli.simulate.route import straight
 

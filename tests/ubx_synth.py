@@ -2,7 +2,8 @@
 
 Pseudoranges and Doppler are computed from the RINEX navigation file's orbits and clocks for a
 receiver at a known position and velocity (with a clock bias and drift); the same ephemerides go
-into GPS LNAV subframes 1–3 (``encode_subframes``) as RXM-SFRBX. Nothing here uses the decoder
+into GPS LNAV subframes 1–3 (``encode_subframes``) and, for Galileo satellites in the table, I/NAV word
+types 1–5 (``encode_pages``, E1-B page pairs) as RXM-SFRBX. Nothing here uses the decoder
 under test. Noise: ``pr_noise_m`` (the coded prStd 5 = 0.32 m is the receiver's claim, not the truth) and
 ``dop_noise_hz`` = 0.064 Hz, exactly the coded doStd 5 (0.002·2⁵ Hz), so the Doppler σ the tool derives is true.
 """
@@ -13,11 +14,13 @@ import numpy as np
 from pyubx2 import GET, UBXMessage
 
 from tollcli.geodesy import OMEGA_EARTH_RADPS, enu_rotation, geodetic2ecef
+from tollcli.gnss.inav_words import encode_pages
 from tollcli.gnss.lnav_subframes import encode_subframes
 from tollcli.gnss.orbits import WEEK_S
 from tollcli.gnss.satellite_states import satellite_states
 
 C = 299_792_458.0
+GNSS_ID = {"G": 0, "E": 2}
 L1 = 1_575_420_000.0
 
 
@@ -31,9 +34,9 @@ def simulate_ubx(eph_table, t0_gps_s: float, n_epochs: int, lat_deg: float, lon_
                  vel_enu_mps=(0.0, 0.0, 0.0), clock_m: float = 30_000.0, drift_mps: float = 120.0,
                  doppler_fault_mps: float = 0.0, with_sfrbx: bool = True, seed: int = 0,
                  pr_noise_m: float = 0.5, dop_noise_hz: float = 0.064) -> bytes:  # fmt: skip
-    """A UBX byte stream: SFRBX subframes of every GPS satellite used, then one RAWX per second."""
+    """A UBX byte stream: SFRBX navigation data of every GPS and Galileo satellite used, then one RAWX per second."""
     rng = np.random.default_rng(seed)
-    gps = eph_table[eph_table["sv"].str.startswith("G")]
+    gps = eph_table[eph_table["sv"].str[0].isin(["G", "E"])]
     svs = np.array(sorted(gps["sv"].unique()))
     R = enu_rotation(np.array([lat_deg]), np.array([lon_deg]))[0]  # rows: e, n, u in ECEF
     v_ecef = R.T @ np.asarray(vel_enu_mps, float)
@@ -64,7 +67,7 @@ def simulate_ubx(eph_table, t0_gps_s: float, n_epochs: int, lat_deg: float, lon_
         fields = {"rcvTow": round(t % WEEK_S, 3), "week": int(t // WEEK_S), "leapS": 18, "numMeas": idx.size}
         for j, i in enumerate(idx, start=1):
             s = f"_{j:02d}"
-            fields.update({f"prMes{s}": float(pr[i]), f"cpMes{s}": 0.0, f"doMes{s}": float(dop[i]), f"gnssId{s}": 0,
+            fields.update({f"prMes{s}": float(pr[i]), f"cpMes{s}": 0.0, f"doMes{s}": float(dop[i]), f"gnssId{s}": GNSS_ID[svs[i][0]],
                            f"svId{s}": int(svs[i][1:]), f"sigId{s}": 0, f"freqId{s}": 0, f"locktime{s}": 10_000,
                            f"cno{s}": 42, f"prStd{s}": 5, f"cpStd{s}": 1, f"doStd{s}": 5, f"prValid{s}": 1})  # fmt: skip
         rawx.append(UBXMessage("RXM", "RXM-RAWX", GET, **fields).serialize())
@@ -72,7 +75,13 @@ def simulate_ubx(eph_table, t0_gps_s: float, n_epochs: int, lat_deg: float, lon_
         week = int(t0_gps_s // WEEK_S)
         for sv in sorted(used):
             row = gps[gps["sv"] == sv].iloc[(gps[gps["sv"] == sv]["toc_s"] - t0_gps_s).abs().argmin()]
-            eph = {**row.to_dict(), "iode": int(row["IODE"]), "health": int(row["health"])}
+            iode = row.get("iode", np.nan)
+            eph = {**row.to_dict(), "iode": int(row["IODE"] if np.isnan(float(iode)) else iode), "health": int(row["health"])}
+            if sv.startswith("E"):
+                for page in encode_pages(eph, t0_gps_s - 30):
+                    out += UBXMessage("RXM", "RXM-SFRBX", GET, gnssId=2, svId=int(sv[1:]), sigId=1, numWords=8, version=2,
+                                      **{f"dwrd_{i + 1:02d}": int(w) for i, w in enumerate(page)}).serialize()  # fmt: skip
+                continue
             words = encode_subframes(eph, week, int(t0_gps_s % WEEK_S) - 30)
             for sub in words:
                 out += UBXMessage("RXM", "RXM-SFRBX", GET, gnssId=0, svId=int(sv[1:]), sigId=0, numWords=10, version=2,

@@ -76,7 +76,7 @@ def _raw_epochs(log: str, kind: str, nav: str | None, sigma_model: str, sigma_m:
         if ephemerides is None:
             ephemerides = sfrbx_ephemerides(ubx)
             if ephemerides.empty:
-                raise DataError(f"{log}: no complete GPS ephemeris in the log's RXM-SFRBX subframes: give --nav NAVFILE")
+                raise DataError(f"{log}: no complete GPS or Galileo ephemeris in the log's RXM-SFRBX navigation data: give --nav NAVFILE")
         m = with_broadcast_satellites(rawx_measurements(ubx), ephemerides)
     try:
         epochs, meas = raw_epochs(m, sigma_model, sigma_m, nominal, iono_coeffs=iono)

@@ -1,5 +1,5 @@
 """u-blox ``RXM-RAWX`` rows → the raw-measurement table of :mod:`tollcli.gnss.raw_positions`, and
-``RXM-SFRBX`` GPS subframes → an ephemeris table.
+``RXM-SFRBX`` navigation data (GPS LNAV subframes, Galileo I/NAV page pairs) → an ephemeris table.
 
 RAWX gives the pseudorange directly (m, receiver time ``week``·604 800 + ``rcvTow`` in the GPS scale
 of the receiver's clock); the Doppler D (Hz) becomes the pseudorange rate −D·λ; the standard
@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.gnss.android_raw import PHYSICAL_RANGE_M
-from tollcli.gnss.lnav_subframes import ephemerides
+from tollcli.gnss import inav_words, lnav_subframes
 from tollcli.gnss.measurements import sv_labels
 from tollcli.gnss.orbits import WEEK_S
 from tollcli.readers.ubx import GNSS_ID, UbxRead
@@ -69,14 +69,29 @@ def rawx_measurements(ubx: UbxRead) -> pd.DataFrame:
 
 
 def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.DataFrame:
-    """GPS LNAV ephemerides decoded from the log's RXM-SFRBX subframes (an empty table when there are none)."""
+    """GPS LNAV and Galileo I/NAV ephemerides decoded from the log's RXM-SFRBX (an empty table when there are none).
+
+    GPS L1 C/A subframes (``gnssId`` 0, ``sigId`` 0, ten words) carry a 10-bit week resolved near
+    ``gps_week_hint`` (default: the RAWX week, else the first NAV-PVT's date, else today); Galileo E1-B/E5b-I page
+    pairs (``gnssId`` 2, ``sigId`` 1 or 5, eight words or more) carry their own 12-bit GST week."""
     sf = ubx.sfrbx
     gps = sf[(sf["gnssId"] == 0) & (sf["sigId"] == 0) & (sf["words"].map(len) == 10)]  # L1 C/A: LNAV
     gps = gps.assign(sv=sv_labels(np.full(len(gps), "GPS", dtype=object), gps["svId"].to_numpy()))
+    gal = sf[(sf["gnssId"] == 2) & sf["sigId"].isin([1, 5]) & (sf["words"].map(len) >= 8)]  # E1-B, E5b-I: I/NAV
+    gal = gal.assign(sv=sv_labels(np.full(len(gal), "Galileo", dtype=object), gal["svId"].to_numpy()))
+    galileo = inav_words.ephemerides(gal[["sv", "words"]].reset_index(drop=True))
     if gps_week_hint is None:
         weeks = ubx.rawx["week"].to_numpy(float) if len(ubx.rawx) else np.array([])
-        gps_week_hint = float(np.median(weeks)) if weeks.size else _pvt_week(ubx.pvt)
-    return ephemerides(gps[["sv", "words"]].reset_index(drop=True), gps_week_hint)
+        if weeks.size:
+            gps_week_hint = float(np.median(weeks))
+        elif len(galileo):
+            gps_week_hint = float(np.median(galileo["toe_s"].to_numpy(float)) // WEEK_S)
+        else:
+            gps_week_hint = _pvt_week(ubx.pvt)
+    table = lnav_subframes.ephemerides(gps[["sv", "words"]].reset_index(drop=True), gps_week_hint)
+    if galileo.empty:
+        return table
+    return galileo if table.empty else pd.concat([table, galileo], ignore_index=True)
 
 
 def _pvt_week(pvt: pd.DataFrame) -> float:
