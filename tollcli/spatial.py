@@ -51,6 +51,16 @@ def metric_crs(lines_wgs84) -> str:
     return f"EPSG:{32600 + zone if lat >= 0 else 32700 + zone}"
 
 
+def local_frame(lon_deg: float) -> str:
+    """A metric frame for a road near longitude ``lon_deg``: transverse Mercator on the WGS-84 ellipsoid, scale 1 on
+    the whole-degree meridian nearest it. Within 0.5° + 100 km of that meridian the scale error stays below 3·10⁻⁴
+    (x²/2R²; 7·10⁻⁵ for a road within 0.5°), so lengths, buffers and HAL are ground distances to better than
+    0.05 % at any longitude and latitude — unlike one UTM zone for a network wider than the zone."""
+    meridian = int(round(float(lon_deg)))
+    meridian = ((meridian + 180) % 360) - 180
+    return f"+proj=tmerc +lat_0=0 +lon_0={meridian} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
+
+
 def _transformer(crs: str, inverse: bool = False):
     """WGS-84 lon/lat → ``crs`` (or back), made once per thread (building one costs milliseconds)."""
     from pyproj import Transformer

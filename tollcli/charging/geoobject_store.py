@@ -2,8 +2,10 @@
 
 A geo-object file changes rarely and is read for every log. The first load parses
 the GeoJSON (plain single-ring polygons in bulk, anything else feature by feature),
-checks every feature, projects the polygons to their metric CRS and stores the
-result — ids, names, road classes, HAL, CRS and the metric polygons as WKB — in
+checks every feature, projects each polygon to its own metric frame (its ``crs_metric``; a
+feature without one gets :func:`tollcli.spatial.local_frame`) and, for the spatial index, to one
+search CRS for the file, and stores the result — ids, names, road classes, HAL, frames and both
+sets of metric polygons as WKB — in
 ``$TOLLCLI_CACHE_DIR`` (default ``~/.cache/tollcli``) under the file's SHA-256.
 A file that ``tollcli geoobjects check`` rejects is refused (and never compiled).
 Later loads of the same bytes read that copy (WKB keeps every coordinate bit for
@@ -27,7 +29,7 @@ from tollcli.cache import cache_dir
 from tollcli.errors import DataError
 from tollcli.spatial import feature_geometry, project, read_features
 
-CACHE_FORMAT = 2  # 2: compiled only after the file passed geoobjects check
+CACHE_FORMAT = 3  # 2: compiled only after the file passed geoobjects check; 3: a metric frame per geo-object
 
 
 @dataclass
@@ -36,9 +38,11 @@ class GeoObjects:
     names: np.ndarray
     road_class: np.ndarray
     hal_m: np.ndarray
-    polygons: np.ndarray  # metric CRS
-    crs: str
-    tree: shapely.STRtree
+    polygons: np.ndarray  # each in its own metric frame, frames[frame[i]]
+    crs: str  # the search CRS of the file: the spatial index and coarse queries (bounding boxes, reachability)
+    tree: shapely.STRtree  # over the polygons in the search CRS
+    frames: tuple[str, ...] = ()
+    frame: np.ndarray | None = None  # per geo-object: index into frames
     source_sha256: str | None = None  # SHA-256 of the file's bytes these were made from (None: not from a file)
 
 
@@ -107,16 +111,20 @@ def _parse(path: str) -> GeoObjects:
     ids = [str(fid) for fid in ids]
     if len(set(ids)) != len(ids):
         raise DataError(f"{path}: duplicate geo-object ids")
-    crss = {p.get("crs_metric") for p in props}
-    crs = crss.pop() if len(crss) == 1 and None not in crss else None
-    if crs is None:
-        from tollcli.spatial import metric_crs
+    from tollcli.spatial import local_frame, metric_crs
 
-        crs = metric_crs(polys)
-    metric = project(polys, crs)
+    centre_lon = shapely.get_coordinates(shapely.centroid(polys))[:, 0]
+    own = [str(p["crs_metric"]) if p.get("crs_metric") else local_frame(lon) for p, lon in zip(props, centre_lon)]
+    frames = tuple(sorted(set(own)))
+    frame = np.array([frames.index(f) for f in own], dtype=np.int64)
+    metric = np.empty(len(polys), dtype=object)
+    for k, name in enumerate(frames):
+        metric[frame == k] = project(polys[frame == k], name)
+    crs = frames[0] if len(frames) == 1 else metric_crs(polys)
+    search = metric if len(frames) == 1 else project(polys, crs)
     return GeoObjects(np.array(ids, dtype=object), np.array([str(p.get("name", "")) for p in props], dtype=object),
                       np.array([str(p.get("road_class", "")) for p in props], dtype=object), hals, metric, crs,
-                      shapely.STRtree(metric))  # fmt: skip
+                      shapely.STRtree(search), frames, frame)  # fmt: skip
 
 
 def _float(value) -> float:
@@ -155,22 +163,33 @@ def _read_compiled(path: Path) -> GeoObjects:
     with np.load(path, allow_pickle=False) as z:
         if int(z["format"]) != CACHE_FORMAT:
             raise ValueError("cache format")
-        blob, ends = z["wkb"].tobytes(), z["wkb_ends"]
-        starts = np.concatenate(([0], ends[:-1]))
-        metric = shapely.from_wkb([blob[a:b] for a, b in zip(starts.tolist(), ends.tolist())])
+        metric, search = _from_wkb(z["wkb"], z["wkb_ends"]), _from_wkb(z["wkb_search"], z["wkb_search_ends"])
         return GeoObjects(z["ids"].astype(object), z["names"].astype(object), z["road_class"].astype(object),
-                          z["hal_m"], metric, str(z["crs"]), shapely.STRtree(metric))  # fmt: skip
+                          z["hal_m"], metric, str(z["crs"]), shapely.STRtree(search), tuple(z["frames"].astype(str).tolist()),
+                          z["frame"])  # fmt: skip
+
+
+def _from_wkb(blob: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    data = blob.tobytes()
+    starts = np.concatenate(([0], ends[:-1]))
+    return shapely.from_wkb([data[a:b] for a, b in zip(starts.tolist(), ends.tolist())])
+
+
+def _to_wkb(geoms) -> tuple[np.ndarray, np.ndarray]:
+    wkb = shapely.to_wkb(np.asarray(geoms, dtype=object)).tolist()
+    return np.frombuffer(b"".join(wkb), np.uint8), np.cumsum([len(w) for w in wkb])
 
 
 def _write_compiled(path: Path, geo: GeoObjects) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        wkb = shapely.to_wkb(geo.polygons).tolist()
+        wkb, wkb_ends = _to_wkb(geo.polygons)
+        wkb_search, wkb_search_ends = _to_wkb(geo.tree.geometries)
         fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
         with os.fdopen(fd, "wb") as fh:
             np.savez(fh, format=CACHE_FORMAT, ids=geo.ids.astype(str), names=geo.names.astype(str),
-                     road_class=geo.road_class.astype(str), hal_m=geo.hal_m, crs=geo.crs,
-                     wkb=np.frombuffer(b"".join(wkb), np.uint8), wkb_ends=np.cumsum([len(w) for w in wkb]))  # fmt: skip
+                     road_class=geo.road_class.astype(str), hal_m=geo.hal_m, crs=geo.crs, frames=np.array(geo.frames, dtype=str),
+                     frame=geo.frame, wkb=wkb, wkb_ends=wkb_ends, wkb_search=wkb_search, wkb_search_ends=wkb_search_ends)  # fmt: skip
         os.replace(tmp, path)
     except OSError:
         try:

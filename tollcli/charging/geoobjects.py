@@ -4,19 +4,25 @@ A road network is a GeoJSON FeatureCollection of LineStrings (centre lines) with
 properties ``id``, ``name``, ``road_class``, optional ``hal_m``, optional
 ``direction`` and ``tolled`` (default true). Non-tolled roads only bound HAL.
 
-:func:`build_geoobjects` works in a metric CRS (the local UTM zone picked from
-the data) and, for every tolled segment:
+:func:`build_geoobjects` works, for every tolled segment, in a metric frame chosen for it
+(a transverse Mercator on the nearest whole-degree meridian, :func:`tollcli.spatial.local_frame`:
+ground distances to ≤ 0.05 % at any extent) and:
 
 1. HAL = min(HAL_max, its own ``hal_m`` if given, ½ · distance to the nearest road it
-   is not connected to). "Connected" means touching within ``connect_tol_m``
+   is not connected to). "Connected" means touching within ``connect_tol_m`` on the same
+   level (``layer``, ``bridge``, ``tunnel``) — or, for a map with topology, sharing a node
    (a junction); connected roads meet the segment by construction and would
-   otherwise force HAL to zero.
-2. Ends that meet another road are trimmed by ``trim_factor · HAL`` so that the
-   buffer does not reach into the roads leaving the junction.
+   otherwise force HAL to zero. A road that crosses without meeting (a bridge, a tunnel)
+   does not bound HAL: the segment is cut back around it instead (step 2).
+2. The parts of the centre line within ``trim_factor · HAL`` of a road it meets are
+   cut (at a right-angle junction: the end, by ``trim_factor · HAL``; at a shallow merge,
+   as far as the roads stay that close), so that the buffer does not reach into the roads
+   leaving the junction; the parts within ``trim_factor · HAL`` of a crossing road are
+   removed the same way.
 3. The geo-object is the centre line buffered by HAL (round caps): a position
    inside it, valid with HPL = HAL, is within HAL of the tolled road.
 
-The output is GeoJSON in WGS-84 (RFC 7946) with the metric CRS used recorded
+The output is GeoJSON in WGS-84 (RFC 7946) with the metric frame used recorded
 per feature (``crs_metric``), so recognition can project positions the same way.
 """
 
@@ -26,10 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from shapely.ops import substring
 
 from tollcli.errors import DataError
-from tollcli.spatial import feature_geometry, metric_crs, project, read_features
+from tollcli.spatial import feature_geometry, local_frame, metric_crs, project, read_features
 
 HAL_MAX_M = 50.0
 CONNECT_TOL_M = 1.0
@@ -81,49 +86,136 @@ def _roads(features: list[dict], path: str):
     return ids, props, lines
 
 
+def road_level(props: dict) -> int:
+    """A road's vertical level: its ``layer``, else +1 on a bridge, −1 in a tunnel, else 0 (OpenStreetMap rules)."""
+    layer = props.get("layer")
+    try:
+        return int(layer)
+    except (TypeError, ValueError):
+        pass
+    if _truthy(props.get("bridge")):
+        return 1
+    return -1 if _truthy(props.get("tunnel")) else 0
+
+
+def _truthy(value) -> bool:
+    return value not in (None, False, "", "no", "0", 0)
+
+
+@dataclass
+class Roads:
+    """Centre lines (WGS-84) with their ids and properties; ``junctions``: pairs (i, j) of roads that meet (share a
+    node) when the source knows its topology (OpenStreetMap), else None: roads touching in 2-D on one level meet."""
+
+    ids: list[str]
+    props: list[dict]
+    lines: list
+    junctions: set[tuple[int, int]] | None = None
+
+
 def build_geoobjects(path: str, hal_max_m: float = HAL_MAX_M, connect_tol_m: float = CONNECT_TOL_M,
                      trim_factor: float = TRIM_FACTOR) -> dict:  # fmt: skip
     """A roads file → a GeoJSON FeatureCollection of geo-objects (dict, WGS-84)."""
     ids, props, lines = _roads(read_features(path), path)
-    crs = metric_crs(lines)
-    metric = project(lines, crs)
+    doc, _ = build_from_roads(Roads(ids, props, lines), path, hal_max_m, connect_tol_m, trim_factor)
+    return doc
+
+
+def build_from_roads(roads: Roads, path: str, hal_max_m: float = HAL_MAX_M, connect_tol_m: float = CONNECT_TOL_M,
+                     trim_factor: float = TRIM_FACTOR, hal_min_m: float | None = None) -> tuple[dict, list[dict]]:  # fmt: skip
+    """Geo-objects of the tolled roads, each built in its own metric frame (:func:`tollcli.spatial.local_frame`).
+
+    Roads that cross a tolled one without meeting it (another level, or no shared node) do not bound its HAL:
+    the tolled centre line is cut back within ``trim_factor`` · HAL of them, so no position on the crossing road can
+    count for it; the crossing road ids and the length cut are recorded per geo-object (``crossings``, ``cut_m``).
+    With ``hal_min_m`` (networks built from a map), a road that would push HAL below it is cut around the same way,
+    and a tolled road left with nothing to charge is skipped — returned as ``{"id", "reason"}`` — instead of an error.
+    """
+    props, lines = roads.props, roads.lines
     tolled = np.array([p.get("tolled", True) is not False for p in props])
     if not tolled.any():
         raise DataError(f"{path}: no tolled road (every feature has tolled: false)")
+    lines = np.asarray(lines, dtype=object)
+    centre_lon = shapely.get_coordinates(shapely.centroid(lines))[:, 0]
+    frames = np.array([local_frame(lon) for lon in centre_lon], dtype=object)
+    levels = np.array([road_level(p) for p in props])
+    features: dict[int, dict] = {}
+    skipped: list[dict] = []
+    for frame in sorted(set(frames[tolled])):
+        group = np.flatnonzero(tolled & (frames == frame))
+        built, gone = _build_in_frame(group, frame, roads, lines, levels, path, hal_max_m, connect_tol_m, trim_factor, hal_min_m)
+        features.update(built)
+        skipped += gone
+    order = sorted(features)
+    return {"type": "FeatureCollection", "features": [features[i] for i in order]}, sorted(skipped, key=lambda s: s["id"])
+
+
+#: buffered geo-objects are densified to this vertex spacing (m) before going back to longitude/latitude, so that
+#: a straight edge in the metric frame stays within a millimetre of the edge between its vertices in any frame
+SEGMENT_M = 100.0
+
+
+def _build_in_frame(group, frame, roads, lines, levels, path, hal_max_m, connect_tol_m, trim_factor, hal_min_m):
+    ids, props = roads.ids, roads.props
+    metric = project(lines, frame)
     tree = shapely.STRtree(metric)
-    # every pair within reach of a HAL decision: 2·HAL_max around each tolled segment
-    left, right = tree.query(metric[tolled], predicate="dwithin", distance=2 * hal_max_m)
-    tolled_idx = np.flatnonzero(tolled)
-    left = tolled_idx[left]
+    left, right = tree.query(metric[group], predicate="dwithin", distance=2 * hal_max_m)
+    left = group[left]
     other = left != right
     left, right = left[other], right[other]
     dist = shapely.distance(metric[left], metric[right])
-    connected = dist <= connect_tol_m
-    hal = np.full(len(metric), hal_max_m)
+    if roads.junctions is None:
+        meets = (dist <= connect_tol_m) & (levels[left] == levels[right])
+    else:
+        meets = np.array([(a, b) in roads.junctions or (b, a) in roads.junctions for a, b in zip(left.tolist(), right.tolist())], bool)
+    cut_within = connect_tol_m if hal_min_m is None else max(connect_tol_m, 2 * hal_min_m)
+    crossing = ~meets & (dist <= cut_within)
+    bounding = ~meets & ~crossing
     own = np.array([float(p["hal_m"]) if p.get("hal_m") not in (None, "") else np.inf for p in props])
-    hal = np.minimum(hal, own)
-    np.minimum.at(hal, left[~connected], dist[~connected] / 2.0)
-    cores = []
-    for i in tolled_idx:  # trimming needs shapely's substring, which works on one line at a time
+    hal = np.minimum(np.full(len(metric), hal_max_m), own)
+    np.minimum.at(hal, left[bounding], dist[bounding] / 2.0)
+    built, skipped = {}, []
+    for i in group:
         line = metric[i]
-        touching = right[(left == i) & connected]
-        ends = shapely.points(np.asarray([line.coords[0], line.coords[-1]]))
-        near_end = (shapely.distance(ends[:, None], metric[touching][None, :]) <= connect_tol_m).any(axis=1) if touching.size else (False, False)
-        start_cut, end_cut = (trim_factor * hal[i] if near else 0.0 for near in near_end)
-        if start_cut + end_cut >= line.length:
-            raise DataError(f"{path}: feature {ids[i]}: too short ({line.length:.1f} m) to trim {start_cut + end_cut:.1f} m at its junctions")
-        cores.append(substring(line, start_cut, line.length - end_cut))
-    cores = np.asarray(cores, dtype=object)
-    polygons = project(shapely.buffer(cores, hal[tolled_idx], quad_segs=16), crs, inverse=True)
-    features = []
-    for k, i in enumerate(tolled_idx):
+        touching = right[(left == i) & meets]
+        crossers = right[(left == i) & crossing]
+        why = ""
+        if hal_min_m is not None and hal[i] < hal_min_m:
+            why = f"HAL {hal[i]:.1f} m below the minimum {hal_min_m:g} m (another road {2 * hal[i]:.1f} m away)"
+        core, cut_m = line, 0.0
+        if not why and touching.size:  # the roads it meets: cut within trim·HAL of them (at a right angle: the end)
+            core = shapely.difference(line, shapely.buffer(shapely.union_all(metric[touching]), trim_factor * hal[i], quad_segs=16))
+            if core.is_empty or core.length < 1.0:
+                why = f"too short ({line.length:.1f} m) to trim {trim_factor:g} × HAL {hal[i]:.1f} m at its junctions"
+        if not why and crossers.size:  # the roads it crosses without meeting: cut around them the same way
+            kept = shapely.difference(core, shapely.buffer(shapely.union_all(metric[crossers]), trim_factor * hal[i], quad_segs=16))
+            cut_m = core.length - kept.length
+            core = kept
+            if core.is_empty or core.length < 1.0:
+                why = f"nothing left after cutting {cut_m:.1f} m around the roads crossing it ({', '.join(sorted(ids[j] for j in crossers))})"
+        if why:
+            if hal_min_m is None:
+                raise DataError(f"{path}: feature {ids[i]}: {why}")
+            skipped.append({"id": ids[i], "reason": why})
+            continue
+        polygon = shapely.segmentize(shapely.buffer(core, hal[i], quad_segs=16), SEGMENT_M)
         properties = {
             "id": ids[i], "name": props[i].get("name", ""), "road_class": props[i].get("road_class", ""),
-            "direction": props[i].get("direction"), "hal_m": round(float(hal[i]), 3), "crs_metric": crs,
-            "length_m": round(cores[k].length, 1),
+            "direction": props[i].get("direction"), "hal_m": round(float(hal[i]), 3), "crs_metric": frame,
+            "length_m": round(core.length, 1),
         }  # fmt: skip
-        features.append({"type": "Feature", "properties": properties, "geometry": shapely.geometry.mapping(polygons[k])})
-    return {"type": "FeatureCollection", "features": features}
+        if crossers.size:
+            properties.update(crossings=sorted(ids[j] for j in crossers), cut_m=round(cut_m, 1))
+        for key in PASSED_THROUGH:
+            if props[i].get(key) not in (None, ""):
+                properties[key] = props[i][key]
+        built[int(i)] = {"type": "Feature", "properties": properties,
+                         "geometry": shapely.geometry.mapping(project([polygon], frame, inverse=True)[0])}  # fmt: skip
+    return built, skipped
+
+
+#: road properties a geo-object keeps (OpenStreetMap ways, reference, travel direction, tunnel flag)
+PASSED_THROUGH = ("osm_way_ids", "ref", "oneway", "tunnel", "tunnel_m", "maxspeed")
 
 
 def _crs_problem(crs, seen: dict) -> str:

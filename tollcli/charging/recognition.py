@@ -33,7 +33,8 @@ from tollcli.charging.geoobject_store import GeoObjects, load_geoobjects  # noqa
 
 
 def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(epoch row, geo-object index) for every position inside a geo-object, and the metric x, y of all rows."""
+    """(epoch row, geo-object index) for every position inside a geo-object, and per pair the position's metric x, y
+    in that geo-object's own frame (the bounding boxes are found in the file's search CRS)."""
     from tollcli.spatial import wgs84_to
 
     lon, lat = epochs["lon_deg"].to_numpy(float), epochs["lat_deg"].to_numpy(float)
@@ -43,10 +44,17 @@ def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, 
     # the boxes hit, then the exact test on coordinates: the same pairs as predicate="within", without a geometry per point
     hit, obj = geo.tree.query(shapely.points(x[have], y[have]))
     rows = have[hit]
-    inside = shapely.contains_xy(geo.polygons[obj], x[rows], y[rows])
-    rows, obj = rows[inside], obj[inside]
+    px, py = x[rows], y[rows]
+    if geo.frame is not None and not (len(geo.frames) == 1 and geo.frames[0] == geo.crs):
+        frame = geo.frame[obj]
+        for k in np.unique(frame):  # one transform per frame met (a few), not per position
+            sel = frame == k
+            fx, fy = wgs84_to(geo.frames[k]).transform(lon[rows[sel]], lat[rows[sel]])
+            px[sel], py[sel] = fx, fy
+    inside = shapely.contains_xy(geo.polygons[obj], px, py)
+    rows, obj, px, py = rows[inside], obj[inside], px[inside], py[inside]
     order = np.lexsort((obj, rows))
-    return rows[order], obj[order], x, y
+    return rows[order], obj[order], px[order], py[order]
 
 
 def utc_seconds(time_utc: pd.Series) -> np.ndarray:
@@ -97,7 +105,7 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
     ``row_offset`` is added to the epoch rows (for a chunk of a longer log). ``geometry``:
     the WLS geometry of ``meas`` when the caller has it (the same for every HAL).
     """
-    rows, obj, x, y = candidate_pairs(epochs, geo)
+    rows, obj, px, py = candidate_pairs(epochs, geo)
     if rows.size == 0:
         return {"epoch_row": np.zeros(0, np.int64), "obj": np.zeros(0, np.int64), "raim_status": np.zeros(0, object),
                 "test_stat": np.zeros(0), "threshold": np.zeros(0), "p_fa": np.zeros(0),
@@ -109,7 +117,7 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
     de, dn = raim["fde_shift_e_m"].to_numpy(), raim["fde_shift_n_m"].to_numpy()
     moved = np.flatnonzero((de != 0) | (dn != 0))  # an unshifted position is inside: it is a candidate pair
     shifted_inside = np.ones(rows.size, bool)
-    shifted_inside[moved] = shapely.contains_xy(geo.polygons[obj[moved]], x[rows[moved]] + de[moved], y[rows[moved]] + dn[moved])
+    shifted_inside[moved] = shapely.contains_xy(geo.polygons[obj[moved]], px[moved] + de[moved], py[moved] + dn[moved])
     return {"epoch_row": rows + row_offset, "obj": obj, "raim_status": status, "test_stat": raim["test_stat"].to_numpy(),
             "threshold": raim["threshold"].to_numpy(), "p_fa": raim["p_fa"].to_numpy(),
             "test_stat_source": raim["test_stat_source"].to_numpy(dtype=object),

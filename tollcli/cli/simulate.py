@@ -41,11 +41,33 @@ def _command(ctx: typer.Context) -> str:
     return " ".join(words + ["-o", shlex.quote(str(ctx.params["output"]))])
 
 
+def _route_lines(route: str, via: str | None, path_from: str | None, path_to: str | None) -> list:
+    """The lines to drive: a GeoJSON route (optionally --via ids) or an OpenStreetMap one (--via ways, --from/--to)."""
+    from tollcli.readers.osm import is_osm
+
+    if not is_osm(route):
+        if path_from:
+            raise UsageError("--from/--to need an OpenStreetMap --route (.osm.pbf, .osm)")
+        return load_route(route, via.split(",") if via else None)
+    from tollcli.simulate.osm_route import route_by_ways, shortest_route
+
+    if path_from:
+        ends = [_floats(p, name) for p, name in ((path_from, "--from"), (path_to, "--to"))]
+        if any(len(e) != 2 for e in ends):
+            raise UsageError("--from and --to are LAT,LON in degrees")
+        return shortest_route(route, tuple(ends[0]), tuple(ends[1]))
+    if not via:
+        raise UsageError(f"{route}: an OpenStreetMap route needs --via WAY,WAY… or --from LAT,LON --to LAT,LON")
+    return route_by_ways(route, [v.strip() for v in via.split(",") if v.strip()])
+
+
 def simulate(
     ctx: typer.Context,
     output: Annotated[str, typer.Option("-o", "--output", help="Folder for the drive's files (created if needed).")],
-    route: Annotated[Optional[str], typer.Option("--route", help="GeoJSON with the LineString(s) to drive; without it a straight drive from --start along --heading.")] = None,
-    via: Annotated[Optional[str], typer.Option("--via", help="Comma-separated road ids of --route to drive, in order.")] = None,
+    route: Annotated[Optional[str], typer.Option("--route", help="GeoJSON with the LineString(s) to drive, or an OpenStreetMap file (.osm.pbf, .osm); without it a straight drive from --start along --heading.")] = None,
+    via: Annotated[Optional[str], typer.Option("--via", help="Comma-separated road ids of --route to drive, in order (OpenStreetMap: way ids).")] = None,
+    path_from: Annotated[Optional[str], typer.Option("--from", help="LAT,LON: with an OpenStreetMap --route, drive the shortest path from here to --to.")] = None,
+    path_to: Annotated[Optional[str], typer.Option("--to", help="LAT,LON: the end of the shortest path (with --from).")] = None,
     geo: Annotated[Optional[str], typer.Option("--geo", help="Geo-objects: the truth then lists those really driven.")] = None,
     env: Annotated[str, typer.Option("--env", help="Street environment (paper 001 Table I): urban, rural or open.")] = "urban",
     constellations: Annotated[str, typer.Option("--constellations", help="Nominal constellations: gps, galileo or gps,galileo.")] = "gps,galileo",
@@ -95,8 +117,10 @@ def simulate(
         raise UsageError(f"--iono {iono!r}: single, sbas or iono-free")
     if fault_sv and not (fault_sv[:1].upper() in "GE" and fault_sv[1:].isdigit()):
         raise UsageError(f"--fault-sv {fault_sv!r}: like G05 or E11")
+    if (path_from is None) != (path_to is None) or (path_from and (via or not route)):
+        raise UsageError("--from and --to go together, with an OpenStreetMap --route and without --via")
     if route:
-        trajectory = along_route(load_route(route, via.split(",") if via else None), speed, rate, duration)
+        trajectory = along_route(_route_lines(route, via, path_from, path_to), speed, rate, duration)
     else:
         lat_lon = _floats(start, "--start")
         if len(lat_lon) != 2 or not (-90 <= lat_lon[0] <= 90 and -180 <= lat_lon[1] <= 180):
