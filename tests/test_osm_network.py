@@ -4,9 +4,11 @@ junctions, grade separation (roads crossing in tunnels or on bridges are never c
 from __future__ import annotations
 
 import json
+from decimal import ROUND_HALF_UP, Decimal
 
 import numpy as np
 import pandas as pd
+import pyproj
 import pytest
 import shapely
 
@@ -165,6 +167,27 @@ def test_a_drive_along_tolled_sections_is_charged_each_one(tmp_path, helsinki):
     truth = set(json.loads((drive / "truth-geoobjects.json").read_text()))
     assert truth == {c for c in best if c in built}
     assert _charged(tmp_path, drive, geo) == truth
+    # the same drive under a per-km truck toll: each section charged its length (junction to junction, on the
+    # ellipsoid) at the rate of the truck's Euro class
+    tariff = tmp_path / "per-km.toml"
+    tariff.write_text('currency = "EUR"\ntimezone = "Europe/Helsinki"\n[vehicle]\nvehicle_class = ["truck"]\n'
+                      'euro_class = ["euro5", "euro6"]\n[[table]]\nvalid_from = 2020-01-01\n'
+                      '[[table.rate]]\nroad_class = "primary"\neuro_class = "euro5"\nper_km = 0.415\n'
+                      '[[table.rate]]\nroad_class = "primary"\neuro_class = "euro6"\nper_km = 0.387\n')  # fmt: skip
+    inv = drive / "per-km.json"
+    r = run_cli("process", str(drive / "drive.nmea"), "--geo", str(geo), "--tariff", str(tariff), "--vehicle-class", "truck",
+                "--vehicle-attr", "euro_class=euro6", "-o", str(inv))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    lines = json.loads(inv.read_text())["lines"]
+    assert {line["geoobject"] for line in lines} == truth and len(lines) == len(truth)
+    geod = pyproj.Geod(ellps="WGS84")
+    for line in lines:
+        section = roads.lines[roads.ids.index(line["geoobject"])]
+        ground_m = geod.geometry_length(section)
+        km = Decimal(line["length_km"])
+        assert abs(km * 1000 - Decimal(ground_m)) <= Decimal(ground_m) * Decimal("0.0005") + Decimal("0.5"), (line, ground_m)
+        assert line["rate_per_km"] == "0.387" and line["tariff_table"] == "2020-01-01"
+        assert Decimal(line["fee"]) == (Decimal("0.387") * km).quantize(Decimal("0.01"), ROUND_HALF_UP)
 
 
 def test_shortest_path_on_the_map_follows_its_roads(tmp_path):

@@ -29,7 +29,9 @@ from tollcli.cache import cache_dir
 from tollcli.errors import DataError
 from tollcli.spatial import feature_geometry, project, read_features
 
-CACHE_FORMAT = 3  # 2: compiled only after the file passed geoobjects check; 3: a metric frame per geo-object
+#: the slowest traffic a tunnel's GNSS outage is allowed for (7.2 km/h, a congested tunnel), m/s
+TUNNEL_MIN_SPEED_MPS = 2.0
+CACHE_FORMAT = 4  # 2: compiled only after the file passed geoobjects check; 3: a metric frame per geo-object; 4: lengths
 
 
 @dataclass
@@ -44,6 +46,19 @@ class GeoObjects:
     frames: tuple[str, ...] = ()
     frame: np.ndarray | None = None  # per geo-object: index into frames
     source_sha256: str | None = None  # SHA-256 of the file's bytes these were made from (None: not from a file)
+    #: per geo-object: the section's length, ground metres (``section_length_m``, else ``length_m``; NaN: none given),
+    #: what per-km rates charge
+    length_m: np.ndarray | None = None
+    #: per geo-object: metres of it in tunnels (``tunnel_m``; the whole section when only ``tunnel`` is set; 0: none),
+    #: where no GNSS reaches: passages and findings expect the gap
+    tunnel_m: np.ndarray | None = None
+
+    def tunnel_lengths_m(self) -> np.ndarray:
+        return self.tunnel_m if self.tunnel_m is not None else np.zeros(len(self.ids))
+
+    def tunnel_times_s(self) -> np.ndarray:
+        """Per geo-object: how long its tunnels may keep GNSS away, s (their length at ``TUNNEL_MIN_SPEED_MPS``)."""
+        return self.tunnel_lengths_m() / TUNNEL_MIN_SPEED_MPS
 
 
 def load_geoobjects(path: str) -> GeoObjects:
@@ -124,7 +139,25 @@ def _parse(path: str) -> GeoObjects:
     search = metric if len(frames) == 1 else project(polys, crs)
     return GeoObjects(np.array(ids, dtype=object), np.array([str(p.get("name", "")) for p in props], dtype=object),
                       np.array([str(p.get("road_class", "")) for p in props], dtype=object), hals, metric, crs,
-                      shapely.STRtree(search), frames, frame)  # fmt: skip
+                      shapely.STRtree(search), frames, frame, None, section_lengths(props), tunnel_lengths(props))  # fmt: skip
+
+
+def section_lengths(props: list[dict]) -> np.ndarray:
+    """Each geo-object's section length, m: ``section_length_m`` (junction to junction), else ``length_m``, else NaN."""
+    return np.array([_float(p.get("section_length_m", p.get("length_m"))) for p in props])
+
+
+def tunnel_lengths(props: list[dict]) -> np.ndarray:
+    """Each geo-object's length in tunnels, m: ``tunnel_m``, else its whole length when ``tunnel`` is set, else 0."""
+    out = np.zeros(len(props))
+    for i, p in enumerate(props):
+        given = _float(p.get("tunnel_m"))
+        if np.isfinite(given) and given > 0:
+            out[i] = given
+        elif p.get("tunnel") not in (None, False, 0, "") and str(p.get("tunnel")).lower() not in ("no", "0", "false"):
+            whole = _float(p.get("section_length_m", p.get("length_m")))
+            out[i] = whole if np.isfinite(whole) else 0.0
+    return out
 
 
 def _float(value) -> float:
@@ -166,7 +199,7 @@ def _read_compiled(path: Path) -> GeoObjects:
         metric, search = _from_wkb(z["wkb"], z["wkb_ends"]), _from_wkb(z["wkb_search"], z["wkb_search_ends"])
         return GeoObjects(z["ids"].astype(object), z["names"].astype(object), z["road_class"].astype(object),
                           z["hal_m"], metric, str(z["crs"]), shapely.STRtree(search), tuple(z["frames"].astype(str).tolist()),
-                          z["frame"])  # fmt: skip
+                          z["frame"], None, z["length_m"], z["tunnel_m"])  # fmt: skip
 
 
 def _from_wkb(blob: np.ndarray, ends: np.ndarray) -> np.ndarray:
@@ -189,7 +222,7 @@ def _write_compiled(path: Path, geo: GeoObjects) -> None:
         with os.fdopen(fd, "wb") as fh:
             np.savez(fh, format=CACHE_FORMAT, ids=geo.ids.astype(str), names=geo.names.astype(str),
                      road_class=geo.road_class.astype(str), hal_m=geo.hal_m, crs=geo.crs, frames=np.array(geo.frames, dtype=str),
-                     frame=geo.frame, wkb=wkb, wkb_ends=wkb_ends, wkb_search=wkb_search, wkb_search_ends=wkb_search_ends)  # fmt: skip
+                     frame=geo.frame, length_m=geo.length_m, tunnel_m=geo.tunnel_m, wkb=wkb, wkb_ends=wkb_ends, wkb_search=wkb_search, wkb_search_ends=wkb_search_ends)  # fmt: skip
         os.replace(tmp, path)
     except OSError:
         try:

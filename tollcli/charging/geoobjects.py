@@ -202,7 +202,7 @@ def _build_in_frame(group, frame, roads, lines, levels, path, hal_max_m, connect
         properties = {
             "id": ids[i], "name": props[i].get("name", ""), "road_class": props[i].get("road_class", ""),
             "direction": props[i].get("direction"), "hal_m": round(float(hal[i]), 3), "crs_metric": frame,
-            "length_m": round(core.length, 1),
+            "length_m": round(core.length, 1), "section_length_m": round(line.length, 1),
         }  # fmt: skip
         if crossers.size:
             properties.update(crossings=sorted(ids[j] for j in crossers), cut_m=round(cut_m, 1))

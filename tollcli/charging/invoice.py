@@ -37,7 +37,8 @@ def _iso(ts) -> str:
 
 def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: GeoObjects, tariff: Tariff, *,
                   vehicle: str, vehicle_class: str, inputs: dict[str, str], parameters: dict, period,
-                  details: tuple[dict, dict] | None = None, continued: dict | None = None) -> dict:  # fmt: skip
+                  details: tuple[dict, dict] | None = None, continued: dict | None = None,
+                  vehicle_attrs: dict[str, str] | None = None) -> dict:  # fmt: skip
     """The invoice document (a dict of JSON-ready values).
 
     Per passage: its statuses counted and its independent valid positions listed as
@@ -46,6 +47,8 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
     ``continued``: geo-object id → ``{"log", "exit_utc"}`` of a passage the vehicle's previous log charged and
     ended inside; this log's first passage of that geo-object, entered at most ``PASSAGE_GAP_S`` after that
     exit, is the same passage: it is listed (band ``continued``, with its evidence) at fee 0, never charged twice.
+    ``vehicle_attrs``: the vehicle's attributes for a tariff of per-km tables (weight class, axles, Euro class…);
+    its lines then carry the charged length, the rate per km and per passage, the table and its rows.
     """
     index = {gid: i for i, gid in enumerate(geo.ids)}
     statuses, evidence = details if details is not None else passage_details(positions)
@@ -54,6 +57,7 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
     lines, not_charged, total = [], [], Decimal(0)
     zero = Decimal(0).quantize(Decimal(1).scaleb(-tariff.minor_unit))
     carried_in = dict(continued or {})
+    vehicle_attributes = {**(vehicle_attrs or {}), "vehicle_class": vehicle_class}
     columns = ("geoobject", "passage", "n_inside", "n_valid", "n_independent", "charged", "entry_utc")
     for k, (gid, passage, n_inside, n_valid, n_indep, charged, entry_utc) in enumerate(zip(*(charges[c] for c in columns))):
         i = index[gid]
@@ -71,15 +75,18 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
             lines.append({**base, "fee": str(zero), "band": "continued", "continues": carried,
                           "evidence": evidence.get((gid, passage), [])})  # fmt: skip
             continue
-        fee, band = tariff.fee(gid, geo.road_class[i], vehicle_class, pd.Timestamp(entry_utc).to_pydatetime())
-        total += fee
-        lines.append({**base, "fee": str(fee), "band": band, "evidence": evidence.get((gid, passage), [])})
+        length_m = float(geo.length_m[i]) if geo.length_m is not None else None
+        price = tariff.price(gid, geo.road_class[i], length_m, vehicle_attributes, pd.Timestamp(entry_utc).to_pydatetime())
+        total += price.fee
+        lines.append({**base, "fee": str(price.fee), "band": price.band, **_rate_fields(price),
+                      "evidence": evidence.get((gid, passage), [])})  # fmt: skip
     for line in lines:  # the sources whose verdicts made its positions count (the audit bounds a false charge with them)
         line["vouched_by"] = vouched_by(line["evidence"])
     doc = {
         "tool": f"tollcli {__version__}",
         "vehicle": vehicle,
         "vehicle_class": vehicle_class,
+        **({"vehicle_attributes": dict(sorted(vehicle_attrs.items()))} if vehicle_attrs else {}),
         "currency": tariff.currency,
         "period": {"start_utc": _iso(period[0]), "end_utc": _iso(period[1])} if period else None,
         "inputs": inputs,
@@ -96,6 +103,14 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
         doc["status_notes"] = {"probable_false_alarm": STATUS_MEANINGS["probable_false_alarm"]
                                + f" (p_fa = {parameters.get('p_fa')}; see each position's p_fa in the evidence)"}  # fmt: skip
     return doc
+
+
+def _rate_fields(price) -> dict:
+    """An invoice line's pricing beyond fee and band: for per-km tables, what was charged for and at which rate."""
+    if not price.table:
+        return {}
+    return {"tariff_table": price.table, "length_km": None if price.length_km is None else str(price.length_km),
+            "rate_per_km": str(price.per_km), "rate_per_passage": str(price.per_passage), "rates": price.components}  # fmt: skip
 
 
 def continues(exit_utc: str, entry_utc) -> bool:
@@ -193,8 +208,11 @@ def seal(invoice: dict) -> SealedInvoice:
 def invoice_csv(invoice: dict) -> str:
     """The invoice lines as CSV (one row per charged passage) with the total last."""
     cols = ["geoobject", "name", "road_class", "entry_utc", "exit_utc", "n_valid_independent", "band", "fee"]
+    if any("tariff_table" in line for line in invoice["lines"]):  # per-km tables: what each fee was charged for
+        cols[-1:-1] = ["tariff_table", "length_km", "rate_per_km", "rate_per_passage"]
     rows = [",".join(cols)]
     for line in invoice["lines"]:
-        rows.append(",".join(json.dumps(line[c]) if isinstance(line[c], str) and "," in line[c] else str(line[c]) for c in cols))
-    rows.append(",".join(["TOTAL", "", "", "", "", "", invoice["currency"], invoice["total"]]))
+        cells = ["" if line.get(c) is None else line.get(c) for c in cols]
+        rows.append(",".join(json.dumps(v) if isinstance(v, str) and "," in v else str(v) for v in cells))
+    rows.append(",".join(["TOTAL", *[""] * (len(cols) - 3), invoice["currency"], invoice["total"]]))
     return "\n".join(rows) + "\n"

@@ -18,10 +18,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import shapely
+from pyproj import Geod
 
 from tollcli.charging.geoobjects import Roads
 from tollcli.errors import UsageError
 from tollcli.readers.osm import OsmRoads
+
+#: ground lengths (tunnel_m) on the WGS-84 ellipsoid
+_GEOD = Geod(ellps="WGS84")
 
 
 def tolled_ways(ways: pd.DataFrame, rules: list[str]) -> np.ndarray:
@@ -135,12 +139,14 @@ def osm_roads(osm: OsmRoads, rules: list[str]) -> Roads:
             line = shapely.LineString(xy[idx[::-1]])
             idx = idx[::-1]
         tunnel_pieces = [p for (p, _), t in zip(chain, w["tunnel"]) if t not in ("", "no")]
+        tunnel_m = sum(_GEOD.line_length(*xy[int(tolled_pieces.at[p, "start"]) : int(tolled_pieces.at[p, "end"]) + 1].T)
+                       for p in tunnel_pieces)  # fmt: skip
         first_way = int(w["way_id"].iloc[0])
         ids.append(f"osm{first_way}:{int(osm.node_id[idx[0]])}-{int(osm.node_id[idx[-1]])}")
         props.append({
             "tolled": True, "name": _first(w["name"]), "ref": _first(w["ref"]), "road_class": _first(w["highway"]),
             "osm_way_ids": sorted(set(w["way_id"].astype(int).tolist())), "oneway": oneway and not (any(reversed_oneway) and not all(reversed_oneway)),
-            "tunnel": bool(tunnel_pieces), "maxspeed": _first(w["maxspeed"]),
+            "tunnel": bool(tunnel_pieces), "tunnel_m": round(tunnel_m, 1), "maxspeed": _first(w["maxspeed"]),
         })  # fmt: skip
         lines.append(line)
         node_sets.append(osm.node_id[idx])

@@ -8,7 +8,9 @@ HAL: for the ETC RAIM the threshold depends on HAL, so the RAIM runs per
 still be inside.
 
 Positions inside one geo-object are grouped into passages (a new passage after
-``passage_gap_s`` without a fix inside). In each passage the valid positions are
+``passage_gap_s`` without a fix inside; in a geo-object with a tunnel, after that plus
+the time its tunnel takes at ``TUNNEL_MIN_SPEED_MPS``: no GNSS reaches a tunnel, and the
+fixes before and after it are one passage, charged once). In each passage the valid positions are
 thinned to independent ones, at least ``tc_s`` apart (greedy from the first:
 exact), and the geo-object is charged when N_valid,in ≥ ``n_th``.
 """
@@ -29,7 +31,12 @@ VALID_STATUSES = ("valid", "excluded_valid")
 PASSAGE_GAP_S = 120.0
 
 
-from tollcli.charging.geoobject_store import GeoObjects, load_geoobjects  # noqa: E402,F401  (re-exported)
+def passage_gaps_s(geo, passage_gap_s: float = PASSAGE_GAP_S) -> np.ndarray:
+    """Per geo-object: the longest time without a fix inside that still continues a passage, s."""
+    return passage_gap_s + geo.tunnel_times_s()
+
+
+from tollcli.charging.geoobject_store import TUNNEL_MIN_SPEED_MPS, GeoObjects, load_geoobjects  # noqa: E402,F401  (re-exported)
 
 
 def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -174,13 +181,14 @@ def passages(cols: dict[str, np.ndarray], geo: GeoObjects, tc_s: float = 5.0, pa
              first_passage: int = 0) -> pd.DataFrame:  # fmt: skip
     """Positions (pair columns with ``valid``, ``verdict``, ``t_s``, ``time_utc``) grouped into passages and thinned.
 
-    Passages: consecutive inside fixes of one geo-object less than ``passage_gap_s`` apart, numbered
+    Passages: consecutive inside fixes of one geo-object at most ``passage_gap_s`` apart (plus its tunnel's
+    time, :func:`passage_gaps_s`), numbered
     from ``first_passage`` in (geo-object, time) order. Rows come out in that order.
     """
     by_obj = np.lexsort((cols["t_s"], cols["obj"]))
     obj, t_s, valid = cols["obj"][by_obj], cols["t_s"][by_obj], cols["valid"][by_obj]
     new = np.ones(obj.size, dtype=bool)
-    new[1:] = (obj[1:] != obj[:-1]) | (np.diff(t_s) > passage_gap_s)
+    new[1:] = (obj[1:] != obj[:-1]) | (np.diff(t_s) > passage_gaps_s(geo, passage_gap_s)[obj[1:]])
     passage = np.cumsum(new) - 1 + first_passage
     independent = thin_independent(t_s, passage, valid, tc_s)
     return pd.DataFrame({

@@ -1,7 +1,8 @@
-"""Tariffs in TOML: fees per geo-object or road class, per vehicle class, with time-of-day bands.
+"""Tariffs in TOML: flat fees per geo-object or road class and vehicle class, or per-km tables; time-of-day bands.
 
-Money is :class:`decimal.Decimal` from the file on: TOML numbers are parsed as
-Decimal (``1.20`` stays exactly 1.20), never as binary floats. Example::
+``docs/tariffs.md`` documents the format with complete examples. Per-km tables (rates per km and per
+passage by vehicle attributes, valid from a date) are read and priced by ``rate_tables.py``; this module
+reads the file, the flat fees and the bands. A flat tariff looks like this::
 
     currency = "EUR"
     minor_unit = 2                     # cents: fees are rounded half-up to 0.01
@@ -25,6 +26,9 @@ Decimal (``1.20`` stays exactly 1.20), never as binary floats. Example::
 Bands may not overlap (an entry time must have one factor); outside every band
 the factor is 1.
 
+Money is :class:`decimal.Decimal` from the file on: TOML numbers are parsed as
+Decimal (``1.20`` stays exactly 1.20), never as binary floats.
+
 A typo must never change a fee silently: an unknown key, day or currency minor unit
 is an error naming the key and its line. A fee keeps every digit the file gives until
 the one rounding (half-up, to the currency's minor unit); fees are below 10^12.
@@ -35,18 +39,27 @@ from __future__ import annotations
 import datetime as dt
 import re
 import tomllib
-from dataclasses import dataclass
-from decimal import MAX_EMAX, MIN_EMIN, ROUND_HALF_UP, Decimal, InvalidOperation, localcontext
+import math
+from dataclasses import dataclass, field
+from decimal import ROUND_HALF_UP, Decimal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
+from tollcli.charging.money import MAX_FEE, exact, exact_fee, line_of, money as _money, where as _where
+from tollcli.charging.rate_tables import (
+    VEHICLE_CLASS,
+    Price,
+    RateTable,
+    chosen_rates,
+    parse_tables,
+    parse_vehicle,
+    table_in_force,
+)
 from tollcli.errors import DataError, UsageError
 
 DAYS = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")
 DAY_NAMES = ("monday", "tuesday", "wednesday", "thursday", "friday", "saturday", "sunday")
-TOP_KEYS = ("currency", "minor_unit", "timezone", "road_class", "geoobject", "band")
+TOP_KEYS = ("currency", "minor_unit", "timezone", "road_class", "geoobject", "band", "vehicle", "table", "length_km")
 BAND_KEYS = ("name", "start", "end", "days", "factor")
-#: fees (and band factors) are below this: invoice totals stay exact in Decimal's 28 digits
-MAX_FEE = Decimal("1e12")
 MAX_FACTOR = Decimal(100)
 #: ISO 4217 currencies whose minor unit is not 2 (the others have cents)
 MINOR_UNITS = {
@@ -55,30 +68,6 @@ MINOR_UNITS = {
     **dict.fromkeys(("BHD", "IQD", "JOD", "KWD", "LYD", "OMR", "TND"), 3),
     **dict.fromkeys(("CLF", "UYW"), 4),
 }  # fmt: skip
-
-
-def line_of(text: str, key: str, after: int = 0) -> int:
-    """The 1-based line of the file where ``key`` is set or opened as a table (0 when not found)."""
-    pattern = re.compile(rf"""^\s*(\[\[?\s*)?["']?{re.escape(key)}["']?\s*(=|\]|\.)""")
-    for number, line in enumerate(text.splitlines(), 1):
-        if number > after and pattern.match(line):
-            return number
-    return 0
-
-
-def _where(path: str, text: str, key: str, after: int = 0) -> str:
-    number = line_of(text, key, after)
-    return f"{path}:{number}" if number else path
-
-
-def exact_fee(amount: Decimal, factor: Decimal, minor_unit: int) -> Decimal:
-    """``amount × factor`` rounded once, half-up, to ``minor_unit`` decimals (no rounding before: the product is exact)."""
-    quantum = Decimal(1).scaleb(-minor_unit)
-    digits = len(amount.as_tuple().digits) + len(factor.as_tuple().digits)
-    whole = max(0, amount.adjusted() + factor.adjusted() + 2)
-    with localcontext() as ctx:
-        ctx.prec, ctx.Emax, ctx.Emin = digits + whole + minor_unit + 2, MAX_EMAX, MIN_EMIN
-        return (amount * factor).quantize(quantum, rounding=ROUND_HALF_UP)
 
 
 @dataclass(frozen=True)
@@ -107,34 +96,66 @@ class Tariff:
     geoobject: dict[str, dict[str, Decimal]]
     bands: tuple[Band, ...]
     source: str = ""
+    #: per-km tables (rate_tables.py), in force one after the other; empty for a tariff of flat fees
+    tables: tuple[RateTable, ...] = ()
+    #: [vehicle]: attribute → the values it may take (per-km tables)
+    vehicle: dict[str, frozenset[str]] = field(default_factory=dict)
+    #: [length_km]: geo-object id → its tariff length, km (wins over the geo-object's own length)
+    length_km: dict[str, Decimal] = field(default_factory=dict)
+
+    def vehicle_classes(self) -> list[str]:
+        """The vehicle classes the tariff prices (empty: per-km tables that do not filter on the class)."""
+        if self.tables:
+            return sorted(self.vehicle.get(VEHICLE_CLASS, ()))
+        return sorted({vc for table in (*self.road_class.values(), *self.geoobject.values()) for vc in table})
+
+    def _band(self, entry_utc: dt.datetime) -> Band | None:
+        if entry_utc.tzinfo is None:
+            raise ValueError("entry time must be timezone-aware (UTC)")
+        local = entry_utc.astimezone(ZoneInfo(self.timezone))
+        return next((b for b in self.bands if b.holds(local)), None)
 
     def fee(self, geoobject_id: str, road_class: str, vehicle_class: str, entry_utc: dt.datetime) -> tuple[Decimal, str]:
-        """The fee for one charged geo-object and the band applied ('' for none)."""
+        """The flat fee for one charged geo-object and the band applied ('' for none)."""
+        if self.tables:
+            raise DataError(f"{self.source}: a per-km tariff prices a passage by its length: use price()")
         table = self.geoobject.get(geoobject_id) or self.road_class.get(road_class)
         if table is None:
             raise DataError(f"{self.source}: no fee for geo-object {geoobject_id!r} or its road class {road_class!r}")
         if vehicle_class not in table:
             raise DataError(f"{self.source}: no fee for vehicle class {vehicle_class!r} on {geoobject_id!r} ({road_class})")
-        if entry_utc.tzinfo is None:
-            raise ValueError("entry time must be timezone-aware (UTC)")
-        local = entry_utc.astimezone(ZoneInfo(self.timezone))
-        band = next((b for b in self.bands if b.holds(local)), None)
+        band = self._band(entry_utc)
         factor = band.factor if band else Decimal(1)
         return exact_fee(table[vehicle_class], factor, self.minor_unit), band.name if band else ""
 
+    def price(self, geoobject_id: str, road_class: str, length_m: float | None, vehicle: dict[str, str],
+              entry_utc: dt.datetime) -> Price:  # fmt: skip
+        """What one passage costs: flat fee, or per-km rates of the table in force at its entry.
 
-def _money(value, where: str, limit: Decimal = MAX_FEE) -> Decimal:
-    if isinstance(value, bool) or not isinstance(value, (int, Decimal, str)):
-        raise DataError(f"{where}: a fee must be a number, got {value!r}")
-    try:
-        amount = Decimal(value)
-    except InvalidOperation:
-        raise DataError(f"{where}: not a number: {value!r}") from None
-    if not amount.is_finite() or amount < 0:
-        raise DataError(f"{where}: a fee must be a finite amount ≥ 0, got {value}")
-    if amount >= limit:
-        raise DataError(f"{where}: {value} is not below {limit:,f}")
-    return amount
+        ``length_m``: the geo-object's section length (ground metres; None or NaN when it has none);
+        ``vehicle``: its attributes, with ``vehicle_class``.
+        """
+        if not self.tables:
+            return Price(*self.fee(geoobject_id, road_class, vehicle[VEHICLE_CLASS], entry_utc))
+        table = table_in_force(self.tables, entry_utc, self.source)
+        rates = chosen_rates(table, geoobject_id, road_class, vehicle, self.source)
+        per_km = sum((r.per_km for r in rates.values()), Decimal(0))
+        per_passage = sum((r.per_passage for r in rates.values()), Decimal(0))
+        length_km = self.section_km(geoobject_id, length_m) if per_km else None
+        amount = exact(lambda: per_passage + per_km * (length_km or 0))
+        band = self._band(entry_utc)
+        fee = exact_fee(amount, band.factor if band else Decimal(1), self.minor_unit)
+        components = {c: {"per_km": str(r.per_km), "per_passage": str(r.per_passage), "line": r.line} for c, r in rates.items()}
+        return Price(fee, band.name if band else "", table.name, length_km, per_km, per_passage, components)
+
+    def section_km(self, geoobject_id: str, length_m: float | None) -> Decimal:
+        """The length charged for a geo-object, km: the tariff's ``[length_km]``, else its length in whole metres."""
+        if geoobject_id in self.length_km:
+            return self.length_km[geoobject_id]
+        if length_m is None or not math.isfinite(length_m) or length_m <= 0:
+            raise DataError(f"{self.source}: geo-object {geoobject_id!r} has no length for a per-km rate: build it with "
+                            f"'tollcli geoobjects build' (section_length_m) or give it under [length_km]")  # fmt: skip
+        return Decimal(int(Decimal(repr(float(length_m))).to_integral_value(rounding=ROUND_HALF_UP))).scaleb(-3)
 
 
 def _minutes(text, where: str) -> int:
@@ -247,6 +268,22 @@ def load_tariff(path: str) -> Tariff:
         raise DataError(f"{path}: unknown timezone {timezone!r}") from None
     road_class = _fee_tables(doc.get("road_class"), "road_class", path)
     geoobject = _fee_tables(doc.get("geoobject"), "geoobject", path)
+    bands = _bands(doc.get("band"), path, text)
+    if "table" in doc:
+        if road_class or geoobject:
+            raise DataError(f"{_where(path, text, 'road_class' if road_class else 'geoobject')}: give fees either as "
+                            f"[road_class]/[geoobject] tables or as [[table]] rates, not both")  # fmt: skip
+        vehicle = parse_vehicle(doc.get("vehicle"), path, text)
+        tables = parse_tables(doc["table"], vehicle, ZoneInfo(str(timezone)), path, text)
+        lengths = doc.get("length_km") or {}
+        if not isinstance(lengths, dict):
+            raise DataError(f"{_where(path, text, 'length_km')}: [length_km] must map geo-object ids to km")
+        length_km = {str(k): _money(v, f"{_where(path, text, str(k), line_of(text, 'length_km'))}: length_km {k}")
+                     for k, v in lengths.items()}  # fmt: skip
+        return Tariff(currency.upper(), minor, str(timezone), {}, {}, bands, path, tables, vehicle, length_km)
+    for key in ("vehicle", "length_km"):
+        if key in doc:
+            raise DataError(f"{_where(path, text, key)}: [{key}] belongs to a tariff of [[table]] rates")
     if not road_class and not geoobject:
-        raise DataError(f"{path}: no fees: give [road_class.<name>] or [geoobject.<id>] tables")
-    return Tariff(currency.upper(), minor, str(timezone), road_class, geoobject, _bands(doc.get("band"), path, text), path)
+        raise DataError(f"{path}: no fees: give [road_class.<name>] or [geoobject.<id>] tables, or [[table]] rates")
+    return Tariff(currency.upper(), minor, str(timezone), road_class, geoobject, bands, path)

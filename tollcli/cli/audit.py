@@ -44,6 +44,7 @@ def audit(
     geo: Annotated[Optional[str], typer.Option("--geo", help="Geo-objects, to read a truth trajectory and price missed ones.")] = None,
     tariff: Annotated[Optional[str], typer.Option("--tariff", help="Tariff, to price geo-objects no invoice charged.")] = None,
     vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class for --tariff prices.")] = "car",
+    vehicle_attr: opt.VehicleAttr = None,
     invoice_error: Annotated[float, typer.Option("--invoice-error", help="M_e: an invoice is right when within this %% of the true total.", min=0.0)] = 1.0,
     epochs: Annotated[Optional[str], typer.Option("--epochs", help="An integrity epoch table ('tollcli integrity -o', CSV/Parquet): with a --truth trajectory, count positioning failures and those the RAIM missed.")] = None,
     output: opt.JsonOutput = "-",
@@ -79,8 +80,11 @@ def audit(
         tariff_doc = load_tariff(tariff)
         start = next((inv["period"]["start_utc"] for inv in invoices if inv.get("period")), "2000-01-01T12:00:00Z")
         when = pd.Timestamp(start).to_pydatetime()
-        for gid, road_class in zip(geo_objects.ids, geo_objects.road_class):
-            fees.setdefault(str(gid), tariff_doc.fee(str(gid), str(road_class), vehicle_class, when)[0])
+        vehicle = {**(opt.vehicle_attrs(vehicle_attr) or {}), "vehicle_class": vehicle_class}
+        lengths = geo_objects.length_m if geo_objects.length_m is not None else [None] * len(geo_objects.ids)
+        for gid, road_class, length_m in zip(geo_objects.ids, geo_objects.road_class, lengths):
+            if str(gid) not in fees:
+                fees[str(gid)] = tariff_doc.price(str(gid), str(road_class), length_m, vehicle, when).fee
     if truth:
         if geo_objects is None and not _is_id_list(truth):
             raise UsageError("a truth trajectory needs --geo to know where the geo-objects are")

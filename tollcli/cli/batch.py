@@ -23,7 +23,8 @@ def batch(
     workers: Annotated[int, typer.Option("--workers", help="Local worker processes (default: the CPU count).", min=1)] = max(os.cpu_count() or 1, 1),
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Address of a Dask distributed scheduler to run on instead (tcp://host:8786).")] = None,
     force: Annotated[bool, typer.Option("--force", help="Process logs again even when their invoice is up to date.")] = False,
-    vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class in the tariff.")] = "car",
+    vehicle_class: opt.TariffVehicleClass = "car",
+    vehicle_attr: opt.VehicleAttr = None,
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network for map-matching integrity.")] = None,
     fmt: opt.InputFormat = "auto",
     nav: opt.Nav = None,
@@ -46,7 +47,7 @@ def batch(
     fee 0 (band 'continued'). Ending the batch (even kill -9) ends its workers.
     """
     logs = expand_inputs(inputs)
-    settings = ChargeSettings(vehicle_class=vehicle_class, raim=raim, p_md=p_md, p_fa=p_fa, policy=policy,
+    settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), raim=raim, p_md=p_md, p_fa=p_fa, policy=policy,
                               integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip
     with progress(f"batch of {len(logs)} logs", quiet) as advance:
         summary = run_batch(logs, geo, tariff, settings, output, workers=workers, scheduler=scheduler, force=force,

@@ -40,13 +40,17 @@ def invoice_tables(invoice: dict):
     from rich.table import Table
 
     table = Table(title=f"Invoice {invoice.get('vehicle', '')} ({invoice.get('vehicle_class', '')})")
-    for col in ("geo-object", "entry (UTC)", "exit (UTC)", "positions", "band", f"fee {invoice['currency']}"):
-        table.add_column(col, justify="right" if col.startswith(("positions", "fee")) else "left")
+    per_km = any("tariff_table" in line for line in invoice["lines"])  # per-km tables: the length and rate charged
+    extra = ("table", "km", "rate/km") if per_km else ()
+    for col in ("geo-object", "entry (UTC)", "exit (UTC)", "positions", "band", *extra, f"fee {invoice['currency']}"):
+        table.add_column(col, justify="right" if col.startswith(("positions", "fee", "km", "rate")) else "left")
     for line in invoice["lines"]:
-        table.add_row(line["geoobject"], line["entry_utc"], line["exit_utc"], str(line["n_valid_independent"]), line["band"], line["fee"])
+        more = tuple(str(line.get(k) or "") for k in ("tariff_table", "length_km", "rate_per_km")) if per_km else ()
+        table.add_row(line["geoobject"], line["entry_utc"], line["exit_utc"], str(line["n_valid_independent"]), line["band"], *more, line["fee"])
     for line in invoice.get("not_charged", []):
-        table.add_row(f"[red]{line['geoobject']}[/red]", line["entry_utc"], line["exit_utc"], str(line["n_valid_independent"]), "not charged", "", style="dim")
-    table.add_row("[bold]TOTAL[/bold]", "", "", "", "", f"[bold]{invoice['total']}[/bold]")
+        table.add_row(f"[red]{line['geoobject']}[/red]", line["entry_utc"], line["exit_utc"], str(line["n_valid_independent"]), "not charged",
+                      *([""] * len(extra)), "", style="dim")  # fmt: skip
+    table.add_row("[bold]TOTAL[/bold]", "", "", "", "", *([""] * len(extra)), f"[bold]{invoice['total']}[/bold]")
     counts: dict[str, int] = {}
     for line in invoice["lines"] + invoice.get("not_charged", []):
         for k, v in line.get("statuses", {}).items():

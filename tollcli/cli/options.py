@@ -86,3 +86,28 @@ MaxBad = Annotated[
     Optional[int],
     typer.Option("--max-bad", help="Exit 3 (partial) when more than this many lines were skipped; outputs are still written.", min=0),
 ]
+
+
+TariffVehicleClass = Annotated[str, typer.Option("--vehicle-class", help="Vehicle class: car, van, truck, bus or motorcycle (the tariff's fees and the top speed of the findings).")]
+VehicleAttr = Annotated[
+    Optional[list[str]],
+    typer.Option("--vehicle-attr", metavar="KEY=VALUE", help="A vehicle attribute a per-km tariff rates by (repeatable): weight_class=over-18t, axles=5+, euro_class=euro6, co2_class=1 (the tariff's [vehicle] names them)."),
+]
+
+
+def vehicle_attrs(items: list[str] | None) -> dict[str, str] | None:
+    """``KEY=VALUE`` options → {key: value} (None when none was given); a UsageError for a malformed or repeated one."""
+    from tollcli.errors import UsageError
+
+    if not items:
+        return None
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep or not key or not value:
+            raise UsageError(f"--vehicle-attr {item!r}: give KEY=VALUE, e.g. euro_class=euro6")
+        if key in out and out[key] != value:
+            raise UsageError(f"--vehicle-attr {key}: given twice ({out[key]!r} and {value!r})")
+        out[key] = value
+    return dict(sorted(out.items()))

@@ -20,7 +20,8 @@ def process(
     log: opt.LogArg,
     geo: Annotated[str, typer.Option("--geo", help="Geo-objects (GeoJSON from 'tollcli geoobjects build').")],
     tariff: Annotated[str, typer.Option("--tariff", help="Tariff (TOML).")],
-    vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class in the tariff.")] = "car",
+    vehicle_class: opt.TariffVehicleClass = "car",
+    vehicle_attr: opt.VehicleAttr = None,
     vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id (default: the log's file name).")] = None,
     output: opt.InvoiceOutput = "-",
     fmt: opt.InputFormat = "auto",
@@ -44,14 +45,15 @@ def process(
     """Charge a trip: valid, independent positions inside geo-objects → invoice lines with evidence.
 
     The invoice (JSON by default; .csv with -o file.csv; a table on a terminal)
-    lists each charged geo-object passage with its fee, entry and exit times and
+    lists each charged geo-object passage with its fee (with a per-km tariff: the
+    table in force, the length charged and the rate), entry and exit times and
     the positions that support it, the passages seen but not charged, the input
     files and their SHA-256, every parameter used, and the SHA-256 of its own
     content; 'tollcli verify' re-runs it.
     """
     if output != "-" and not output.lower().endswith((".json", ".csv")):
         raise UsageError(f"{output}: invoices are written as .json or .csv")
-    settings = ChargeSettings(vehicle_class=vehicle_class, vehicle=vehicle, raim=raim, p_md=p_md, p_fa=p_fa, fde=fde,
+    settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), vehicle=vehicle, raim=raim, p_md=p_md, p_fa=p_fa, fde=fde,
                               sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
                               date=date.date().isoformat() if date else None, policy=policy,
                               integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip

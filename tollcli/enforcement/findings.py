@@ -31,6 +31,12 @@ spoofing
   1024 GPS weeks, a receiver fault rather than an attack);
   ``doppler_mismatch``  the reported (Doppler) speed and the speed from successive fixes differ by more
   than max(``doppler_tol_mps``, 30 %) over ``doppler_window_s`` s, for ≥ ``doppler_window_s`` s.
+expected
+  ``tunnel_outage``  a gap, fix loss or collapse at a geo-object's tunnel, no longer than the tunnel takes
+  (``tunnels.py``; ``tunnel_portal_m``, ``tunnel_reacquire_s``): the kind it replaces is in ``evidence.explains``.
+
+Why this file is long: one short function per kind of finding over one shared table of fixes; split by
+category they would each rebuild that table.
 """
 
 from __future__ import annotations
@@ -43,6 +49,7 @@ import shapely
 from shapely import affinity
 
 from tollcli.enforcement.trip import cn0_summary, fixes, runs, trailing_median
+from tollcli.enforcement.tunnels import tunnel_outages
 from tollcli.errors import UsageError
 from tollcli.geodesy import great_circle_distance_m
 from tollcli.stats import binomial_tail
@@ -53,7 +60,7 @@ CATEGORY = {
     "position_jump": "spoofing", "time_jump": "spoofing", "overspeed": "spoofing", "cn0_uniform": "spoofing",
     "raim_persistent_alarm": "spoofing", "position_disagreement": "spoofing", "date_disagreement": "spoofing",
     "date_jump": "spoofing",
-    "doppler_mismatch": "spoofing",
+    "doppler_mismatch": "spoofing", "tunnel_outage": "expected",
 }  # fmt: skip
 #: a persistent RAIM alarm is reported when no-fault alarms (each epoch at its own P_FA) would be this unlikely
 RAIM_ALARM_P_VALUE = 1e-3
@@ -68,6 +75,8 @@ class FindingSettings:
     max_speed_mps: float = 250 / 3.6
     gap_min_s: float = 60.0
     gap_min_m: float = 500.0
+    tunnel_portal_m: float = 50.0
+    tunnel_reacquire_s: float = 60.0
     baseline_s: float = 30.0
     cn0_drop_db: float = 8.0
     fix_loss_min_s: float = 10.0
@@ -134,6 +143,7 @@ def trip_findings(epochs: pd.DataFrame, satellites: pd.DataFrame | None = None, 
     out += _disagreements(epochs, t)
     if raim is not None:
         out += _raim_alarm(epochs, raim.reset_index(drop=True), t, settings)
+    out = tunnel_outages(out, geo, settings.tunnel_portal_m, settings.tunnel_reacquire_s)
     out.sort(key=lambda f: (f["start_utc"], f["kind"]))
     if not keep_rows:
         for f in out:

@@ -159,7 +159,7 @@ def _current(done: dict, job: Job, settings: ChargeSettings, log_sha: str) -> bo
     if inputs.get("log_sha256") != log_sha or any(inputs.get(key) != sha for key, sha in job.input_sha256):
         return False
     # ``continued`` depends on the vehicle's other logs: join_passages checks it after every log is done
-    recorded = {"input_format": "auto", **parameters}  # an invoice records its format only when one was given
+    recorded = {"input_format": "auto", "vehicle_attrs": None, **parameters}  # recorded only when given
     return all(k in recorded and recorded[k] == v for k, v in asdict(settings).items() if k != "continued")
 
 

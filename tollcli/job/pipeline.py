@@ -17,6 +17,7 @@ from tollcli.charging.recognition import (
     load_geoobjects,
     positions_from_pairs,
 )
+from tollcli.charging.rate_tables import check_vehicle
 from tollcli.charging.tariffs import load_tariff
 from tollcli.enforcement.findings import FindingSettings, trip_findings
 from tollcli.enforcement.trip import cn0_summary
@@ -59,6 +60,8 @@ class ChargeSettings:
     continued: dict | None = None
     #: the log's format (io.sources.sniff_format's kinds; "auto": recognised from the file)
     input_format: str = "auto"
+    #: the vehicle's attributes for a tariff of per-km tables (attribute → value, e.g. euro_class → euro6); None: none
+    vehicle_attrs: dict | None = None
 
 
 #: the shortest correlation time accepted, s (a 10 Hz receiver's epoch interval)
@@ -89,11 +92,22 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
         _check_continued(settings.continued)
     if settings.input_format not in INPUT_KINDS:
         bad("input_format (--format)", settings.input_format, f"one of {', '.join(INPUT_KINDS)}")
+    attrs = settings.vehicle_attrs
+    if attrs is not None and (not isinstance(attrs, dict) or not all(isinstance(k, str) and isinstance(v, str) and k and v
+                                                                        for k, v in attrs.items())):  # fmt: skip
+        bad("vehicle_attrs (--vehicle-attr)", attrs, "a table of attribute → value, both texts")
+    if attrs and "vehicle_class" in attrs:
+        bad("vehicle_attrs (--vehicle-attr)", attrs, "the vehicle class is given by --vehicle-class")
     if tariff is not None:
-        classes = sorted({vc for table in (*tariff.road_class.values(), *tariff.geoobject.values()) for vc in table})
-        if settings.vehicle_class not in classes:
+        classes = tariff.vehicle_classes()
+        if (classes or not tariff.tables) and settings.vehicle_class not in classes:
             bad("vehicle_class (--vehicle-class)", settings.vehicle_class,
                 f"not a vehicle class of the tariff {tariff.source} ({', '.join(classes)})")
+        if attrs and not tariff.tables:
+            bad("vehicle_attrs (--vehicle-attr)", attrs, f"the tariff {tariff.source} has flat fees, no vehicle attributes")
+        why = check_vehicle(attrs or {}, tariff.vehicle, tariff.source) if tariff.tables else ""
+        if why:
+            bad("vehicle_attrs (--vehicle-attr)", attrs, why)
 
 
 def _check_continued(continued) -> None:
@@ -171,10 +185,12 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         del parameters["input_format"]  # recorded only when given: invoices of auto-recognised logs stay as they were
     if settings.continued is None:
         del parameters["continued"]  # recorded only by an invoice that continues a passage of the log before
+    if settings.vehicle_attrs is None:
+        del parameters["vehicle_attrs"]  # recorded only for a tariff of per-km tables
     invoice = build_invoice(table, positions, geo_objects, tariff_doc,
                             vehicle=settings.vehicle or printable_path(os.path.basename(log)), vehicle_class=settings.vehicle_class,
                             inputs=inputs, parameters=parameters, period=period, details=details,
-                            continued=settings.continued)  # fmt: skip
+                            continued=settings.continued, vehicle_attrs=settings.vehicle_attrs)  # fmt: skip
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
     return seal(invoice), stats
 

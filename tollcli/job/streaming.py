@@ -37,6 +37,7 @@ from tollcli.charging.invoice import passage_details
 from tollcli.charging.recognition import (
     PAIR_COLUMNS,
     PASSAGE_GAP_S,
+    passage_gaps_s,
     charges,
     concat_pairs,
     pair_verdicts,
@@ -107,7 +108,8 @@ class PassageStream:
         else:
             start = np.flatnonzero(np.r_[True, number[1:] != number[:-1]])
             last_t = np.repeat(np.maximum.reduceat(cols["t_s"][order], start), np.diff(np.r_[start, number.size]))
-            closed = (t_frontier_s - last_t) > self.gap_s  # a later position is further than the gap after it
+            gap_s = passage_gaps_s(self.geo, self.gap_s)[cols["obj"][order]]  # longer in a geo-object with a tunnel
+            closed = (t_frontier_s - last_t) > gap_s  # a later position is further than the gap after it
         if closed.any():
             done = pos[closed] if not closed.all() else pos
             self.charge_parts.append(charges(done, self.n_th))
