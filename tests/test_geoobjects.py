@@ -245,16 +245,22 @@ def test_a_1000_km_network_across_three_utm_zones_keeps_ground_distances(tmp_pat
     geo = tmp_path / "long-geo.geojson"
     geo.write_text(json.dumps(doc))
     assert run_cli("geoobjects", "check", str(geo)).returncode == 0
-    # a drive across the zone boundary at 120° W (sections 19–22) is charged every section it drives
-    across = [f"M{k:03d}" for k in range(19, 23)]
-    assert lons[19] < -120.0 < lons[23]
+    # a drive along the whole motorway, across both zone boundaries (120° W, 114° W), under a per-km truck toll: every
+    # section charged, each its 10.000 km (ground, junction to junction) at the truck's rate
+    everything = [f"M{k:03d}" for k in range(n)]
+    assert lons[0] < -120.0 < -114.0 < lons[-1]
     drive = tmp_path / "drive"
-    r = run_cli("simulate", "--route", str(path), "--via", ",".join(across), "--geo", str(geo), "--env", "open", "--speed", "40",
-                "--iono", "sbas", "--seed", "2", "-o", str(drive))  # fmt: skip
+    r = run_cli("simulate", "--route", str(path), "--via", ",".join(everything), "--geo", str(geo), "--env", "open",
+                "--speed", "100", "--iono", "sbas", "--seed", "2", "-o", str(drive))  # fmt: skip
     assert r.returncode == 0, r.stderr
     tariff = tmp_path / "t.toml"
-    tariff.write_text('currency = "EUR"\n[road_class.motorway]\ncar = 2.50\n')
-    r = run_cli("process", str(drive / "drive.nmea"), "--geo", str(geo), "--tariff", str(tariff), "-o", str(drive / "inv.json"))
+    tariff.write_text('currency = "EUR"\ntimezone = "America/Los_Angeles"\n[vehicle]\naxles = ["2", "3", "4", "5+"]\n'
+                      '[[table]]\nvalid_from = 2026-01-01\n[[table.rate]]\naxles = ["2", "3", "4"]\nper_km = 0.174\n'
+                      '[[table.rate]]\naxles = "5+"\nper_km = 0.198\n')  # fmt: skip
+    r = run_cli("process", str(drive / "drive.nmea"), "--geo", str(geo), "--tariff", str(tariff), "--vehicle-class", "truck",
+                "--vehicle-attr", "axles=5+", "-o", str(drive / "inv.json"))  # fmt: skip
     assert r.returncode == 0, r.stderr
-    charged = [line["geoobject"] for line in json.loads((drive / "inv.json").read_text())["lines"]]
-    assert charged == across
+    invoice = json.loads((drive / "inv.json").read_text())
+    assert [line["geoobject"] for line in invoice["lines"]] == everything
+    assert {(line["length_km"], line["rate_per_km"], line["fee"]) for line in invoice["lines"]} == {("10.000", "0.198", "1.98")}
+    assert invoice["total"] == "198.00"
