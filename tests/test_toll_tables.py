@@ -236,6 +236,9 @@ def test_a_drive_across_the_validity_date_is_charged_by_the_right_tables(midnigh
     header, first, *_ = csv.read_text().splitlines()
     assert header.split(",")[6:11] == ["band", "tariff_table", "length_km", "rate_per_km", "rate_per_passage"]
     assert first.split(",")[7:9] == ["2024-H1", "1.471"]
+    page = tmp_path / "report.html"
+    assert run_cli("report", str(inv), "-o", str(page)).returncode == 0
+    assert "<th>rate per km</th>" in page.read_text() and "<td>2024-H1</td><td>1.471</td><td>0.344</td><td>0.51</td>" in page.read_text()
 
 
 def test_the_same_drive_a_day_earlier_is_all_first_table(midnight_drive, tmp_path):
@@ -282,3 +285,19 @@ def test_the_tariff_documentation_example_is_the_bundled_file():
     doc = (Path(REPO) / "docs" / "tariffs.md").read_text()
     assert TRUCK.read_text().strip() in doc
     load_tariff(str(TRUCK))
+
+
+@pytest.mark.parametrize("row, words", [
+    ('[[table.rate]]\nroad_class = "motorwya"\nper_km = 0.1\n', "t.toml:10: the rate names road class 'motorwya'"),
+    ('[[table.rate]]\ngeoobject = "A9-N3"\nper_passage = 1\n', "t.toml:10: the rate names geo-object 'A9-N3'"),
+    ('[[table.rate]]\nper_km = 0.1\n[length_km]\n"A9-M1" = 1.5\n', "[length_km] names geo-object 'A9-M1'"),
+])  # fmt: skip
+def test_a_tariff_naming_what_the_network_lacks_is_refused(midnight_drive, tmp_path, row, words):
+    """A misspelt geo-object id or road class would leave its row unused (a fee changed silently): refused, one line."""
+    tariff = tmp_path / "t.toml"
+    tariff.write_text(HEAD + "[[table]]\nvalid_from = 2024-01-01\n" + row)
+    r = run_cli("process", str(midnight_drive / "drive.nmea"), "--geo", str(GEO), "--tariff", str(tariff), "--vehicle-class", "truck",
+                "-o", str(tmp_path / "i.json"))  # fmt: skip
+    err = r.stderr.decode()
+    assert r.returncode == 1 and words in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "i.json").exists()

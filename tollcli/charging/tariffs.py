@@ -109,6 +109,22 @@ class Tariff:
             return sorted(self.vehicle.get(VEHICLE_CLASS, ()))
         return sorted({vc for table in (*self.road_class.values(), *self.geoobject.values()) for vc in table})
 
+    def check_against(self, geo_ids, road_classes, geo_source: str) -> None:
+        """DataError when the per-km tables name a geo-object or road class the geo-object file does not have:
+        a misspelt id or class would otherwise leave its row unused and change fees silently."""
+        ids, classes = set(map(str, geo_ids)), set(map(str, road_classes))
+        for gid in sorted(set(self.length_km) - ids):
+            raise DataError(f"{self.source}: [length_km] names geo-object {gid!r}, which {geo_source} does not have "
+                            f"(a misspelt id would leave its length unused)")  # fmt: skip
+        for table in self.tables:
+            for rate in table.rates:
+                for what, named, present in (("geo-object", rate.geoobjects, ids), ("road class", rate.road_classes, classes)):
+                    missing = sorted((named or set()) - present)
+                    if missing:
+                        where = f"{self.source}:{rate.line}" if rate.line else self.source
+                        raise DataError(f"{where}: the rate names {what} {missing[0]!r}, which {geo_source} does not "
+                                        f"have (a misspelt {what} would leave the rate unused)")  # fmt: skip
+
     def _band(self, entry_utc: dt.datetime) -> Band | None:
         if entry_utc.tzinfo is None:
             raise ValueError("entry time must be timezone-aware (UTC)")

@@ -78,6 +78,7 @@ def audit(
         if geo_objects is None:
             raise UsageError("--tariff prices geo-objects by their road class: give --geo too")
         tariff_doc = load_tariff(tariff)
+        tariff_doc.check_against(geo_objects.ids, geo_objects.road_class, geo)
         start = next((inv["period"]["start_utc"] for inv in invoices if inv.get("period")), "2000-01-01T12:00:00Z")
         when = pd.Timestamp(start).to_pydatetime()
         vehicle = {**(opt.vehicle_attrs(vehicle_attr) or {}), "vehicle_class": vehicle_class}

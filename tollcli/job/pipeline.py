@@ -146,6 +146,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     tariff_doc = load_tariff(tariff)
     check_settings(settings, tariff_doc)
     geo_objects = load_geoobjects(geo)
+    tariff_doc.check_against(geo_objects.ids, geo_objects.road_class, geo)
     kind = sniff_format(log) if settings.input_format == "auto" else settings.input_format
     stats = None
     nominal = NominalModel()

@@ -57,9 +57,13 @@ def report_html(run: RunData, tiles: str | None = None) -> str:
         "charged": charged, "points": points, "colours": STATUS_COLOURS, "tiles": tiles,
         "truth": [[round(float(a), 7), round(float(b), 7)] for a, b in zip(run.truth["lat_deg"], run.truth["lon_deg"])] if run.truth is not None else None,
     }  # fmt: skip
-    lines = [[ln["geoobject"], ln.get("name", ""), ln["entry_utc"], ln["exit_utc"], ln["n_valid_independent"], ln.get("band", ""), ln["fee"]]
+    per_km = any("tariff_table" in ln for ln in inv["lines"])  # per-km tables: the table, length and rate charged
+    more = lambda ln: [ln.get("tariff_table", ""), ln.get("length_km") or "", ln.get("rate_per_km", "")] if per_km else []  # noqa: E731
+    lines = [[ln["geoobject"], ln.get("name", ""), ln["entry_utc"], ln["exit_utc"], ln["n_valid_independent"], ln.get("band", ""), *more(ln), ln["fee"]]
              for ln in inv["lines"]]  # fmt: skip
-    lines.append(["TOTAL", "", "", "", "", inv["currency"], inv["total"]])
+    lines.append(["TOTAL", "", "", "", "", *([""] * (3 if per_km else 0)), inv["currency"], inv["total"]])
+    invoice_columns = ["geo-object", "name", "entry (UTC)", "exit (UTC)", "valid independent", "band",
+                       *(["table", "km", "rate per km"] if per_km else []), "fee"]  # fmt: skip
     missed = [[ln["geoobject"], ln["entry_utc"], ln["n_inside"], ln["n_valid"], ", ".join(f"{k} {v}" for k, v in ln.get("statuses", {}).items())]
               for ln in inv.get("not_charged", [])]  # fmt: skip
     findings = [[f["kind"], f["category"], f["start_utc"], f["end_utc"], json.dumps(f["evidence"], sort_keys=True)]
@@ -113,7 +117,7 @@ Epoch statuses (HAL {run.hal_m:g} m): {html.escape(', '.join(f'{k} {v}' for k, v
 <details open><summary>What the epoch statuses mean</summary><ul>{meanings}</ul></details>
 <div id="map"></div>
 <h2 id="invoice">Invoice</h2>
-{_table(["geo-object", "name", "entry (UTC)", "exit (UTC)", "valid independent", "band", "fee"], lines, "invoice")}
+{_table(invoice_columns, lines, "invoice")}
 <h2>Seen but not charged</h2>
 {_table(["geo-object", "entry (UTC)", "inside", "valid", "statuses"], missed) if missed else "<p>None.</p>"}
 <h2>Findings (tamper and evasion signs)</h2>
