@@ -146,7 +146,7 @@ def test_fuzz_geoobject_files_through_the_commands(doc):
 
 
 @FUZZ_CLI
-@given(st.deferred(lambda: _tariff))
+@given(st.deferred(lambda: st.one_of(_tariff, _per_km_tariff)))
 def test_fuzz_tariffs_through_process(text):
     """A fuzzed tariff through process: an invoice or a documented exit with a reason, never a traceback."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -208,6 +208,50 @@ _band = st.builds(lambda s, e, f, d: f'[[band]]\nstart = "{s}"\nend = "{e}"\nfac
 _tariff = st.builds(lambda cur, tz, parts, junk: f"currency = {cur}\ntimezone = {tz}\n" + "".join(parts) + junk,
                     st.sampled_from(['"EUR"', '"E"', "1", '"€€€"']), st.sampled_from(['"Europe/Paris"', '"UTC"', '"Nowhere/X"', "5"]),
                     st.lists(st.one_of(_section, _band), max_size=5), st.sampled_from(["", "= broken", "[x", "\x00"]))  # fmt: skip
+
+
+def _mostly(good, bad):
+    """``good`` 39 times in 40, else ``bad``: many fuzzed tariffs load, so pricing is fuzzed too."""
+    return st.sampled_from(range(40)).flatmap(lambda k: bad if k == 39 else good)
+
+
+_values = _mostly(st.lists(st.sampled_from(["euro5", "euro6", "2", "5+"]), min_size=1, max_size=3, unique=True).map(json.dumps),
+                  st.sampled_from(['"euro6"', "5", '["x"]', "true", "{a = 1}", "[]"]))  # fmt: skip
+_vehicle = st.builds(lambda extra: '[vehicle]\neuro_class = ["euro5", "euro6"]\naxles = ["2", "5+"]\n' + extra,
+                     _mostly(st.just(""), st.sampled_from(['vehicle_class = ["truck"]\n', "per_km = [1]\n", '1x = ["a"]\n'])))  # fmt: skip
+_amount = _mostly(st.decimals(0, 10, places=4).map(str), _toml_value)
+_filter = _mostly(st.one_of(
+    st.tuples(st.just("euro_class"), _mostly(st.lists(st.sampled_from(["euro5", "euro6"]), min_size=1, unique=True).map(json.dumps), _values)),
+    st.tuples(st.just("axles"), _mostly(st.lists(st.sampled_from(["2", "5+"]), min_size=1, unique=True).map(json.dumps), _values)),
+    st.tuples(st.just("road_class"), _mostly(st.sampled_from(['"motorway"', '["motorway", "trunk"]', '"trunk"']), _values)),
+    st.tuples(st.just("geoobject"), _mostly(st.sampled_from(['"g"', '"h"']), _values)),
+    st.tuples(st.just("per_passage"), _amount),
+    st.tuples(st.just("component"), _mostly(st.sampled_from(['"air"', '"noise"']), _values))),
+    st.tuples(st.sampled_from(["zzz", "vehicle_class"]), _amount))  # fmt: skip
+_rate = st.builds(lambda amount, kvs: f"[[table.rate]]\nper_km = {amount}\n" + "".join(f"{k} = {v}\n" for k, v in kvs),
+                  _amount, st.lists(_filter, max_size=2, unique_by=lambda kv: kv[0]))  # fmt: skip
+_table = st.builds(lambda start, until, rates: f"[[table]]\nvalid_from = {start}\n" + (f"valid_until = {until}\n" if until else "") + "".join(rates),
+                   _mostly(st.sampled_from(["2024-01-01", "2024-07-01T00:00:00", "2024-07-01T00:00:00+02:00"]), st.just('"soon"')),
+                   _mostly(st.just(""), st.sampled_from(["2024-09-01", "2023-01-01"])), st.lists(_rate, min_size=1, max_size=3))  # fmt: skip
+_per_km_tariff = st.builds(lambda cur, vehicle, tables, lengths: f"{cur}\ntimezone = \"Europe/Berlin\"\n{vehicle}" + "".join(tables) + lengths,
+                           st.sampled_from(['currency = "EUR"', 'currency = "JPY"\nminor_unit = 0']), _vehicle,
+                           st.lists(_table, min_size=1, max_size=2),
+                           _mostly(st.sampled_from(["", '[length_km]\n"g" = 1.5\n']), st.just("[length_km]\ng = -1\n")))  # fmt: skip
+
+
+@FUZZ
+@given(_per_km_tariff, st.dictionaries(st.sampled_from(["euro_class", "axles", "vehicle_class"]), st.sampled_from(["euro5", "euro6", "2", "5+", "truck"])),
+       st.sampled_from([None, float("nan"), 0.0, 1234.5, 1e7]), st.datetimes(dt.datetime(2023, 1, 1), dt.datetime(2025, 1, 1)))
+def test_fuzz_per_km_tariffs_give_prices_or_data_errors(text, vehicle, length_m, when):
+    """A fuzzed per-km tariff, vehicle and length: a price ≥ 0 with a length when it charges per km, or a DataError."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _written(tmp, "t.toml", text)
+        try:
+            tariff = load_tariff(path)
+            price = tariff.price("g", "motorway", length_m, {"vehicle_class": "truck", **vehicle}, when.replace(tzinfo=dt.timezone.utc))
+        except TollError:
+            return
+        assert price.fee >= 0 and (price.per_km == 0 or price.length_km is not None)
 
 
 @FUZZ

@@ -213,8 +213,8 @@ def test_a_1000_km_network_across_three_utm_zones_keeps_ground_distances(tmp_pat
     geod = Geod(ellps="WGS84")
     lat0, lon0 = 45.0, -122.6
     n = 100
-    lons = np.array(geod.fwd_intermediate(lon0, lat0, 90.0, npts=n + 1, del_s=10_000.0, initial_idx=0, terminus_idx=0).lons)
-    lats = np.array(geod.fwd_intermediate(lon0, lat0, 90.0, npts=n + 1, del_s=10_000.0, initial_idx=0, terminus_idx=0).lats)
+    line = geod.fwd_intermediate(lon0, lat0, 90.0, npts=n + 1, del_s=10_000.0, initial_idx=0, terminus_idx=0, return_back_azimuth=True)
+    lons, lats = np.array(line.lons), np.array(line.lats)
     # the free road: each vertex 60 m to the north of the motorway's vertex (ground distance, on the ellipsoid)
     az_north = np.array(geod.inv(lons[:-1], lats[:-1], lons[1:], lats[1:], return_back_azimuth=True)[0]) - 90.0
     az_north = np.append(az_north, az_north[-1])

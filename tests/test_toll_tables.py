@@ -301,3 +301,18 @@ def test_a_tariff_naming_what_the_network_lacks_is_refused(midnight_drive, tmp_p
     err = r.stderr.decode()
     assert r.returncode == 1 and words in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "i.json").exists()
+
+
+def test_batch_records_the_vehicle_and_redoes_a_log_when_it_changes(midnight_drive, tmp_path):
+    """The vehicle's attributes decide the invoice: the same attributes find it up to date, other ones redo it."""
+    def run(*attrs):
+        r = run_cli("batch", str(midnight_drive / "drive.nmea"), "--geo", str(GEO), "--tariff", str(TRUCK), "--vehicle-class", "truck",
+                    *attrs, "-o", str(tmp_path / "out"), "--workers", "1", "-q", "--json")  # fmt: skip
+        assert r.returncode == 0, r.stderr
+        return json.loads(r.stdout)
+
+    heavy = ATTRS[2:]
+    assert (run(*heavy)["done"], run(*heavy)["skipped"]) == (1, 1)
+    four_axles = [a.replace("axles=5+", "axles=4") for a in heavy]
+    again = run(*four_axles)
+    assert again["done"] == 1 and again["totals"] == {"EUR": "2.52"}  # 0.320 × 1.471 → 0.47 (H1), 1.50 + 0.332 × 1.651 → 2.05 (H2)
