@@ -207,3 +207,33 @@ def test_shortest_path_on_the_map_follows_its_roads(tmp_path):
     assert len(truth) > 20 and shapely.distance(pts, network).max() < 1.0
     r = run_cli("simulate", "--route", str(path), "--from", "60.1699,24.9384", "-o", str(tmp_path / "x"))
     assert r.returncode == 2
+
+
+def test_the_same_map_as_osm_xml_gives_the_same_geoobjects(tmp_path):
+    """Metamorphic: the extract rewritten as OSM XML (.osm) by libosmium builds byte-identical geo-objects."""
+    import osmium
+
+    path = shared("osm", "helsinki.osm.pbf")
+    xml = tmp_path / "helsinki.osm"
+    writer = osmium.SimpleWriter(str(xml))
+
+    class Copy(osmium.SimpleHandler):
+        def node(self, n):
+            writer.add_node(n)
+
+        def way(self, w):
+            writer.add_way(w)
+
+        def relation(self, r):
+            writer.add_relation(r)
+
+    Copy().apply_file(str(path))
+    writer.close()
+    assert xml.read_bytes().startswith(b"<?xml")
+    outs = []
+    for source in (path, xml):
+        out = tmp_path / f"{source.name}.geojson"
+        r = run_cli("geoobjects", "build", str(source), "--tolled", "highway=primary", "-o", str(out), "-q")
+        assert r.returncode == 0, r.stderr
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] and len(json.loads(outs[0])["features"]) == 31
