@@ -78,11 +78,36 @@ def driven_from_truth(path: str, geo) -> set[str]:
         lon = next((c for c in table.columns if c.lower() in ("lon_deg", "lngdeg", "lon", "lng", "longitude")), None)
         if lat is None or lon is None:
             raise DataError(f"{path}: a truth trajectory needs latitude and longitude columns")
+        heading = next((c for c in table.columns if c.lower() in ("heading_deg", "course_deg")), None)
         points = table.rename(columns={lat: "lat_deg", lon: "lon_deg"})[["lat_deg", "lon_deg"]]
+        if heading is not None:
+            points = points.assign(course_deg=table[heading].to_numpy(float))
     if points.empty:
         return set()
-    _, obj, _, _ = candidate_pairs(points.astype(float), geo)
+    points = points.astype(float)
+    rows, obj, px, py = candidate_pairs(points, geo)
+    directed = geo.directed()[obj]
+    if directed.any():  # a carriageway is driven only in its direction of travel (carriageways.py)
+        from tollcli.charging.carriageways import direction_check
+
+        course = points["course_deg"].to_numpy() if "course_deg" in points else track_deg(points)
+        ok = direction_check(geo.axes[obj[directed]], px[directed], py[directed], course[rows[directed]],
+                             np.full(int(directed.sum()), 1e9)) == ""  # a trajectory: its course is the truth  # fmt: skip
+        keep = ~directed
+        keep[directed] = ok
+        obj = obj[keep]
     return {str(geo.ids[i]) for i in np.unique(obj)}
+
+
+def track_deg(points: pd.DataFrame) -> np.ndarray:
+    """The direction of travel at each point of a trajectory (towards the next point; the last repeats), degrees
+    from north; NaN where the vehicle does not move."""
+    lat, lon = np.radians(points["lat_deg"].to_numpy(float)), np.radians(points["lon_deg"].to_numpy(float))
+    if lat.size < 2:
+        return np.full(lat.size, np.nan)
+    dn, de = np.diff(lat), np.diff(lon) * np.cos((lat[1:] + lat[:-1]) / 2)
+    track = np.where(np.hypot(dn, de) > 0, np.degrees(np.arctan2(de, dn)) % 360.0, np.nan)
+    return np.append(track, track[-1])
 
 
 def truth_span(path: str) -> tuple[pd.Timestamp, pd.Timestamp, set[str]] | None:

@@ -31,7 +31,7 @@ from tollcli.spatial import feature_geometry, project, read_features
 
 #: the slowest traffic a tunnel's GNSS outage is allowed for (7.2 km/h, a congested tunnel), m/s
 TUNNEL_MIN_SPEED_MPS = 2.0
-CACHE_FORMAT = 4  # 2: compiled only after the file passed geoobjects check; 3: a metric frame per geo-object; 4: lengths
+CACHE_FORMAT = 4  # 2: compiled only after the file passed geoobjects check; 3: a metric frame per geo-object; 4: lengths, axes
 
 
 @dataclass
@@ -52,6 +52,16 @@ class GeoObjects:
     #: per geo-object: metres of it in tunnels (``tunnel_m``; the whole section when only ``tunnel`` is set; 0: none),
     #: where no GNSS reaches: passages and findings expect the gap
     tunnel_m: np.ndarray | None = None
+
+    #: per geo-object: its axis in its own metric frame when it is a carriageway told apart from the opposite one by the
+    #: direction of travel (``carriageways.py``), else None
+    axes: np.ndarray | None = None
+
+    def directed(self) -> np.ndarray:
+        """Which geo-objects count a position only in their direction of travel."""
+        if self.axes is None:
+            return np.zeros(len(self.ids), bool)
+        return np.array([a is not None for a in self.axes], bool)
 
     def tunnel_lengths_m(self) -> np.ndarray:
         return self.tunnel_m if self.tunnel_m is not None else np.zeros(len(self.ids))
@@ -137,9 +147,21 @@ def _parse(path: str) -> GeoObjects:
         metric[frame == k] = project(polys[frame == k], name)
     crs = frames[0] if len(frames) == 1 else metric_crs(polys)
     search = metric if len(frames) == 1 else project(polys, crs)
+    axes = _axes(props, frames, frame)
     return GeoObjects(np.array(ids, dtype=object), np.array([str(p.get("name", "")) for p in props], dtype=object),
                       np.array([str(p.get("road_class", "")) for p in props], dtype=object), hals, metric, crs,
-                      shapely.STRtree(search), frames, frame, None, section_lengths(props), tunnel_lengths(props))  # fmt: skip
+                      shapely.STRtree(search), frames, frame, None, section_lengths(props), tunnel_lengths(props), axes)  # fmt: skip
+
+
+def _axes(props: list[dict], frames: tuple[str, ...], frame: np.ndarray) -> np.ndarray | None:
+    """The carriageways' axes (``axis``, lon/lat) in their own frames; None where a geo-object has none."""
+    have = [i for i, p in enumerate(props) if p.get("axis")]
+    if not have:
+        return None
+    out = np.full(len(props), None, dtype=object)
+    for i in have:
+        out[i] = project([shapely.LineString(np.asarray(props[i]["axis"], dtype=float))], frames[frame[i]])[0]
+    return out
 
 
 def section_lengths(props: list[dict]) -> np.ndarray:
@@ -199,7 +221,14 @@ def _read_compiled(path: Path) -> GeoObjects:
         metric, search = _from_wkb(z["wkb"], z["wkb_ends"]), _from_wkb(z["wkb_search"], z["wkb_search_ends"])
         return GeoObjects(z["ids"].astype(object), z["names"].astype(object), z["road_class"].astype(object),
                           z["hal_m"], metric, str(z["crs"]), shapely.STRtree(search), tuple(z["frames"].astype(str).tolist()),
-                          z["frame"], None, z["length_m"], z["tunnel_m"])  # fmt: skip
+                          z["frame"], None, z["length_m"], z["tunnel_m"], _axes_from(z))  # fmt: skip
+
+
+def _axes_from(z) -> np.ndarray | None:
+    if "axes_wkb" not in z:
+        return None
+    axes = _from_wkb(z["axes_wkb"], z["axes_wkb_ends"])
+    return np.array([None if a.is_empty else a for a in axes], dtype=object)
 
 
 def _from_wkb(blob: np.ndarray, ends: np.ndarray) -> np.ndarray:
@@ -218,11 +247,14 @@ def _write_compiled(path: Path, geo: GeoObjects) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         wkb, wkb_ends = _to_wkb(geo.polygons)
         wkb_search, wkb_search_ends = _to_wkb(geo.tree.geometries)
+        extra = {}
+        if geo.axes is not None:  # an empty line stands for "no axis"
+            extra["axes_wkb"], extra["axes_wkb_ends"] = _to_wkb([shapely.LineString() if a is None else a for a in geo.axes])
         fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
         with os.fdopen(fd, "wb") as fh:
             np.savez(fh, format=CACHE_FORMAT, ids=geo.ids.astype(str), names=geo.names.astype(str),
                      road_class=geo.road_class.astype(str), hal_m=geo.hal_m, crs=geo.crs, frames=np.array(geo.frames, dtype=str),
-                     frame=geo.frame, length_m=geo.length_m, tunnel_m=geo.tunnel_m, wkb=wkb, wkb_ends=wkb_ends, wkb_search=wkb_search, wkb_search_ends=wkb_search_ends)  # fmt: skip
+                     frame=geo.frame, length_m=geo.length_m, tunnel_m=geo.tunnel_m, wkb=wkb, wkb_ends=wkb_ends, wkb_search=wkb_search, wkb_search_ends=wkb_search_ends, **extra)  # fmt: skip
         os.replace(tmp, path)
     except OSError:
         try:

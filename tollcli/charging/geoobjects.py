@@ -9,7 +9,7 @@ properties ``id``, ``name``, ``road_class``, optional ``hal_m``, optional
 ground distances to ≤ 0.05 % at any extent) and:
 
 1. HAL = min(HAL_max, its own ``hal_m`` if given, ½ · distance to the nearest road it
-   is not connected to). "Connected" means touching within ``connect_tol_m`` on the same
+   is not connected to, other than its opposite carriageway: ``carriageways.py``). "Connected" means touching within ``connect_tol_m`` on the same
    level (``layer``, ``bridge``, ``tunnel``) — or, for a map with topology, sharing a node
    (a junction); connected roads meet the segment by construction and would
    otherwise force HAL to zero. A road that crosses without meeting (a bridge, a tunnel)
@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
+from tollcli.charging.carriageways import opposite_pairs
 from tollcli.errors import DataError
 from tollcli.spatial import feature_geometry, local_frame, metric_crs, project, read_features
 
@@ -169,8 +170,9 @@ def _build_in_frame(group, frame, roads, lines, levels, path, hal_max_m, connect
     else:
         meets = np.array([(a, b) in roads.junctions or (b, a) in roads.junctions for a, b in zip(left.tolist(), right.tolist())], bool)
     cut_within = connect_tol_m if hal_min_m is None else max(connect_tol_m, 2 * hal_min_m)
-    crossing = ~meets & (dist <= cut_within)
-    bounding = ~meets & ~crossing
+    opposite = opposite_pairs(left, right, metric, props, meets)  # carriageways of one road: told apart by direction
+    crossing = ~meets & ~opposite & (dist <= cut_within)
+    bounding = ~meets & ~crossing & ~opposite
     own = np.array([float(p["hal_m"]) if p.get("hal_m") not in (None, "") else np.inf for p in props])
     hal = np.minimum(np.full(len(metric), hal_max_m), own)
     np.minimum.at(hal, left[bounding], dist[bounding] / 2.0)
@@ -206,6 +208,10 @@ def _build_in_frame(group, frame, roads, lines, levels, path, hal_max_m, connect
         }  # fmt: skip
         if crossers.size:
             properties.update(crossings=sorted(ids[j] for j in crossers), cut_m=round(cut_m, 1))
+        partners = right[(left == i) & opposite]
+        if partners.size:  # a carriageway: its positions count only in its direction of travel, along this axis
+            axis = shapely.get_coordinates(project([line], frame, inverse=True)[0])
+            properties.update(opposite=sorted(ids[j] for j in partners), axis=np.round(axis, 7).tolist())
         for key in PASSED_THROUGH:
             if props[i].get(key) not in (None, ""):
                 properties[key] = props[i][key]
@@ -241,6 +247,7 @@ def check_geoobjects(path: str, hal_min_m: float = 5.0) -> list[Finding]:
     crs_seen: dict = {}
     features = read_features(path)
     ids: list[str] = []
+    partners: dict[str, set] = {}
     polys = []
     for i, feature in enumerate(features):
         fid = _feature_id(feature, i)
@@ -266,6 +273,9 @@ def check_geoobjects(path: str, hal_min_m: float = 5.0) -> list[Finding]:
             continue
         if not geom.is_valid:
             findings.append(Finding(fid, f"invalid geometry: {shapely.is_valid_reason(geom)}"))
+        partners[fid] = set(map(str, props.get("opposite") or ()))
+        if "axis" in props and not _is_axis(props["axis"]):
+            findings.append(Finding(fid, "axis must be a list of ≥ 2 [longitude, latitude] points (the direction of travel)"))
         crs_problem = _crs_problem(props.get("crs_metric"), crs_seen)
         if crs_problem:
             findings.append(Finding(fid, crs_problem))
@@ -284,8 +294,17 @@ def check_geoobjects(path: str, hal_min_m: float = 5.0) -> list[Finding]:
         metric = project([p for _, p in usable], crs)
         a, b = shapely.STRtree(metric).query(metric, predicate="intersects")
         for i, j in zip(a, b):
-            if i < j:
+            if i < j and usable[j][0] not in partners.get(usable[i][0], ()):  # opposite carriageways may overlap
                 area = shapely.intersection(metric[i], metric[j]).area
                 if area > 1.0:
                     findings.append(Finding(usable[i][0], f"overlaps {usable[j][0]} ({area:.0f} m²)"))
     return findings
+
+
+def _is_axis(value) -> bool:
+    try:
+        xy = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return xy.ndim == 2 and xy.shape[0] >= 2 and xy.shape[1] == 2 and bool(np.isfinite(xy).all()) \
+        and bool((np.abs(xy[:, 0]) <= 180).all() and (np.abs(xy[:, 1]) <= 90).all())

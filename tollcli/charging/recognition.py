@@ -102,6 +102,8 @@ def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params:
 
 PAIR_COLUMNS = ("epoch_row", "obj", "raim_status", "test_stat", "threshold", "p_fa", "test_stat_source", "integrity_source",
                 "raim_valid")  # fmt: skip
+#: ``direction``: '' or why a carriageway does not count the position (wrong_direction, direction_unknown)
+OPTIONAL_PAIR_COLUMNS = ("direction",)
 
 
 def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams, row_offset: int = 0,
@@ -117,7 +119,7 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
         return {"epoch_row": np.zeros(0, np.int64), "obj": np.zeros(0, np.int64), "raim_status": np.zeros(0, object),
                 "test_stat": np.zeros(0), "threshold": np.zeros(0), "p_fa": np.zeros(0),
                 "test_stat_source": np.zeros(0, object), "integrity_source": np.zeros(0, object),
-                "raim_valid": np.zeros(0, bool)}  # fmt: skip
+                "raim_valid": np.zeros(0, bool), "direction": np.zeros(0, object)}  # fmt: skip
     raim = run_raim(meas.take(rows), params, hal_m=geo.hal_m[obj],
                     geometry=take_epochs(geometry, rows) if geometry is not None else None)
     status = raim["raim_status"].to_numpy(dtype=object)
@@ -129,11 +131,27 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
             "threshold": raim["threshold"].to_numpy(), "p_fa": raim["p_fa"].to_numpy(),
             "test_stat_source": raim["test_stat_source"].to_numpy(dtype=object),
             "integrity_source": raim["integrity_source"].to_numpy(dtype=object),
-            "raim_valid": np.isin(status, VALID_STATUSES) & shifted_inside}  # fmt: skip
+            "raim_valid": np.isin(status, VALID_STATUSES) & shifted_inside,
+            "direction": _directions(epochs, geo, rows, obj, px, py)}  # fmt: skip
+
+
+def _directions(epochs: pd.DataFrame, geo: GeoObjects, rows: np.ndarray, obj: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Per pair: '' or why a carriageway does not count the position (``carriageways.direction_check``)."""
+    out = np.full(rows.size, "", dtype=object)
+    directed = geo.directed()[obj]
+    if directed.any():
+        from tollcli.charging.carriageways import direction_check
+
+        nan = np.full(len(epochs), np.nan)
+        course = epochs["course_deg"].to_numpy(float) if "course_deg" in epochs else nan
+        speed = epochs["speed_mps"].to_numpy(float) if "speed_mps" in epochs else nan
+        out[directed] = direction_check(geo.axes[obj[directed]], px[directed], py[directed], course[rows[directed]],
+                                        speed[rows[directed]])  # fmt: skip
+    return out
 
 
 def concat_pairs(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    return {k: np.concatenate([p[k] for p in parts]) for k in PAIR_COLUMNS} if parts else {}
+    return {k: np.concatenate([p[k] for p in parts]) for k in (*PAIR_COLUMNS, *OPTIONAL_PAIR_COLUMNS) if k in parts[0]} if parts else {}
 
 
 def positions_from_pairs(pairs: dict[str, np.ndarray], time_utc: pd.Series, geo: GeoObjects, tc_s: float = 5.0,
@@ -165,6 +183,10 @@ def pair_verdicts(pairs: dict[str, np.ndarray], geo: GeoObjects, epoch_why: np.n
     rows, obj = pairs["epoch_row"] - row_offset, pairs["obj"]
     valid = pairs["raim_valid"].copy()
     verdict = pairs["raim_status"].copy()
+    if "direction" in pairs:  # a carriageway counts a position only in its direction of travel
+        wrong = valid & (pairs["direction"] != "")
+        verdict[wrong] = pairs["direction"][wrong]
+        valid &= ~wrong
     if epoch_why is not None:
         why = np.asarray(epoch_why, dtype=object)[rows]
         fails = valid & (why != "")
