@@ -5,7 +5,8 @@ in the geo-objects' metric CRS (bulk ``STRtree.query``). A position counts for a
 geo-object when it lies inside it **and** is valid under that geo-object's own
 HAL: for the ETC RAIM the threshold depends on HAL, so the RAIM runs per
 (epoch, candidate geo-object) pair. After an exclusion the shifted position must
-still be inside.
+still be inside. On a geo-object that is one of two opposite carriageways the
+course must also agree with its direction of travel (``carriageways.py``).
 
 Positions inside one geo-object are grouped into passages (a new passage after
 ``passage_gap_s`` without a fix inside; in a geo-object with a tunnel, after that plus
