@@ -10,7 +10,7 @@ import typer
 
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
-from tollcli.errors import DataError, PartialError
+from tollcli.errors import DataError, PartialError, UsageError
 from tollcli.job.batch import expand_inputs, run_batch
 from tollcli.job.pipeline import ChargeSettings
 
@@ -25,6 +25,7 @@ def batch(
     force: Annotated[bool, typer.Option("--force", help="Process logs again even when their invoice is up to date.")] = False,
     vehicle_class: opt.TariffVehicleClass = "car",
     vehicle_attr: opt.VehicleAttr = None,
+    fleet: Annotated[Optional[str], typer.Option("--fleet", help="Fleet CSV: vehicle,vehicle_class,<attribute>… per vehicle id; each log is charged as its vehicle (one not listed fails).")] = None,
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network for map-matching integrity.")] = None,
     fmt: opt.InputFormat = "auto",
     nav: opt.Nav = None,
@@ -45,13 +46,17 @@ def batch(
     starting within 120 s of the last) are one drive: a passage cut by the file
     boundary is charged once, where it began; the next invoice lists its part at
     fee 0 (band 'continued'). Ending the batch (even kill -9) ends its workers.
+    A mixed fleet: --fleet FILE.csv gives each vehicle id its class and per-km
+    tariff attributes (docs/tariffs.md).
     """
+    if fleet is not None and vehicle_attr:
+        raise UsageError("--fleet gives every vehicle its attributes: leave out --vehicle-attr")
     logs = expand_inputs(inputs)
     settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), raim=raim, p_md=p_md, p_fa=p_fa, policy=policy,
                               integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip
     with progress(f"batch of {len(logs)} logs", quiet) as advance:
         summary = run_batch(logs, geo, tariff, settings, output, workers=workers, scheduler=scheduler, force=force,
-                            roads=roads, nav=nav, progress=advance)  # fmt: skip
+                            roads=roads, nav=nav, progress=advance, fleet=fleet)  # fmt: skip
     line = (f"{output}: {summary['logs']} logs: {summary['done']} done, {summary['skipped']} up to date, {summary['failed']} failed; "
             + ", ".join(f"{v} {k}" for k, v in summary["totals"].items()))  # fmt: skip
     if as_json:

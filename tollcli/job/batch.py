@@ -52,6 +52,7 @@ from tollcli.charging.recognition import PASSAGE_GAP_S
 from tollcli.enforcement.locate import vehicle_from_log, vehicle_from_path
 from tollcli.errors import DataError, UsageError
 from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
+from tollcli.job.fleet import read_fleet
 from tollcli.job.pipeline import ChargeSettings, charge_log
 
 LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv", ".ubx")
@@ -70,6 +71,7 @@ class Job:
     name: str = ""  # the outputs' file name (a safe path component, unique in OUTDIR)
     input_sha256: tuple = ()  # (key, SHA-256) of the shared inputs, for the resume check
     nav: str | None = None  # the navigation file shared by the logs (raw-measurement inputs)
+    error: str = ""  # why the log cannot be charged before it is read (a vehicle the fleet file does not list)
 
 
 def path_component(text: str) -> str:
@@ -172,6 +174,8 @@ def run_one(job: Job) -> dict:
     inv_path = os.path.join(job.outdir, "invoices", folder, name + ".json")
     outcome = {"log": job.log, "vehicle": vehicle, "invoice": os.path.relpath(inv_path, job.outdir)}
     settings = replace(job.settings, vehicle=vehicle)
+    if job.error:
+        return _failed(job, name, outcome, job.error)
     try:
         log_sha = file_sha256(job.log)
     except OSError as exc:
@@ -322,10 +326,28 @@ def _run_in_worker(job: Job) -> dict:
         os._exit(143)
 
 
+def _fleet_jobs(jobs: list[Job], table: dict, fleet: str) -> list[Job]:
+    """Each job with its vehicle's class and attributes from the fleet file (or the reason it cannot be charged)."""
+    out = []
+    for job in jobs:
+        entry = table.get(job.vehicle)
+        if entry is None:
+            out.append(replace(job, error=f"{job.log}: vehicle {job.vehicle!r} is not in the fleet file {fleet} "
+                                          f"(its class and attributes decide the fee)"))  # fmt: skip
+        else:
+            out.append(replace(job, settings=replace(job.settings, vehicle_class=entry[0], vehicle_attrs=entry[1])))
+    return out
+
+
 def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, outdir: str, *, workers: int = 1,
               scheduler: str | None = None, force: bool = False, roads: str | None = None, nav: str | None = None,
-              progress=None) -> dict:  # fmt: skip
-    """Process every log; returns the summary (also written to OUTDIR/summary.json)."""
+              progress=None, fleet: str | None = None) -> dict:  # fmt: skip
+    """Process every log; returns the summary (also written to OUTDIR/summary.json).
+
+    ``fleet``: a fleet CSV (``fleet.py``) giving each vehicle its class and tariff attributes; a log of a vehicle
+    it does not list fails (listed in failed/), it is never charged as some default vehicle.
+    """
+    vehicles = read_fleet(fleet) if fleet is not None else None  # a bad fleet file stops the batch before it starts
     output_folder(outdir)
     shared = [("geoobjects_sha256", file_sha256(geo)), ("tariff_sha256", file_sha256(tariff))]
     if roads is not None:
@@ -334,6 +356,8 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
         shared.append(("nav_sha256", file_sha256(nav)))
     jobs = [Job(log, geo, tariff, settings, outdir, force, roads, vehicle, name, tuple(shared), nav)
             for log, (vehicle, _, name) in zip(logs, plan_outputs(logs, settings, outdir))]  # fmt: skip
+    if vehicles is not None:
+        jobs = _fleet_jobs(jobs, vehicles, fleet)
     outcomes: list[dict] = []
     tick = progress or (lambda n: None)
     if scheduler:
