@@ -36,6 +36,13 @@ def run_cli(*args: str, stdin: bytes | None = None, cwd: Path | None = None) -> 
     )  # fmt: skip
 
 
+def built_geoobjects(roads: Path, geo: Path, *extra: str) -> Path:
+    """``tollcli geoobjects build ROADS -o GEO`` as a user runs it (the test fails with its stderr otherwise)."""
+    r = run_cli("geoobjects", "build", str(roads), "-o", str(geo), "-q", *extra)
+    assert r.returncode == 0, r.stderr
+    return geo
+
+
 def run_main(*args: str) -> tuple[int, str]:
     """Run the CLI's entry point in this process (the ``tollcli`` script's code path): (exit code, stderr).
 

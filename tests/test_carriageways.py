@@ -9,7 +9,7 @@ import pytest
 import shapely
 from pyproj import Geod
 
-from conftest import run_cli, shared
+from conftest import built_geoobjects, run_cli, shared
 from tollcli.charging.carriageways import direction_check, heading_deg
 from tollcli.charging.invoice import invoice_json
 from tollcli.job import pipeline, streaming
@@ -33,10 +33,7 @@ def _motorway(tmp_path, name: str, paired: bool = True):
     ]  # fmt: skip
     roads = tmp_path / f"{name}-roads.geojson"
     roads.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
-    geo = tmp_path / f"{name}.geojson"
-    r = run_cli("geoobjects", "build", str(roads), "-o", str(geo), "-q")
-    assert r.returncode == 0, r.stderr
-    return roads, geo
+    return roads, built_geoobjects(roads, tmp_path / f"{name}.geojson")
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import numpy as np
 import pyproj
 import pytest
 
-from conftest import run_cli, shared
+from conftest import built_geoobjects, run_cli, shared
 from tollcli.charging.geoobject_store import TUNNEL_MIN_SPEED_MPS, tunnel_lengths
 from tollcli.charging.recognition import PASSAGE_GAP_S, passage_gaps_s, passages
 
@@ -24,10 +24,7 @@ def _write_network(tmp_path, name: str, props: dict):
     roads.write_text(json.dumps({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {
         "id": "T1", "name": "Tunnel road", "road_class": "motorway", **props},
         "geometry": {"type": "LineString", "coordinates": ROAD}}]}))  # fmt: skip
-    geo = tmp_path / f"geo-{name}.geojson"
-    r = run_cli("geoobjects", "build", str(roads), "-o", str(geo), "-q")
-    assert r.returncode == 0, r.stderr
-    return roads, geo
+    return roads, built_geoobjects(roads, tmp_path / f"geo-{name}.geojson")
 
 
 @pytest.fixture(scope="module")

@@ -17,11 +17,14 @@ Formats, by the output's extension:
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import signal
 import sys
 import tempfile
+import threading
 from typing import IO
 
 import numpy as np
@@ -120,7 +123,8 @@ class TableWriter:
             self._fh = sys.stdout.buffer if binary else sys.stdout
         else:
             folder = os.path.dirname(os.path.abspath(self.path))
-            fd, self._tmp = _temporary(self.path, folder)
+            with signals_held():  # inside the writer's with-block: discard() removes it from here on
+                fd, self._tmp = _temporary(self.path, folder)
             os.chmod(self._tmp, _umask_mode())
             self._fh = os.fdopen(fd, "wb" if binary else "w", encoding=None if binary else "utf-8", newline=None if binary else "")
         return self._fh
@@ -228,6 +232,20 @@ class TableWriter:
         self._records += 1
 
 
+@contextlib.contextmanager
+def signals_held():
+    """SIGTERM and SIGINT held back (delivered on leaving) in the main thread: a temporary file is created and its
+    name kept in one step, so an interruption can never leave a temporary file nobody knows of."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def _temporary(path: str, folder: str) -> tuple[int, str]:
     """A temporary file beside ``path``; an OSError names ``path`` (the output), not the temporary name."""
     try:
@@ -252,16 +270,18 @@ def write_text_atomic(path: str, text: str) -> None:
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise UsageError(f"{path}: folder {folder} does not exist")
-    fd, tmp = _temporary(path, folder)
-    os.chmod(tmp, _umask_mode())
+    tmp = None
     try:
+        with signals_held():  # created and named at once, inside the try that removes it
+            fd, tmp = _temporary(path, folder)
+        os.chmod(tmp, _umask_mode())
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
-        if os.path.exists(tmp):
+        if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
         raise
 
@@ -273,24 +293,34 @@ class AtomicText:
         folder = os.path.dirname(os.path.abspath(path))
         if not os.path.isdir(folder):
             raise UsageError(f"{path}: folder {folder} does not exist")
-        self.path = path
-        fd, self._tmp = _temporary(path, folder)
-        os.chmod(self._tmp, _umask_mode())
-        self._fh = os.fdopen(fd, "w", encoding="utf-8", newline="")
+        self.path, self._folder = path, folder
+        self._tmp: str | None = None
+        self._fh: IO | None = None
 
     def __enter__(self) -> "AtomicText":
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
         if self._tmp is not None:
-            self._fh.close()
+            if self._fh is not None:
+                self._fh.close()
             os.unlink(self._tmp)
             self._tmp = None
 
+    def _open(self) -> IO:
+        """The temporary file, made on first use (inside the with-block, whose exit removes it)."""
+        if self._fh is None:
+            with signals_held():
+                fd, self._tmp = _temporary(self.path, self._folder)
+            os.chmod(self._tmp, _umask_mode())
+            self._fh = os.fdopen(fd, "w", encoding="utf-8", newline="")
+        return self._fh
+
     def writelines(self, lines) -> None:
-        self._fh.writelines(line + "\n" for line in lines)
+        self._open().writelines(line + "\n" for line in lines)
 
     def commit(self) -> None:
+        self._open()
         self._fh.flush()
         os.fsync(self._fh.fileno())
         self._fh.close()

@@ -304,6 +304,9 @@ def die_with_parent(parent_pid: int) -> None:
         pass
 
     def stop(signum, frame):
+        # one unwinding: the parent's death sends SIGTERM twice (PR_SET_PDEATHSIG and the watcher below); a second
+        # one arriving while the first unwinds would interrupt the discarding of a half-written output
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         raise SystemExit(128 + signum)  # unwind: the outputs being written are discarded; then _run_in_worker ends
 
     signal.signal(signal.SIGTERM, stop)
