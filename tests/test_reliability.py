@@ -106,3 +106,27 @@ def test_verify_names_each_corrupted_recorded_hash(invoiced, key, label):
     code, message = _verify(invoiced)
     assert code == 1 and f"{label} {inv['inputs'][key]} changed since the invoice was made" in message
     assert "recorded 000000000000" in message
+
+
+def test_a_terminate_signal_waits_until_the_temporary_file_is_named():
+    """``signals_held``: SIGTERM arriving while a temporary file is created is delivered only when its name is kept
+    (so the writer's cleanup knows the file); outside the block it interrupts at once."""
+    import subprocess
+    import sys
+
+    code = (
+        "import os, signal\n"
+        "from tollcli.io.writers import signals_held\n"
+        "def stop(s, f):\n    raise SystemExit(143)\n"
+        "signal.signal(signal.SIGTERM, stop)\n"
+        "reached = []\n"
+        "try:\n"
+        "    with signals_held():\n"
+        "        os.kill(os.getpid(), signal.SIGTERM)\n"
+        "        reached.append('inside')\n"
+        "    reached.append('after')\n"
+        "except SystemExit:\n"
+        "    print(','.join(reached))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "inside", out.stderr
