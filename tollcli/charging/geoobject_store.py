@@ -171,12 +171,14 @@ def section_lengths(props: list[dict]) -> np.ndarray:
 
 def tunnel_lengths(props: list[dict]) -> np.ndarray:
     """Each geo-object's length in tunnels, m: ``tunnel_m``, else its whole length when ``tunnel`` is set, else 0."""
+    from tollcli.charging.geoobjects import flag_set
+
     out = np.zeros(len(props))
     for i, p in enumerate(props):
         given = _float(p.get("tunnel_m"))
         if np.isfinite(given) and given > 0:
             out[i] = given
-        elif p.get("tunnel") not in (None, False, 0, "") and str(p.get("tunnel")).lower() not in ("no", "0", "false"):
+        elif flag_set(p.get("tunnel")):
             whole = _float(p.get("section_length_m", p.get("length_m")))
             out[i] = whole if np.isfinite(whole) else 0.0
     return out

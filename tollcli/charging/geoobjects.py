@@ -94,13 +94,14 @@ def road_level(props: dict) -> int:
         return int(layer)
     except (TypeError, ValueError):
         pass
-    if _truthy(props.get("bridge")):
+    if flag_set(props.get("bridge")):
         return 1
-    return -1 if _truthy(props.get("tunnel")) else 0
+    return -1 if flag_set(props.get("tunnel")) else 0
 
 
-def _truthy(value) -> bool:
-    return value not in (None, False, "", "no", "0", 0)
+def flag_set(value) -> bool:
+    """A road tag that is set (``bridge``, ``tunnel``): anything but absent, false, 0, "", "no" or "false"."""
+    return value not in (None, False, "", 0) and str(value).lower() not in ("no", "0", "false")
 
 
 @dataclass

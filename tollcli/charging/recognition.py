@@ -10,7 +10,7 @@ course must also agree with its direction of travel (``carriageways.py``).
 
 Positions inside one geo-object are grouped into passages (a new passage after
 ``passage_gap_s`` without a fix inside; in a geo-object with a tunnel, after that plus
-the time its tunnel takes at ``TUNNEL_MIN_SPEED_MPS``: no GNSS reaches a tunnel, and the
+the time its tunnel takes at ``geoobject_store.TUNNEL_MIN_SPEED_MPS``: no GNSS reaches a tunnel, and the
 fixes before and after it are one passage, charged once). In each passage the valid positions are
 thinned to independent ones, at least ``tc_s`` apart (greedy from the first:
 exact), and the geo-object is charged when N_valid,in ≥ ``n_th``.
@@ -37,7 +37,7 @@ def passage_gaps_s(geo, passage_gap_s: float = PASSAGE_GAP_S) -> np.ndarray:
     return passage_gap_s + geo.tunnel_times_s()
 
 
-from tollcli.charging.geoobject_store import TUNNEL_MIN_SPEED_MPS, GeoObjects, load_geoobjects  # noqa: E402,F401  (re-exported)
+from tollcli.charging.geoobject_store import GeoObjects, load_geoobjects  # noqa: E402,F401  (re-exported)
 
 
 def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -37,9 +37,9 @@ the one rounding (half-up, to the currency's minor unit); fees are below 10^12.
 from __future__ import annotations
 
 import datetime as dt
+import math
 import re
 import tomllib
-import math
 from dataclasses import dataclass, field
 from decimal import ROUND_HALF_UP, Decimal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
@@ -113,8 +113,9 @@ class Tariff:
         """DataError when the per-km tables name a geo-object or road class the geo-object file does not have:
         a misspelt id or class would otherwise leave its row unused and change fees silently."""
         ids, classes = set(map(str, geo_ids)), set(map(str, road_classes))
-        for gid in sorted(set(self.length_km) - ids):
-            raise DataError(f"{self.source}: [length_km] names geo-object {gid!r}, which {geo_source} does not have "
+        unknown = sorted(set(self.length_km) - ids)
+        if unknown:
+            raise DataError(f"{self.source}: [length_km] names geo-object {unknown[0]!r}, which {geo_source} does not have "
                             f"(a misspelt id would leave its length unused)")  # fmt: skip
         for table in self.tables:
             for rate in table.rates:
@@ -171,7 +172,7 @@ class Tariff:
         if length_m is None or not math.isfinite(length_m) or length_m <= 0:
             raise DataError(f"{self.source}: geo-object {geoobject_id!r} has no length for a per-km rate: build it with "
                             f"'tollcli geoobjects build' (section_length_m) or give it under [length_km]")  # fmt: skip
-        return Decimal(int(Decimal(repr(float(length_m))).to_integral_value(rounding=ROUND_HALF_UP))).scaleb(-3)
+        return Decimal(repr(float(length_m))).quantize(Decimal(1), rounding=ROUND_HALF_UP).scaleb(-3)  # whole metres
 
 
 def _minutes(text, where: str) -> int:
