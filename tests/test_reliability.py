@@ -130,3 +130,38 @@ def test_a_terminate_signal_waits_until_the_temporary_file_is_named():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == "inside", out.stderr
+
+
+def test_a_terminate_signal_taken_by_another_thread_still_waits():
+    """The kernel may hand a process-directed SIGTERM to any thread that does not block it (OpenBLAS, pyarrow and
+    Dask start threads); Python then runs the handler in the main thread. Sent straight to another thread here, the
+    signal must still wait until the block is left, and then interrupt exactly once."""
+    import subprocess
+    import sys
+
+    code = (
+        "import os, signal, threading\n"
+        "from tollcli.io.writers import signals_held\n"
+        "calls = []\n"
+        "def stop(s, f):\n    calls.append(s)\n    raise SystemExit(143)\n"
+        "signal.signal(signal.SIGTERM, stop)\n"
+        "gate = threading.Event()\n"
+        "other = threading.Thread(target=gate.wait, daemon=True)\n"
+        "other.start()\n"
+        "reached = []\n"
+        "try:\n"
+        "    with signals_held():\n"
+        "        with signals_held():\n"  # nested: the outer block decides
+        "            signal.pthread_kill(other.ident, signal.SIGTERM)\n"
+        "            signal.pthread_kill(other.ident, signal.SIGTERM)\n"
+        "            for _ in range(200000):\n"
+        "                pass\n"  # many bytecodes: time for a handler to run, were it not deferred
+        "            reached.append('inner')\n"
+        "        reached.append('outer')\n"
+        "    reached.append('after')\n"
+        "except SystemExit:\n"
+        "    print(','.join(reached), len(calls), signal.getsignal(signal.SIGTERM) is stop)\n"
+        "gate.set()\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "inner,outer 1 True", out.stderr

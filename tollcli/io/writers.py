@@ -232,18 +232,54 @@ class TableWriter:
         self._records += 1
 
 
+_HELD = (signal.SIGTERM, signal.SIGINT)
+_holding = 0  # nesting depth of signals_held in the main thread
+_pending: list[int] = []  # signals that arrived while held, in order
+
+
+def _defer(signum, frame) -> None:
+    _pending.append(signum)
+
+
 @contextlib.contextmanager
 def signals_held():
-    """SIGTERM and SIGINT held back (delivered on leaving) in the main thread: a temporary file is created and its
-    name kept in one step, so an interruption can never leave a temporary file nobody knows of."""
-    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+    """SIGTERM and SIGINT held back (delivered on leaving): a temporary file is created and its name kept in one step,
+    so an interruption can never leave a temporary file nobody knows of.
+
+    The deferral is in the handler, not in a signal mask: a signal sent to the process may be taken by any thread
+    (numpy/OpenBLAS, pyarrow and Dask start some), and Python runs its handler in the main thread whatever thread
+    took it. While held, the handlers only note the signal; on leaving the old handlers come back and each noted
+    signal is raised again, once. Off the main thread (where handlers cannot be set) nothing is held.
+    """
+    global _holding
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
+    if _holding:
+        _holding += 1
+        try:
+            yield
+        finally:
+            _holding -= 1
+        return
+    old = {}
+    for signum in _HELD:
+        handler = signal.getsignal(signum)
+        if handler is None or handler == signal.SIG_IGN:  # set outside Python, or ignored: nothing to defer
+            continue
+        old[signum] = signal.signal(signum, _defer)
+    _holding = 1
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        _holding = 0
+        for signum, handler in old.items():
+            signal.signal(signum, handler)
+        pending = list(dict.fromkeys(_pending))
+        _pending.clear()
+        for signum in pending:
+            if signum in old:
+                signal.raise_signal(signum)
 
 
 def _temporary(path: str, folder: str) -> tuple[int, str]:
