@@ -13,37 +13,90 @@ from typing import Annotated, Optional
 import pandas as pd
 import typer
 
-from tollcli.charging.audit import audit_with_truth, check_same_trip, findings_of, driven_from_truth, fee_table, load_invoice, risk_report
+from tollcli.charging.audit import MONEY_UNKNOWN, audit_with_truth, check_same_trip, findings_of, load_invoice, risk_report
+from tollcli.charging.truth_passages import is_id_list, truth_passages
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
 from tollcli.cli import options as opt
 from tollcli.cli.console import audit_tables, show, warn
-from tollcli.errors import UsageError
+from tollcli.errors import DataError, UsageError
 from tollcli.integrity.truth_check import check_against_truth
 from tollcli.io.sources import read_table
 from tollcli.io.writers import write_text_atomic
+from tollcli.job.verify import VerifyFailed, locate_input
 
 
-def _expand(runs: list[str]) -> list[str]:
-    paths: list[str] = []
+def _expand(runs: list[str]) -> list[tuple[str, dict]]:
+    """The invoices named: files, globs, or folders searched recursively (a batch output folder: its
+    ``invoices/<vehicle>/*.json``); in a folder, JSON files that are not invoices (a summary) are passed over."""
+    found: list[tuple[str, dict]] = []
     for run in runs:
         if os.path.isdir(run):
-            paths.extend(sorted(glob.glob(os.path.join(run, "*.json"))))
+            for path in sorted(glob.glob(os.path.join(glob.escape(run), "**", "*.json"), recursive=True)):
+                try:
+                    found.append((path, load_invoice(path)))
+                except DataError:
+                    continue
         elif any(ch in run for ch in "*?["):
-            paths.extend(sorted(glob.glob(run)))
+            found.extend((p, load_invoice(p)) for p in sorted(glob.glob(run)))
         else:
-            paths.append(run)
-    if not paths:
+            found.append((run, load_invoice(run)))
+    if not found:
         raise UsageError("no invoices found in " + ", ".join(runs))
-    return paths
+    return found
+
+
+class TariffPricer:
+    """The true fee of a passage: the tariff (``--tariff``, else the one each invoice records, found where it names
+    it or beside it with its recorded SHA-256) at the passage's entry time, for the invoice's vehicle."""
+
+    def __init__(self, tariff: str | None, geo: str | None, vehicle_class: str | None, vehicle_attrs: dict | None):
+        self.tariff, self.geo, self.vehicle_class, self.vehicle_attrs = tariff, geo, vehicle_class, vehicle_attrs
+        self.cache: dict[tuple, tuple] = {}
+        self.sources: set[str] = set()
+
+    def _load(self, invoice: dict, name: str):
+        inputs = invoice.get("inputs") or {}
+        tariff, geo = self.tariff, self.geo
+        try:
+            if tariff is None:
+                tariff = locate_input(name, str(inputs["tariff"]), inputs.get("tariff_sha256"), "tariff")
+            if geo is None:
+                geo = locate_input(name, str(inputs["geoobjects"]), inputs.get("geoobjects_sha256"), "geo-objects")
+        except (KeyError, VerifyFailed):
+            return None
+        key = (tariff, geo)
+        if key not in self.cache:
+            geo_objects = load_geoobjects(geo)
+            doc = load_tariff(tariff)
+            doc.check_against(geo_objects.ids, geo_objects.road_class, geo)
+            index = {str(g): i for i, g in enumerate(geo_objects.ids)}
+            self.cache[key] = (doc, geo_objects, index)
+        self.sources.add(tariff)
+        return self.cache[key]
+
+    def __call__(self, invoice: dict, gid: str, when):
+        loaded = self._load(invoice, invoice.get("_path", ""))
+        if loaded is None:
+            return None
+        doc, geo_objects, index = loaded
+        if gid not in index:
+            return None
+        i = index[gid]
+        if when is None:
+            when = pd.Timestamp((invoice.get("period") or {}).get("start_utc", "2000-01-01T12:00:00Z"))
+        vehicle = {**(invoice.get("vehicle_attributes") or {}), **(self.vehicle_attrs or {}),
+                   "vehicle_class": self.vehicle_class or invoice.get("vehicle_class") or "car"}  # fmt: skip
+        length_m = float(geo_objects.length_m[i]) if geo_objects.length_m is not None else None
+        return doc.price(gid, str(geo_objects.road_class[i]), length_m, vehicle, when.to_pydatetime()).fee
 
 
 def audit(
     runs: Annotated[Optional[list[str]], typer.Argument(metavar="[RUN...]", help="Invoices (JSON from 'tollcli process'), folders or globs.", show_default=False)] = None,
     truth: Annotated[Optional[str], typer.Option("--truth", help="Driven geo-objects: ids (JSON list or one per line) or a trajectory (CSV/GeoJSON, needs --geo).")] = None,
     geo: Annotated[Optional[str], typer.Option("--geo", help="Geo-objects, to read a truth trajectory and price missed ones.")] = None,
-    tariff: Annotated[Optional[str], typer.Option("--tariff", help="Tariff, to price geo-objects no invoice charged.")] = None,
-    vehicle_class: Annotated[str, typer.Option("--vehicle-class", help="Vehicle class for --tariff prices.")] = "car",
+    tariff: Annotated[Optional[str], typer.Option("--tariff", help="Tariff to price the passages driven (default: the one each invoice records, where it names it or beside it, checked by its SHA-256).")] = None,
+    vehicle_class: Annotated[Optional[str], typer.Option("--vehicle-class", help="Vehicle class to price passages at (default: each invoice's).")] = None,
     vehicle_attr: opt.VehicleAttr = None,
     invoice_error: Annotated[float, typer.Option("--invoice-error", help="M_e: an invoice is right when within this %% of the true total.", min=0.0)] = 1.0,
     epochs: Annotated[Optional[str], typer.Option("--epochs", help="An integrity epoch table ('tollcli integrity -o', CSV/Parquet): with a --truth trajectory, count positioning failures and those the RAIM missed.")] = None,
@@ -59,7 +112,7 @@ def audit(
         raise UsageError("give invoices (RUN...) and/or --epochs with --truth")
     integrity = None
     if epochs:
-        if not truth or _is_id_list(truth):
+        if not truth or is_id_list(truth):
             raise UsageError("--epochs needs --truth to be a trajectory (CSV with time_utc, lat_deg, lon_deg)")
         integrity = check_against_truth(read_table(epochs), read_table(truth))
     if not runs:
@@ -68,36 +121,32 @@ def audit(
                    f"{integrity['undetected']} undetected (rate {integrity['undetected_rate']:.2e}, P_MD {integrity['p_md']:g})")  # fmt: skip
         _emit(report, summary, output, quiet)
         return
-    paths = _expand(runs)
-    invoices = [load_invoice(p) for p in paths]
+    found = _expand(runs)
+    paths = [p for p, _ in found]
+    invoices = [{**inv, "_path": p} for p, inv in found]
     if truth:
         check_same_trip(invoices, paths, truth)
-    fees = fee_table(invoices)
     geo_objects = load_geoobjects(geo) if geo else None
-    if tariff:
-        if geo_objects is None:
-            raise UsageError("--tariff prices geo-objects by their road class: give --geo too")
-        tariff_doc = load_tariff(tariff)
-        tariff_doc.check_against(geo_objects.ids, geo_objects.road_class, geo)
-        start = next((inv["period"]["start_utc"] for inv in invoices if inv.get("period")), "2000-01-01T12:00:00Z")
-        when = pd.Timestamp(start).to_pydatetime()
-        vehicle = {**(opt.vehicle_attrs(vehicle_attr) or {}), "vehicle_class": vehicle_class}
-        lengths = geo_objects.length_m if geo_objects.length_m is not None else [None] * len(geo_objects.ids)
-        for gid, road_class, length_m in zip(geo_objects.ids, geo_objects.road_class, lengths):
-            if str(gid) not in fees:
-                fees[str(gid)] = tariff_doc.price(str(gid), str(road_class), length_m, vehicle, when).fee
+    if tariff and geo_objects is None:
+        raise UsageError("--tariff prices geo-objects by their road class: give --geo too")
+    pricer = TariffPricer(tariff, geo, vehicle_class, opt.vehicle_attrs(vehicle_attr))
     if truth:
-        if geo_objects is None and not _is_id_list(truth):
+        if geo_objects is None and not is_id_list(truth):
             raise UsageError("a truth trajectory needs --geo to know where the geo-objects are")
-        driven = driven_from_truth(truth, geo_objects)
-        report = {"mode": "truth", **audit_with_truth(invoices, driven, fees, invoice_error)}
-        summary = (f"{report['runs']} runs: {report['missed_recognitions']} missed recognitions, "
-                   f"{report['false_recognitions']} false recognitions, {report['share_within']:.1%} of invoices "
-                   f"within {invoice_error:g} %")  # fmt: skip
+        passages = truth_passages(truth, geo_objects)
+        report = {"mode": "truth", **audit_with_truth(invoices, passages, {}, invoice_error, pricer)}
+        if report["share_within"] is None:
+            money = f"money unknown ({MONEY_UNKNOWN})"
+        else:
+            money = f"{report['share_within']:.1%} of {report['runs_money_known']} invoices within {invoice_error:g} %"
+        summary = (f"{report['runs']} runs, {report['passages_driven']} passages driven: {report['missed_recognitions']} "
+                   f"missed recognitions, {report['false_recognitions']} false recognitions; {money}")  # fmt: skip
     else:
-        report = {"mode": "risk", **risk_report(invoices, fees)}
+        report = {"mode": "risk", **risk_report(invoices, {}, pricer)}
         summary = (f"{report['runs']} runs: {len(report['revenue_at_risk'])} passages at risk "
-                   f"({report['money_at_risk']} not charged), {len(report['charges'])} charges")  # fmt: skip
+                   f"({report['money_at_risk']}{'' if report['money_at_risk_complete'] else ' or more'} not charged), "
+                   f"{len(report['charges'])} charges")  # fmt: skip
+    report["tariffs"] = sorted(pricer.sources)
     report["findings"] = findings_of(invoices)
     if report["findings"]:
         kinds = Counter(f["kind"] for f in report["findings"])
@@ -120,13 +169,5 @@ def _emit(report: dict, summary: str, output: str, quiet: bool) -> None:
     warn(summary, quiet)
 
 
-def _is_id_list(path: str) -> bool:
-    try:
-        with open(path, encoding="utf-8") as fh:
-            head = fh.read(4096).lstrip()
-    except OSError:
-        return True  # let the reader report it
-    first = head.splitlines()[0] if head else ""
-    return head.startswith("[") or ("lat" not in first.lower() and not head.startswith("{"))
 
 
