@@ -135,3 +135,18 @@ def test_helsinki_carriageways_are_antiparallel_namesakes(tmp_path):
                 a, b = np.array(p["axis"]), np.array(props[other]["axis"])
                 assert np.dot(a[-1] - a[0], b[-1] - b[0]) < 0 or len(a) > 2  # overall antiparallel (or curved)
     assert run_cli("geoobjects", "check", str(geo)).returncode == 0
+
+
+def test_the_revenue_at_risk_does_not_count_the_opposite_carriageway_in_a_city(motorway):
+    """An urban drive northbound: the southbound positions the RAIM refuses are still the other carriageway, owed
+    nothing — not revenue at risk (before: the direction rule was applied to RAIM-valid positions only)."""
+    tmp, geo, tariff, _ = motorway
+    drive = tmp / "urban"
+    r = run_cli("simulate", "--route", str(tmp / "paired-roads.geojson"), "--via", "A7-N", "--geo", str(geo), "--seed", "1",
+                "--env", "urban", "-o", str(drive), "-q")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    doc = _invoice(drive / "drive.nmea", geo, tariff, tmp / "urban.json")
+    refused = {line["geoobject"]: line["statuses"] for line in doc["not_charged"]}
+    assert set(refused["A7-S"]) == {"wrong_direction"}
+    report = json.loads(run_cli("audit", str(tmp / "urban.json"), "-o", "-", "-q").stdout)
+    assert report["money_at_risk"] == "0.00" and [x["geoobject"] for x in report["opposite_carriageway"]] == ["A7-S"]

@@ -185,7 +185,10 @@ def pair_verdicts(pairs: dict[str, np.ndarray], geo: GeoObjects, epoch_why: np.n
     valid = pairs["raim_valid"].copy()
     verdict = pairs["raim_status"].copy()
     if "direction" in pairs:  # a carriageway counts a position only in its direction of travel
-        wrong = valid & (pairs["direction"] != "")
+        # travelling against it is the other carriageway whatever the RAIM says (the revenue at risk must not count
+        # it); an unknown direction only matters where the position would count
+        against = pairs["direction"] == "wrong_direction"
+        wrong = against | (valid & (pairs["direction"] != ""))
         verdict[wrong] = pairs["direction"][wrong]
         valid &= ~wrong
     if epoch_why is not None:
