@@ -58,6 +58,13 @@ def test_default_policy_is_the_strictest_the_inputs_support(tmp_path):
     derived = str(SAMPLES / "sim" / "rural-clean" / "drive-derived.csv")  # pseudoranges: no speed over ground
     assert run_cli("process", derived, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(inv)).returncode == 0
     assert json.loads(inv.read_text())["parameters"]["policy_used"] == "raim"
+    # with a road network too: map matching has no speed or heading to match with, so the default stays RAIM
+    # (before: raim+mm, every position mm_alarm, nothing charged)
+    assert run_cli("process", derived, "--geo", GEO, "--tariff", TARIFF, "--roads", ROADS, "-q", "-o", str(inv)).returncode == 0
+    invoice = json.loads(inv.read_text())
+    assert invoice["parameters"]["policy_used"] == "raim" and len(invoice["lines"]) == 2
+    bad = run_cli("process", derived, "--geo", GEO, "--tariff", TARIFF, "--roads", ROADS, "--policy", "raim+mm", "-o", str(inv))
+    assert bad.returncode == 2 and b"map matching needs the speed and heading" in bad.stderr
     bad = run_cli("process", drive, "--geo", GEO, "--tariff", TARIFF, "--policy", "raim+mm", "-o", str(inv))
     assert bad.returncode == 2 and b"needs the road network (--roads)" in bad.stderr
     bad = run_cli("process", drive, "--geo", GEO, "--tariff", TARIFF, "--policy", "everything", "-o", str(inv))

@@ -158,6 +158,8 @@ def passages_from_trajectory(points: pd.DataFrame, geo) -> pd.DataFrame:
         keep = ~directed
         keep[directed] = ok
         rows, obj = rows[keep], obj[keep]
+    if rows.size == 0:
+        return passages_from_ids([])
     times = points["time_utc"]
     timed = bool(times.notna().all())
     order = np.lexsort((rows, obj))

@@ -32,9 +32,11 @@ POLICIES = {"raim": (), "raim+speed": ("speed",), "raim+mm": ("mm",), "all": ("s
 
 
 def default_policy(has_speed: bool, has_roads: bool) -> str:
-    if has_speed and has_roads:
-        return "all"
-    return "raim+mm" if has_roads else ("raim+speed" if has_speed else "raim")
+    """The strictest policy the inputs support: the speed check needs a speed over ground, and so does map
+    matching (its fuzzy rules read speed and heading); without them a road network adds no check."""
+    if not has_speed:
+        return "raim"
+    return "all" if has_roads else "raim+speed"
 
 
 def mm_integrity(epochs: pd.DataFrame, matched: pd.DataFrame, window: int = 5, ramp: float = 0.0) -> pd.DataFrame:

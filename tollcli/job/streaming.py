@@ -73,6 +73,8 @@ def choose_policy(has_speed: bool, policy: str | None, roads: str | None) -> tup
         raise UsageError(f"--policy {policy} needs the road network (--roads)")
     if "speed" in needs and not has_speed:
         raise UsageError(f"--policy {policy}: the log has no speed over ground (RMC/VTG) to check")
+    if "mm" in needs and not has_speed:
+        raise UsageError(f"--policy {policy}: map matching needs the speed and heading the log does not have (RMC/VTG)")
     return policy, needs
 
 
