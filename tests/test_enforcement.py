@@ -195,7 +195,7 @@ GPSD_FINDINGS = {
     "bu353-glonass.log": ["satellite_collapse"], "ericsson-gru04.log": ["time_jump"],
     "garmin-10x.log": ["cn0_collapse", "satellite_collapse"], "gp-320fw-2019-04-07-coldboot.log": ["time_jump", "time_jump"],  # cold boot: the clock jumps, then to 1999 (no-fix dates are not read)
     "iTrek.log": ["time_jump"],  # two recordings concatenated
-    "humminbird-M37.log": ["time_jump"], "meinberg-gps164.log": ["doppler_mismatch"], "nl2008u.log": ["gap"],
+    "humminbird-M37.log": ["time_jump"], "nl2008u.log": ["gap"],
     "sl869.log": ["position_jump"], "ublox-lea-4h.log": ["gap"], "unicore-um621.log": ["cn0_collapse", "satellite_collapse"],
 }  # fmt: skip
 

@@ -61,6 +61,10 @@ def _route_lines(route: str, via: str | None, path_from: str | None, path_to: st
     return route_by_ways(route, [v.strip() for v in via.split(",") if v.strip()])
 
 
+#: output rates a receiver logs at, Hz
+RATES_HZ = (1.0, 2.0, 5.0, 10.0, 20.0)
+
+
 def simulate(
     ctx: typer.Context,
     output: Annotated[str, typer.Option("-o", "--output", help="Folder for the drive's files (created if needed).")],
@@ -73,7 +77,7 @@ def simulate(
     constellations: Annotated[str, typer.Option("--constellations", help="Nominal constellations: gps, galileo or gps,galileo.")] = "gps,galileo",
     duration: Annotated[Optional[float], typer.Option("--duration", help="Seconds to drive (default: the whole route, or 600 s straight).", min=0.0)] = None,
     speed: Annotated[float, typer.Option("--speed", help="Vehicle speed, m/s (13.89 = 50 km/h).", min=0.1)] = 13.89,
-    rate: Annotated[float, typer.Option("--rate", help="Output rate, Hz (1, 5 or 10).")] = 1.0,
+    rate: Annotated[float, typer.Option("--rate", help="Output rate, Hz (1, 2, 5, 10 or 20).")] = 1.0,
     start: Annotated[str, typer.Option("--start", help="LAT,LON of a straight drive's start, degrees.")] = f"{PERPIGNAN[0]:.6f},{PERPIGNAN[1]:.6f}",
     heading: Annotated[float, typer.Option("--heading", help="Heading of a straight drive, degrees from north.")] = 0.0,
     start_utc: Annotated[dt.datetime, typer.Option("--start-utc", formats=["%Y-%m-%dT%H:%M:%S"], help="UTC time of the first epoch.")] = dt.datetime(2026, 3, 2, 8, 0, 0),
@@ -108,8 +112,8 @@ def simulate(
     """
     if env not in ENVIRONMENTS:
         raise UsageError(f"--env {env!r}: one of {', '.join(ENVIRONMENTS)}")
-    if rate not in (1.0, 5.0, 10.0):
-        raise UsageError(f"--rate {rate:g}: one of 1, 5, 10")
+    if rate not in RATES_HZ:
+        raise UsageError(f"--rate {rate:g}: one of {', '.join(f'{r:g}' for r in RATES_HZ)}")
     names = [c.strip().lower() for c in constellations.split(",") if c.strip()]
     if not names or any(n not in ("gps", "galileo") for n in names):
         raise UsageError(f"--constellations {constellations!r}: gps, galileo or gps,galileo")

@@ -21,7 +21,7 @@ spoofing
   ``overspeed``  reported speed above ``max_speed_mps`` for ≥ 3 epochs;
   ``cn0_uniform``  ≥ 5 satellites with C/N0 spread < ``uniform_std_db`` and median ≥ ``uniform_min_dbhz``
   for ≥ ``uniform_min_s`` (a simulator's signature);
-  ``raim_persistent_alarm``  the RAIM's test fails in ≥ 80 % of ≥ ``raim_window_s`` s with good
+  ``raim_persistent_alarm``  the RAIM's test fails in ≥ 80 % of ≥ ``raim_window_s`` s (one epoch a second) with good
   geometry (HDOP ≤ 2, ≥ 6 satellites), far more often than those epochs' P_FA explain (binomial tail
   < ``RAIM_ALARM_P_VALUE``: ETC alarms at P_FA near 1 — probable false alarms — accuse nobody);
   ``position_disagreement``  two sentences of one epoch place it ≥ ``disagree_m`` apart (GGA vs RMC…);
@@ -29,8 +29,9 @@ spoofing
   ``date_jump``  inside a continuous trip an RMC/ZDA date jumps away from the trip's date (the epochs keep
   the trip's date, so the passage is charged once; ``week_rollover`` when the jump is a multiple of
   1024 GPS weeks, a receiver fault rather than an attack);
-  ``doppler_mismatch``  the reported (Doppler) speed and the speed from successive fixes differ by more
-  than max(``doppler_tol_mps``, 30 %) over ``doppler_window_s`` s, for ≥ ``doppler_window_s`` s.
+  ``doppler_mismatch``  over ``doppler_window_s`` s the fixes' displacement and the one the reported (Doppler)
+  velocity gives differ by more than max(``doppler_tol_mps``, 30 %) as speeds, for ≥ ``doppler_window_s`` s
+  (a time window, whatever the rate: :func:`doppler_windows`).
 expected
   ``tunnel_outage``  a gap, fix loss or collapse at a geo-object's tunnel, no longer than the tunnel takes
   (``tunnels.py``; ``tunnel_portal_m``, ``tunnel_reacquire_s``): the kind it replaces is in ``evidence.explains``.
@@ -225,34 +226,80 @@ def _speed_checks(epochs: pd.DataFrame, t: np.ndarray, fx, s: FindingSettings) -
             lat, lon = _where(epochs, a)
             out.append(_finding("overspeed", (a, b), t[a], t[b], lat, lon, max_reported_mps=np.nanmax(speed[a : b + 1]),
                                 max_speed_mps=s.max_speed_mps, epochs=b - a + 1))  # fmt: skip
-    # Doppler (reported) speed against the speed from successive fixes, over a window
-    if fx.rows.size < 3:
-        return out
-    close = (fx.dt_s > 0) & (fx.dt_s <= 2.0)
-    pos_speed = np.where(close, fx.step_m / np.where(close, fx.dt_s, 1.0), np.nan)
-    rep = speed[fx.rows[1:]]
-    ok = np.isfinite(pos_speed) & np.isfinite(rep)
-    n = max(int(s.doppler_window_s), 2)
-    c_ok = np.concatenate([[0], np.cumsum(ok)])
-    c_p = np.concatenate([[0.0], np.cumsum(np.where(ok, pos_speed, 0.0))])
-    c_r = np.concatenate([[0.0], np.cumsum(np.where(ok, rep, 0.0))])
-    idx = np.arange(n, ok.size + 1)
-    if idx.size == 0:
-        return out
-    cnt = c_ok[idx] - c_ok[idx - n]
-    full = cnt >= n - 1
+    return out + _doppler_checks(epochs, fx, t, s)
+
+
+#: steps longer than this break a Doppler window (a gap is another finding's business)
+DOPPLER_MAX_STEP_S = 2.0
+
+
+def doppler_windows(epochs: pd.DataFrame, fx, window_s: float) -> dict[str, np.ndarray]:
+    """Over the last ``window_s`` seconds before each fix: the displacement of the fixes and the one the reported
+    velocity (speed over ground and course, dead-reckoned, trapezoid) gives, as speeds in m/s, and the speed of
+    their difference. The displacement, not the path length: at 5–20 Hz the path of noisy short steps is
+    longer than the road. Where a course is missing the reported path length stands in for its displacement
+    (on a bend it is longer: the check is then looser, never falsely alarmed by the bend).
+
+    Returns per fix: ``start`` (the window's first fix, −1 when there is none), ``position_speed_mps``,
+    ``reported_speed_mps``, ``difference_mps`` (NaN where the window has a gap or a missing speed)."""
+    m = fx.rows.size
+    nan = np.full(m, np.nan)
+    speed = epochs["speed_mps"].to_numpy(float)[fx.rows]
+    course = epochs["course_deg"].to_numpy(float)[fx.rows] if "course_deg" in epochs else nan
+    start = np.searchsorted(fx.t_s, fx.t_s - window_s, side="right") - 1
+    if m < 2:
+        return {"start": np.full(m, -1), "position_speed_mps": nan, "reported_speed_mps": nan, "difference_mps": nan}
+    v = (speed[:-1] + speed[1:]) / 2.0
+    rad = np.radians(course)
+    ce, cn = np.sin(rad[:-1]) + np.sin(rad[1:]), np.cos(rad[:-1]) + np.cos(rad[1:])
+    norm = np.hypot(ce, cn)
     with np.errstate(invalid="ignore", divide="ignore"):
-        mp = (c_p[idx] - c_p[idx - n]) / cnt
-        mr = (c_r[idx] - c_r[idx - n]) / cnt
-    bad = full & (np.abs(mp - mr) > np.maximum(s.doppler_tol_mps, 0.3 * np.maximum(mp, mr)))
-    flag = np.zeros(ok.size, bool)
-    flag[idx[bad] - 1] = True  # the window's last step
+        ue, un = ce / norm, cn / norm
+    has_course = np.isfinite(ue) & np.isfinite(un)
+    step_ok = (fx.dt_s > 0) & (fx.dt_s <= DOPPLER_MAX_STEP_S) & np.isfinite(v)
+    d = np.where(step_ok, v * fx.dt_s, 0.0)
+
+    def window_sum(x: np.ndarray) -> np.ndarray:
+        c = np.concatenate([[0.0], np.cumsum(x)])
+        j = np.arange(m)
+        return np.where(start >= 0, c[j] - c[np.maximum(start, 0)], np.nan)
+
+    bad_steps = window_sum((~step_ok).astype(float))
+    no_course = window_sum((~has_course).astype(float))
+    dr_e, dr_n = window_sum(np.where(has_course, d * ue, 0.0)), window_sum(np.where(has_course, d * un, 0.0))
+    path = window_sum(d)
+    i = np.maximum(start, 0)
+    span = fx.t_s - fx.t_s[i]
+    lat0 = np.radians((fx.lat_deg + fx.lat_deg[i]) / 2)
+    pn = np.radians(fx.lat_deg - fx.lat_deg[i]) * 6_371_008.8
+    pe = np.radians(fx.lon_deg - fx.lon_deg[i]) * 6_371_008.8 * np.cos(lat0)
+    usable = (start >= 0) & (start < np.arange(m)) & (bad_steps == 0) & (span >= window_s * 0.5)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        pos = np.where(usable, np.hypot(pe, pn) / span, np.nan)
+        vectors = no_course == 0
+        rep = np.where(usable, np.where(vectors, np.hypot(dr_e, dr_n), path) / span, np.nan)
+        diff = np.where(vectors, np.hypot(pe - dr_e, pn - dr_n) / span, np.abs(pos - rep))
+    return {"start": np.where(usable, start, -1), "position_speed_mps": pos, "reported_speed_mps": rep,
+            "difference_mps": np.where(usable, diff, np.nan)}  # fmt: skip
+
+
+def _doppler_checks(epochs: pd.DataFrame, fx, t: np.ndarray, s: FindingSettings) -> list[dict]:
+    """``doppler_mismatch``: the fixes' displacement and the reported velocity's disagree by more than
+    max(``doppler_tol_mps``, 30 %) over every ``doppler_window_s`` window for at least ``doppler_window_s``."""
+    out = []
+    if fx.rows.size < 3 or "speed_mps" not in epochs:
+        return out
+    w = doppler_windows(epochs, fx, s.doppler_window_s)
+    mp, mr = w["position_speed_mps"], w["reported_speed_mps"]
+    with np.errstate(invalid="ignore"):
+        flag = w["difference_mps"] > np.maximum(s.doppler_tol_mps, 0.3 * np.maximum(mp, mr))
+    step = float(np.median(fx.dt_s[fx.dt_s > 0])) if np.any(fx.dt_s > 0) else 1.0
     for a, b in runs(flag):
-        if b - a + 1 >= n:
-            r0, r1 = fx.rows[a + 1], fx.rows[b + 1]
+        if fx.t_s[b] - fx.t_s[a] + step >= s.doppler_window_s:
+            r0, r1 = fx.rows[a], fx.rows[b]
             seg = slice(a, b + 1)
-            out.append(_finding("doppler_mismatch", (r0, r1), t[r0], t[r1], fx.lat_deg[a + 1], fx.lon_deg[a + 1], fx.lat_deg[b + 1], fx.lon_deg[b + 1],
-                                reported_speed_mps=np.nanmean(rep[seg]), position_speed_mps=np.nanmean(pos_speed[seg]),
+            out.append(_finding("doppler_mismatch", (r0, r1), t[r0], t[r1], fx.lat_deg[a], fx.lon_deg[a], fx.lat_deg[b], fx.lon_deg[b],
+                                reported_speed_mps=np.nanmean(mr[seg]), position_speed_mps=np.nanmean(mp[seg]),
                                 window_s=s.doppler_window_s))  # fmt: skip
     return out
 
@@ -368,18 +415,32 @@ def _disagreements(epochs: pd.DataFrame, t: np.ndarray) -> list[dict]:
     return out
 
 
+def once_a_second(t_s: np.ndarray) -> np.ndarray:
+    """Rows of the first epoch in each second (all rows when the times do not increase): the RAIM's alarms at 5–20 Hz
+    are no more independent than the errors behind them, which last seconds; one a second is what 1 Hz logs give."""
+    t = np.asarray(t_s, float)
+    if t.size == 0 or not (np.isfinite(t).all() and np.all(np.diff(t) >= 0)):
+        return np.arange(t.size)
+    sec = np.floor(t + 1e-6)
+    return np.flatnonzero(np.r_[True, sec[1:] != sec[:-1]])
+
+
 def _raim_alarm(epochs: pd.DataFrame, raim: pd.DataFrame, t: np.ndarray, s: FindingSettings) -> list[dict]:
-    status = raim["raim_status"].astype(str).to_numpy()
+    status_all = raim["raim_status"].astype(str).to_numpy()
+    sample = once_a_second(t)  # windows of raim_window_s seconds, one epoch a second, whatever the rate
+    status = status_all[sample]
     monitored = np.isin(status, ["valid", "fault_detected", "excluded_valid", "probable_false_alarm"])
     # every failed test counts, but a window needs far more alarms than its P_FA explain (ETC's at P_FA ≈ 1 do not)
-    alarm = np.isin(status, ["fault_detected", "probable_false_alarm"] if "p_fa" in raim else ["fault_detected"])
-    hdop = epochs["hdop"].to_numpy(float)
-    n_used = raim["n_used"].to_numpy(float)
+    alarm_kinds = ["fault_detected", "probable_false_alarm"] if "p_fa" in raim else ["fault_detected"]
+    alarm = np.isin(status, alarm_kinds)
+    hdop = epochs["hdop"].to_numpy(float)[sample]
+    n_used = raim["n_used"].to_numpy(float)[sample]
     good = monitored & (hdop <= 2.0) & (n_used >= 6)
     n = max(int(s.raim_window_s), 2)
     c_good = np.concatenate([[0], np.cumsum(good)])
     c_alarm = np.concatenate([[0], np.cumsum(alarm & good)])
-    p_fa = np.nan_to_num(raim["p_fa"].to_numpy(float), nan=1.0) if "p_fa" in raim else np.zeros(good.size)
+    p_fa_all = np.nan_to_num(raim["p_fa"].to_numpy(float), nan=1.0) if "p_fa" in raim else np.zeros(len(raim))
+    p_fa = p_fa_all[sample]
     c_p_fa = np.concatenate([[0.0], np.cumsum(np.where(good, np.clip(p_fa, 0.0, 1.0), 0.0))])
     idx = np.arange(n, good.size + 1)
     if idx.size == 0:
@@ -392,9 +453,14 @@ def _raim_alarm(epochs: pd.DataFrame, raim: pd.DataFrame, t: np.ndarray, s: Find
     surprise = binomial_tail(alarms[candidate], g[candidate], expected[candidate])  # P(≥ this many alarms | no fault)
     hot = idx[candidate[surprise < RAIM_ALARM_P_VALUE]]
     mark = np.zeros(good.size + 1)
-    np.add.at(mark, hot - n, 1)  # every epoch of a hot window
+    np.add.at(mark, hot - n, 1)  # every sampled epoch of a hot window
     np.add.at(mark, hot, -1)
-    flag = np.cumsum(mark)[:-1] > 0
+    flag_sampled = np.cumsum(mark)[:-1] > 0
+    ends = np.append(sample[1:], len(epochs)) - 1  # a sampled epoch stands for its second
+    flag = np.zeros(len(epochs), bool)
+    for a, b in runs(flag_sampled):
+        flag[sample[a] : ends[b] + 1] = True
+    alarm, p_fa, hdop = np.isin(status_all, alarm_kinds), p_fa_all, epochs["hdop"].to_numpy(float)
     out = []
     for a, b in runs(flag):
         lat, lon = _where(epochs, a)
