@@ -8,9 +8,11 @@ Statuses, in the order they are decided:
 ``unmonitored``    geometry is fine but the log gives no test statistic (no residuals):
                    slopes, HPL and Th are reported, the position is never ``valid``
 ``fault_detected`` t > Th at a false-alarm probability P_FA ≤ ``p_fa`` (the alarm is credible)
-``probable_false_alarm`` t > Th, but this epoch's P_FA > ``p_fa`` (ETC only: to keep P_MD at the HAL the
-                   threshold was set so low that the test fails often without any fault; the position is
-                   not trusted — not charged on — but it is no evidence of a fault or an attack)
+``probable_false_alarm`` t > Th, but this epoch's P_FA > ``p_fa`` and t is no larger than a fault-free
+                   χ²_k exceeds with probability ``p_fa`` (ETC only: to keep P_MD at the HAL the threshold was
+                   set so low that the test fails often without any fault; the position is not trusted — not
+                   charged on — but it is no evidence of a fault or an attack). A larger t is ``fault_detected``
+                   whatever the threshold: the size of the exceedance is the evidence
 ``excluded_valid`` (FDE only) t > Th, and exactly one subset without one satellite passes
 ``valid``          t ≤ Th (and, classic, HPL ≤ HAL)
 """
@@ -35,7 +37,8 @@ STATUS_MEANINGS = {
     "probable_false_alarm": (
         "the test failed, but at this epoch's geometry P_FA > p_fa: to keep P_MD at the HAL the ETC RAIM lowers its "
         "threshold until the test often fails with no fault at all (HPL = HAL is bought with false alarms). The "
-        "position is not trusted and never charged on, but the alarm alone is no evidence of a fault or of tampering"
+        "position is not trusted and never charged on, but the alarm alone is no evidence of a fault or of tampering. "
+        "An alarm whose test statistic a fault-free test would not reach even at p_fa is fault_detected instead"
     ),
     "unavailable": "the geometry cannot protect the HAL (classic: HPL > HAL; ETC: a measurement nothing checks)",
     "unmonitored": "the log gives no test statistic (no residuals): not checked, never trusted",

@@ -77,8 +77,7 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     if source is None:  # residuals given directly: a residual test
         source = np.where(np.isfinite(t), "pseudorange" if meas.dy_m is not None else "grs", "none").astype(object)
     status = detection.status.copy()
-    with np.errstate(invalid="ignore"):  # an alarm at a P_FA above the one asked for is probably false (ETC)
-        status[(status == FAULT) & (detection.p_fa > params.p_fa)] = PROBABLE_FALSE_ALARM
+    status[probable_false_alarms(status, detection.test_stat, detection.dof, detection.p_fa, params.p_fa)] = PROBABLE_FALSE_ALARM
     if meas.satellites_reported is not None:  # a receiver that reports no satellites at all (GGA/RMC only): nothing
         status[~meas.satellites_reported & (geometry.n_meas == 0)] = STATUSES.index("unmonitored")  # to monitor, not "too few"
     verdicts, extra = _source_verdicts(meas, status, source, detection.hal_m, params)
@@ -169,3 +168,20 @@ def level_of(meas: Measurements) -> str | None:
         return None
     i = int(anything[0])
     return level_for(bool(residual[i]), bool(gbs[i]), bool(gst[i]))
+
+
+def probable_false_alarms(status: np.ndarray, test_stat: np.ndarray, dof: np.ndarray, epoch_p_fa: np.ndarray,
+                          p_fa: float) -> np.ndarray:  # fmt: skip
+    """Alarms (``FAULT``) that are probably false: the epoch's threshold has a false-alarm probability above
+    ``p_fa`` (ETC) **and** the test statistic does not exceed what a fault-free χ²_dof passes with probability
+    ``p_fa`` either. An exceedance so large that no fault-free test would reach it at ``p_fa`` (a 750 m outlier:
+    t 250 000 × Th) stays ``fault_detected``, whatever the epoch's threshold."""
+    from scipy.stats import chi2
+
+    alarm = (status == FAULT) & np.isfinite(test_stat) & (dof >= 1)
+    with np.errstate(invalid="ignore"):
+        loose = alarm & (epoch_p_fa > p_fa)
+    out = np.zeros(status.shape, bool)
+    if loose.any():
+        out[loose] = test_stat[loose] <= chi2.isf(p_fa, dof[loose])
+    return out
