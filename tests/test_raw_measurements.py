@@ -401,3 +401,13 @@ def test_the_receivers_own_nav_pvt_is_kept_beside_each_epoch():
     assert out["receiver_lat_deg"].iloc[0] == pytest.approx(first["lat_deg"]) and out["receiver_lat_deg"].iloc[0] == pytest.approx(44.0688655)
     assert out["receiver_speed_mps"].iloc[0] == pytest.approx(0.027)
     assert np.isnan(out["receiver_lat_deg"].iloc[1])
+
+
+def test_rinex_observations_with_a_navigation_file_of_another_day_are_a_clear_error(tmp_path):
+    """The Pixel 6 RINEX of 2023-11-07 with the broadcast ephemerides of 2021-04-29: one line naming both files and
+    their dates, exit 1 — as GnssLogger input does (before: every epoch 'insufficient', exit 0)."""
+    obs, nav = shared("android", "pixel6.23o"), shared("rinex", "brdc1190.21n")
+    r = run_cli("integrity", str(obs), "--nav", str(nav), "-o", str(tmp_path / "e.csv"))
+    err = r.stderr.decode()
+    assert r.returncode == 1 and len(err.strip().splitlines()) == 1 and not (tmp_path / "e.csv").exists()
+    assert "pixel6.23o" in err and "brdc1190.21n" in err and "2021-04-29" in err and "2023-11-07" in err

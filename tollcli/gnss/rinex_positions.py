@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from tollcli.errors import UsageError
+from tollcli.errors import DataError, UsageError
 from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
 from tollcli.gnss.measurements import Measurements, pad, slots
 from tollcli.gnss.orbits import WEEK_S
@@ -37,8 +37,12 @@ def rinex_epochs(obs_path: str, nav_path: str, sigma_model: str = "nominal", sig
     t_rx = gps_seconds(rows["time"].to_numpy())
     sv = rows["sv"].to_numpy(str)
     pr = rows["pr_m"].to_numpy(float)
-    states = satellite_states(rinex_ephemeris_table(nav), sv, t_rx, pr)
+    ephemerides = rinex_ephemeris_table(nav)
+    states = satellite_states(ephemerides, sv, t_rx, pr)
     pos, clock, usable = states["pos_m"], states["clock_s"], states["have"]
+    if not usable.any():  # a navigation file of another day: say so, not "every epoch insufficient"
+        raise DataError(f"{obs_path}: no observation has a satellite orbit in {nav_path} ({orbit_coverage(ephemerides, t_rx)}); "
+                        "a navigation file for the day of the observations gives the orbits")  # fmt: skip
 
     epoch_times, row = np.unique(rows["time"].to_numpy(), return_inverse=True)
     keep = np.flatnonzero(usable)
@@ -84,3 +88,13 @@ def rinex_epochs(obs_path: str, nav_path: str, sigma_model: str = "nominal", sig
     meas = Measurements(H, sigma, mask, labels, dy_m=g["dy_m"],
                         test_stat_source=np.full(epoch_times.size, "pseudorange", dtype=object))  # fmt: skip
     return epochs, meas
+
+
+def orbit_coverage(ephemerides: pd.DataFrame, t_rx_s: np.ndarray) -> str:
+    """When a navigation file's ephemerides and the observations are, in words (UTC dates, GPS time)."""
+
+    def span(t: np.ndarray) -> str:
+        a, b = gps_millis_to_utc(np.round(np.array([np.nanmin(t), np.nanmax(t)]) * 1000))
+        return f"{str(a)[:16]} – {str(b)[:16]} UTC"
+
+    return f"ephemerides {span(ephemerides['toc_s'].to_numpy(float))}, observations {span(np.asarray(t_rx_s, float))}"
