@@ -86,7 +86,8 @@ class TableWriter:
     temporary file; leaving it normally without :meth:`commit` discards it too.
     """
 
-    def __init__(self, path: str, fmt: str | None = None):
+    def __init__(self, path: str, fmt: str | None = None, schema=None):
+        """``schema``: Parquet only, the Arrow schema every chunk is cast to (else the first chunk's)."""
         self.path = path
         self.fmt = fmt or format_for(path)
         if self.fmt not in FORMATS:
@@ -95,7 +96,7 @@ class TableWriter:
         self._fh: IO | None = None
         self._rows = 0
         self._parquet = None
-        self._schema = None
+        self._schema = schema
         self._committed = False
         self._columns: list[str] | None = None
         self._started = False  # header / opening bracket written

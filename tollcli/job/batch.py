@@ -4,7 +4,8 @@ Layout of OUTDIR:
 
 ``invoices/<vehicle>/<log name>.json``   the invoice (as ``tollcli process`` writes it)
 ``epochs/date=<YYYY-MM-DD>/vehicle=<vehicle>/<log name>.parquet``  the log's epoch table with RAIM columns:
-                                          together a Hive-partitioned dataset DuckDB or Spark read as one table
+                                          together a Hive-partitioned dataset DuckDB or Spark read as one table:
+                                          one schema for every input kind (``epoch_schema.py``)
 ``failed/<log name>.txt``                 why a log could not be processed
 ``summary.json``                          every log's outcome, totals per currency (sorted: the same bytes
                                           whatever the worker count or scheduler)
@@ -52,6 +53,7 @@ from tollcli.charging.recognition import PASSAGE_GAP_S
 from tollcli.enforcement.locate import vehicle_from_log, vehicle_from_path
 from tollcli.errors import DataError, UsageError
 from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
+from tollcli.job.epoch_schema import conform_epochs, epoch_schema
 from tollcli.job.fleet import read_fleet
 from tollcli.job.pipeline import ChargeSettings, charge_log
 
@@ -211,8 +213,8 @@ def _process(job: Job, settings: ChargeSettings, folder: str, name: str, inv_pat
     date = dated.iloc[0].strftime("%Y-%m-%d") if len(dated) else "unknown"
     ep_dir = os.path.join(job.outdir, "epochs", f"date={date}", f"vehicle={folder}")
     os.makedirs(ep_dir, exist_ok=True)
-    with TableWriter(os.path.join(ep_dir, name + ".parquet"), "parquet") as writer:
-        writer.write(table)  # vehicle and date come from the partition path (a column too would clash with it)
+    with TableWriter(os.path.join(ep_dir, name + ".parquet"), "parquet", schema=epoch_schema()) as writer:
+        writer.write(conform_epochs(table))  # one schema for every input kind; vehicle and date come from the path
         writer.commit()
     os.makedirs(os.path.dirname(inv_path), exist_ok=True)
     write_text_atomic(inv_path, invoice_json(invoice))  # last: its presence marks the log done
