@@ -63,7 +63,21 @@ def process(
     else:
         write_text_atomic(output, invoice_csv(invoice) if output.lower().endswith(".csv") else invoice_json(invoice))
         show(lambda: invoice_tables(invoice), quiet)
-    warn(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged, "
+    warn(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged{_why_not(invoice)}, "
          f"total {invoice['total']} {invoice['currency']}", quiet)  # fmt: skip
     if stats is not None:
         check_partial(stats, max_bad)
+
+
+def _why_not(invoice: dict) -> str:
+    """The commonest reason positions of the passages not charged failed, as the invoice's note says it."""
+    counts: dict[str, int] = {}
+    for passage in invoice["not_charged"]:
+        for status, n in passage["statuses"].items():
+            if status not in ("valid", "excluded_valid"):
+                counts[status] = counts.get(status, 0) + int(n)
+    if not counts:
+        return ""
+    top = max(sorted(counts), key=counts.get)
+    note = (invoice.get("status_notes") or {}).get(top, "")
+    return f" (mostly {top}{': ' + note.split('. ')[0] if note else ''})"

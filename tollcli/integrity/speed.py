@@ -32,6 +32,29 @@ import pandas as pd
 SPEED_STATUSES = ("ok", "low_speed", "unavailable", "inconsistent", "no_data")
 
 
+#: what each speed verdict tells the reader of an invoice (as the position's status, ``speed_`` + status)
+SPEED_STATUS_MEANINGS = {
+    "speed_no_data": ("the speed check needs a full window of {n} intervals ({n1} epochs) at a regular rate, each with "
+                      "a speed over ground and a position: the first {n} epochs of a log, epochs next to a gap and "
+                      "epochs without a speed have none, and are not charged on"),
+    "speed_low_speed": ("the vehicle was stationary or slower than {v:g} m/s: below that the Doppler speed and heading "
+                        "are unreliable (the thesis's low-speed rule), and the position is not charged on"),
+    "speed_unavailable": "the Doppler speed's accuracy (MASE) is below 3 sigma of its own samples: no speed integrity",
+    "speed_inconsistent": "the Doppler speed is not the speed the positions show over the window (a position or speed fault)",
+}  # fmt: skip
+
+
+def speed_status_notes(seen: set[str], duration_s: float | None, step_s: float | None, params: "SpeedParams") -> dict[str, str]:
+    """Notes for the speed verdicts an invoice shows; a log shorter than the speed window says so."""
+    n = params.window_intervals
+    notes = {k: v.format(n=n, n1=n + 1, v=params.min_speed_mps) for k, v in SPEED_STATUS_MEANINGS.items() if k in seen}
+    if "speed_no_data" in notes and duration_s is not None and step_s and duration_s < n * step_s:
+        notes["speed_no_data"] = (f"log shorter than the speed window: {duration_s:g} s of epochs {step_s:g} s apart, the "
+                                  f"speed check needs {n * step_s:g} s ({n} intervals), so no position could pass it. "
+                                  + notes["speed_no_data"][0].upper() + notes["speed_no_data"][1:])  # fmt: skip
+    return notes
+
+
 @dataclass(frozen=True)
 class SpeedParams:
     window_intervals: int = 10  # N (Chalko's 10-second averages)

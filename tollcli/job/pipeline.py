@@ -156,7 +156,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
         stats, params = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table)
         policy, table, details, found, period = charger.finish()
-        positions = None
+        positions, step_s = None, charger.step_s
     else:
         epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
         params = settle_sources(params, meas)
@@ -169,6 +169,10 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         table, details = charges(positions, settings.n_th), None
         dated = epochs["time_utc"].dropna()
         period = (dated.min(), dated.max()) if len(dated) else None
+        from tollcli.integrity.speed import nominal_step_s
+        from tollcli.times import epoch_seconds
+
+        step_s = nominal_step_s(epoch_seconds(epochs)) if len(epochs) > 1 else None
         if epoch_table is not None:
             epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), per_epoch], axis=1))
     inputs = {"log": printable_path(log), "geoobjects": printable_path(geo), "tariff": printable_path(tariff),
@@ -193,7 +197,19 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
                             inputs=inputs, parameters=parameters, period=period, details=details,
                             continued=settings.continued, vehicle_attrs=settings.vehicle_attrs)  # fmt: skip
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
+    _speed_notes(invoice, period, step_s)
     return seal(invoice), stats
+
+
+def _speed_notes(invoice: dict, period, step_s: float | None) -> None:
+    """Why positions failed the speed check, in the invoice's ``status_notes`` (a short log says it is short)."""
+    from tollcli.integrity.speed import SpeedParams, speed_status_notes
+
+    seen = {status for passage in (*invoice["lines"], *invoice["not_charged"]) for status in passage["statuses"]}
+    duration = (pd.Timestamp(period[1]) - pd.Timestamp(period[0])).total_seconds() if period else None
+    notes = speed_status_notes(seen, duration, step_s, SpeedParams())
+    if notes:
+        invoice["status_notes"] = {**(invoice.get("status_notes") or {}), **notes}
 
 
 #: epoch columns kept for the whole log after its chunks are read (policy checks, findings, the invoice's period)
