@@ -42,7 +42,7 @@ def test_each_vehicle_is_charged_as_itself_and_an_unlisted_one_fails(logs, tmp_p
     fleet.write_text(HEADER + "TRK-042,truck,over-18t,5+,euro6,1\nTRK-043,truck,over-18t,4,euro6,1\n")
     out = tmp_path / "out"
     r, outcomes = _batch(logs, fleet, out, "--workers", "2")
-    assert r.returncode == 3  # some logs failed, not all
+    assert r.returncode == 6  # some logs failed, not all
     assert (outcomes["TRK-042"]["status"], outcomes["TRK-042"]["total"]) == ("done", "2.60")  # 0.51 + 2.09
     assert (outcomes["TRK-043"]["status"], outcomes["TRK-043"]["total"]) == ("done", "2.52")  # 4 axles: 0.47 + 2.05
     assert outcomes["VAN-9"]["status"] == "failed" and "'VAN-9' is not in the fleet file" in outcomes["VAN-9"]["error"]

@@ -11,6 +11,7 @@ Exit codes (also in ``tollcli --help`` and the man pages):
   permissions); nothing half-written is left in place of an output
 * 5 — internal error: a defect of tollcli (the message names it; please report it;
   ``TOLLCLI_DEBUG=1`` shows the traceback)
+* 6 — some failed: ``batch`` wrote every log's outputs it could, but some logs failed (``failed/`` says why)
 """
 
 EXIT_OK = 0
@@ -19,6 +20,7 @@ EXIT_USAGE = 2
 EXIT_PARTIAL = 3
 EXIT_SYSTEM = 4
 EXIT_INTERNAL = 5
+EXIT_SOME_FAILED = 6
 
 
 class TollError(Exception):
@@ -43,3 +45,9 @@ class PartialError(TollError):
     """The job finished and wrote its outputs, but more input was skipped than allowed (--max-bad)."""
 
     exit_code = EXIT_PARTIAL
+
+
+class SomeFailedError(TollError):
+    """A batch finished and wrote the outputs of the logs it could; some logs failed."""
+
+    exit_code = EXIT_SOME_FAILED

@@ -22,7 +22,8 @@ COMMANDS = {
 EPILOG = (
     "Exit codes: 0 ok; 1 data error (input unusable, a bad line under --strict, or verify found a difference); "
     "2 usage error (bad option, missing file, directory); 3 partial (outputs written, more lines skipped than --max-bad); "
-    "4 system error (an output cannot be written: read-only, disk full); 5 internal error (a defect: please report it)."
+    "4 system error (an output cannot be written: read-only, disk full); 5 internal error (a defect: please report it); "
+    "6 some logs of a batch failed (the others' outputs written; failed/ says why)."
 )
 
 def _version(value: bool) -> None:

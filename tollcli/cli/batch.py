@@ -10,7 +10,7 @@ import typer
 
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
-from tollcli.errors import DataError, PartialError, UsageError
+from tollcli.errors import DataError, SomeFailedError, UsageError
 from tollcli.job.batch import expand_inputs, run_batch
 from tollcli.job.pipeline import ChargeSettings
 
@@ -34,6 +34,11 @@ def batch(
     raim: opt.RaimMode = "etc",
     p_md: opt.PMd = 5e-5,
     p_fa: opt.PFa = 5e-3,
+    fde: opt.Fde = False,
+    sigma_model: opt.SigmaModel = "nominal",
+    sigma: opt.Sigma = 5.0,
+    tc: opt.Tc = 5.0,
+    n_th: opt.NTh = 1,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
     quiet: opt.Quiet = False,
 ) -> None:
@@ -41,7 +46,7 @@ def batch(
 
     Resumable: a log whose invoice records its current SHA-256 is skipped (--force
     redoes it). A bad log is reported in failed/ and the summary and never stops
-    the others (exit 3 when some failed, 1 when all did). Outputs do not depend on
+    the others (exit 6 when some failed, 1 when all did). Outputs do not depend on
     the worker count or the scheduler. A vehicle's consecutive logs (the next
     starting within 120 s of the last) are one drive: a passage cut by the file
     boundary is charged once, where it began; the next invoice lists its part at
@@ -51,8 +56,13 @@ def batch(
     """
     if fleet is not None and vehicle_attr:
         raise UsageError("--fleet gives every vehicle its attributes: leave out --vehicle-attr")
-    logs = expand_inputs(inputs)
+    passed_over: list[str] = []
+    logs = expand_inputs(inputs, passed_over)
+    if passed_over:
+        warn(f"  passed over {len(passed_over)} files that are not receiver logs: {', '.join(passed_over[:5])}"
+             + (" …" if len(passed_over) > 5 else ""), quiet)  # fmt: skip
     settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), raim=raim, p_md=p_md, p_fa=p_fa, policy=policy,
+                              fde=fde, sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th,
                               integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip
     with progress(f"batch of {len(logs)} logs", quiet) as advance:
         summary = run_batch(logs, geo, tariff, settings, output, workers=workers, scheduler=scheduler, force=force,
@@ -72,4 +82,4 @@ def batch(
         first = next(o["error"] for o in summary["outcomes"] if o["status"] == "failed")
         message = (f"{summary['failed']} of {summary['logs']} logs failed (see {os.path.join(output, 'failed')}); "
                    f"first: {first}")  # fmt: skip
-        raise (DataError if summary["failed"] == summary["logs"] else PartialError)(message)
+        raise (DataError if summary["failed"] == summary["logs"] else SomeFailedError)(message)

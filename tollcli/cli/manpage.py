@@ -20,6 +20,9 @@ EXIT_STATUS = (
           "a bad line under --strict, or verify found a difference"),
     ("2", "usage error: bad option, missing file, a directory where a file was expected, unknown output format"),
     ("3", "partial: outputs were written but more lines were skipped than --max-bad allows"),
+    ("4", "system error: a file could not be written or read (read-only folder, disk full, permissions)"),
+    ("5", "internal error: a defect of tollcli, named in one line (please report it; TOLLCLI_DEBUG=1 shows the traceback)"),
+    ("6", "some failed: batch wrote the outputs of every log it could, but some logs failed (failed/ says why)"),
 )  # fmt: skip
 FILES = (
     ("geoobjects/*.geojson", "geo-objects: constant-HAL buffer polygons with id, hal_m, road_class (tollcli geoobjects build)"),

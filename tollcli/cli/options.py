@@ -81,6 +81,8 @@ SigmaModel = Annotated[
     typer.Option("--sigma-model", help="Pseudorange error model: nominal (thesis; alias urban, rural), constant (--sigma), input (σ from the log)."),
 ]
 Sigma = Annotated[float, typer.Option("--sigma", help="σ of every pseudorange for --sigma-model constant, m.", min=0.0)]
+Tc = Annotated[float, typer.Option("--tc", help="Correlation time: independent positions are at least this far apart, s (≥ 0.1).", min=0.1)]
+NTh = Annotated[int, typer.Option("--n-th", help="Charge when at least this many valid independent positions fell inside.", min=1)]
 Iono = Annotated[str, typer.Option("--iono", help="Nominal model ionosphere: single (single frequency), sbas, iono-free.")]
 MaxBad = Annotated[
     Optional[int],

@@ -18,14 +18,31 @@ COLUMNS = ("vehicle", "log", "which", "time_utc", "lat_deg", "lon_deg", "raim_st
 TRUSTED = ("valid", "excluded_valid")
 
 
+#: suffixes a log's file name ends with that are not part of the vehicle id: a compression, then a log kind
+COMPRESSION_SUFFIXES = (".gz", ".bz2", ".xz", ".zst")
+LOG_FILE_SUFFIXES = (".nmea", ".log", ".txt", ".csv", ".ubx", ".obs", ".rnx", ".dat", ".bin", ".json", ".parquet")
+_RINEX_OBS = re.compile(r"\.\d\d[oO]$")
+
+
+_QUALIFIER = re.compile(r"^(.+?)\.[A-Za-z][^.]*$")
+
+
 def vehicle_from_path(path: str) -> str:
-    """The vehicle id a log's file name gives: its name without folders and extensions (``TRK-042.nmea.gz`` → ``TRK-042``)."""
+    """The vehicle id a log's file name gives: its name without folders, its log suffixes and the qualifiers
+    after a dot that start with a letter (``TRK-042.nmea.gz`` → ``TRK-042``; ``TRK-5.morning.nmea`` → ``TRK-5``:
+    the qualifier names the log). A dot followed by a digit is part of the id (``ublox-zed-f9p_hpg1.11.log`` →
+    ``ublox-zed-f9p_hpg1.11``)."""
     name = os.path.basename(path)
-    while True:
-        stem, ext = os.path.splitext(name)
-        if not ext or len(ext) > 8:
-            return name
-        name = stem
+    for suffixes in (COMPRESSION_SUFFIXES, LOG_FILE_SUFFIXES):
+        lower = name.lower()
+        ext = next((s for s in suffixes if lower.endswith(s) and len(name) > len(s)), None)
+        if ext is not None:
+            name = name[: -len(ext)]
+        elif suffixes is LOG_FILE_SUFFIXES and _RINEX_OBS.search(name):
+            name = name[:-4]
+    while (m := _QUALIFIER.match(name)) is not None:
+        name = m.group(1)
+    return name
 
 
 _HEADER_VEHICLE = re.compile(rb"^#\s*vehicle(?:[ _-]?id)?\s*[:=]\s*(\S+)", re.IGNORECASE | re.MULTILINE)

@@ -11,7 +11,7 @@ import zlib
 from collections.abc import Iterator
 from typing import BinaryIO
 
-from tollcli.errors import DataError, UsageError
+from tollcli.errors import DataError, TollError, UsageError
 
 BLOCK_BYTES = 1 << 21
 GZIP_MAGIC = b"\x1f\x8b"
@@ -158,6 +158,25 @@ def sniff_format(log: str) -> str:
     if UBX_RAWX in head:
         return "ubx"
     return "nmea"
+
+
+_NMEA_SENTENCE = re.compile(rb"[$!][A-Z]{2}[A-Z0-9]{2,4},")
+
+
+def looks_like_log(path: str) -> bool:
+    """Whether a file's first bytes are a receiver log of a kind tollcli reads (a pseudorange header, RINEX,
+    GnssLogger, u-blox, or an NMEA sentence): a folder's ``notes.txt`` is not one."""
+    try:
+        if sniff_format(path) != "nmea":
+            return True
+        stream = open_binary(path)
+        try:
+            head = stream.read(SNIFF_BYTES)
+        finally:
+            stream.close()
+    except (OSError, EOFError, zlib.error, TollError):
+        return True  # unreadable: processing it says why
+    return bool(_NMEA_SENTENCE.search(head)) or b"\xb5\x62" in head
 
 
 def read_table(path: str):

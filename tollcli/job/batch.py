@@ -52,12 +52,16 @@ from tollcli.charging.invoice import file_sha256, invoice_json
 from tollcli.charging.recognition import PASSAGE_GAP_S
 from tollcli.enforcement.locate import vehicle_from_log, vehicle_from_path
 from tollcli.errors import DataError, UsageError
+from tollcli.io.sources import looks_like_log
 from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
 from tollcli.job.epoch_schema import conform_epochs, epoch_schema
 from tollcli.job.fleet import read_fleet
 from tollcli.job.pipeline import ChargeSettings, charge_log
 
-LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv", ".ubx")
+LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv", ".ubx", ".obs", ".rnx")
+#: suffixes only a receiver log has: a folder's file with one is always taken (a broken one fails, said);
+#: a .txt, .log, .csv or .gz is taken when its first bytes are a log's (``looks_like_log``)
+LOG_ONLY_SUFFIXES = (".nmea", ".nmea.gz", ".ubx", ".obs", ".rnx")
 
 
 @dataclass(frozen=True)
@@ -130,8 +134,12 @@ def plan_outputs(logs: list[str], settings: ChargeSettings, outdir: str) -> list
     return out
 
 
-def expand_inputs(inputs: list[str]) -> list[str]:
-    """Logs from paths, globs, directories (their log files) and list files (``@list.txt``: one path per line)."""
+def expand_inputs(inputs: list[str], passed_over: list[str] | None = None) -> list[str]:
+    """Logs from paths, globs, directories (their log files) and list files (``@list.txt``: one path per line).
+
+    In a directory a file is a log when its suffix is one only logs have (``LOG_ONLY_SUFFIXES``), or a log's
+    suffix and its first bytes are a log's (``looks_like_log``); the others (a ``notes.txt``) are appended to
+    ``passed_over``. Files named, listed or globbed are all taken."""
     found: list[str] = []
     for item in inputs:
         if item.startswith("@"):
@@ -141,8 +149,13 @@ def expand_inputs(inputs: list[str]) -> list[str]:
             except OSError as exc:
                 raise UsageError(f"{item[1:]}: cannot read the list of logs ({exc.strerror})") from None
         elif os.path.isdir(item):
-            found += [p for p in glob.glob(os.path.join(item, "**", "*"), recursive=True)
-                      if os.path.isfile(p) and p.lower().endswith(LOG_SUFFIXES)]  # fmt: skip
+            for p in sorted(glob.glob(os.path.join(glob.escape(item), "**", "*"), recursive=True)):
+                if not os.path.isfile(p):
+                    continue
+                if p.lower().endswith(LOG_ONLY_SUFFIXES) or (p.lower().endswith(LOG_SUFFIXES) and looks_like_log(p)):
+                    found.append(p)
+                elif passed_over is not None:
+                    passed_over.append(os.path.normpath(p))
         elif any(ch in item for ch in "*?["):
             found += [p for p in glob.glob(item, recursive=True) if os.path.isfile(p)]
         else:
