@@ -31,7 +31,6 @@ JUDGEMENTS = {
     "gp-320fw-2019-04-07-coldboot.log": "receiver quirk: cold boot with week-rollover dates before the fix",
     "iTrek.log": "log artefact: two recordings concatenated (the first one's two no-fix epochs take the second's date)",
     "humminbird-M37.log": "receiver quirk: RMC time lags GGA by 13 s",
-    "meinberg-gps164.log": "receiver quirk: a static timing receiver reports speed 0 while converging",
     "nl2008u.log": "true event: a 20 min gap of a handheld log",
     "sl869.log": "receiver quirk: a one-epoch position glitch",
     "ublox-lea-4h.log": "true event: a 67 s gap while driving",

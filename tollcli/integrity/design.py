@@ -155,6 +155,33 @@ def _stored_row(p_md: float, scheme: str, grid: np.ndarray, k: int, what: str = 
     return cached_array("thresholds", name, compute, shape=grid.shape)
 
 
+#: degrees of freedom the stored classic thresholds cover (more measurements than anyone tracks)
+CLASSIC_DOF_MAX = 128
+
+
+@lru_cache(maxsize=16)
+def _classic_row(p_fa: float) -> np.ndarray:
+    import scipy
+
+    from tollcli.cache import cached_array
+
+    dof = np.arange(CLASSIC_DOF_MAX + 1)
+    name = f"classic-threshold-pfa{p_fa!r}-k{CLASSIC_DOF_MAX}-scipy{scipy.__version__}.npy"
+    return cached_array("thresholds", name, lambda: classic_threshold(p_fa, dof), shape=dof.shape)
+
+
+def stored_classic_threshold(p_fa: float, dof) -> np.ndarray:
+    """:func:`classic_threshold` (χ²_dof's upper ``p_fa`` quantile) from a row kept in the cache directory: a
+    second process needs no scipy.special for it."""
+    dof = np.asarray(dof)
+    row = _classic_row(float(p_fa))
+    inside = (dof >= 1) & (dof <= CLASSIC_DOF_MAX)
+    out = np.where(inside, row[np.clip(dof, 0, CLASSIC_DOF_MAX)], np.nan)
+    if (dof > CLASSIC_DOF_MAX).any():
+        out = np.where(dof > CLASSIC_DOF_MAX, classic_threshold(p_fa, dof), out)
+    return out
+
+
 @lru_cache(maxsize=16)
 def etc_threshold_table(p_md: float) -> EtcThresholdTable:
     """The shared look-up table for ``p_md`` (a process builds each one once: its rows cost ~40 ms apiece)."""

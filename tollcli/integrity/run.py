@@ -176,12 +176,12 @@ def probable_false_alarms(status: np.ndarray, test_stat: np.ndarray, dof: np.nda
     ``p_fa`` (ETC) **and** the test statistic does not exceed what a fault-free χ²_dof passes with probability
     ``p_fa`` either. An exceedance so large that no fault-free test would reach it at ``p_fa`` (a 750 m outlier:
     t 250 000 × Th) stays ``fault_detected``, whatever the epoch's threshold."""
-    from scipy.stats import chi2
+    from tollcli.integrity.design import stored_classic_threshold
 
     alarm = (status == FAULT) & np.isfinite(test_stat) & (dof >= 1)
     with np.errstate(invalid="ignore"):
         loose = alarm & (epoch_p_fa > p_fa)
     out = np.zeros(status.shape, bool)
     if loose.any():
-        out[loose] = test_stat[loose] <= chi2.isf(p_fa, dof[loose])
+        out[loose] = test_stat[loose] <= stored_classic_threshold(p_fa, dof[loose])
     return out
