@@ -22,14 +22,13 @@ Without truth, a risk report from the invoices alone:
 
 from __future__ import annotations
 
-import json
 import math
 from decimal import Decimal
 
 import numpy as np
 import pandas as pd
 
-from tollcli.errors import DataError, UsageError
+from tollcli.errors import DataError
 from tollcli.integrity.sources import FAULT_DETECTING
 from tollcli.io.sources import read_json
 from tollcli.stats import wilson
