@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 from conftest import REPO, SAMPLES, run_cli
 
-from tollcli.job.batch import expand_inputs, run_batch
+from tollcli.job.batch import run_batch
+from tollcli.job.log_files import expand_inputs
 from tollcli.job.pipeline import ChargeSettings
 
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")

@@ -11,7 +11,8 @@ import typer
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
 from tollcli.errors import DataError, SomeFailedError, UsageError
-from tollcli.job.batch import expand_inputs, run_batch
+from tollcli.job.batch import run_batch
+from tollcli.job.log_files import expand_inputs
 from tollcli.job.pipeline import ChargeSettings
 
 

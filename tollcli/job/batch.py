@@ -34,7 +34,6 @@ distributed cluster; each log's outputs depend only on that log and the shared s
 from __future__ import annotations
 
 import ctypes
-import glob
 import hashlib
 import json
 import os
@@ -52,16 +51,11 @@ from tollcli.charging.invoice import file_sha256, invoice_json
 from tollcli.charging.recognition import PASSAGE_GAP_S
 from tollcli.enforcement.locate import vehicle_from_log, vehicle_from_path
 from tollcli.errors import DataError, UsageError
-from tollcli.io.sources import looks_like_log
 from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
 from tollcli.job.epoch_schema import conform_epochs, epoch_schema
 from tollcli.job.fleet import read_fleet
+from tollcli.job.log_files import log_name
 from tollcli.job.pipeline import ChargeSettings, charge_log
-
-LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv", ".ubx", ".obs", ".rnx")
-#: suffixes only a receiver log has: a folder's file with one is always taken (a broken one fails, said);
-#: a .txt, .log, .csv or .gz is taken when its first bytes are a log's (``looks_like_log``)
-LOG_ONLY_SUFFIXES = (".nmea", ".nmea.gz", ".ubx", ".obs", ".rnx")
 
 
 @dataclass(frozen=True)
@@ -86,15 +80,6 @@ def path_component(text: str) -> str:
     if quoted.startswith("."):
         quoted = "%2E" + quoted[1:]
     return quoted or "%00"
-
-
-def log_name(log: str) -> str:
-    """The log's file name without its log suffix (``truck1.day2.nmea.gz`` → ``truck1.day2``)."""
-    base = os.path.basename(log)
-    for suffix in sorted(LOG_SUFFIXES, key=len, reverse=True):
-        if base.lower().endswith(suffix) and len(base) > len(suffix):
-            return base[: -len(suffix)]
-    return base
 
 
 def _owner(outdir: str, vehicle: str, name: str) -> str | None:
@@ -132,38 +117,6 @@ def plan_outputs(logs: list[str], settings: ChargeSettings, outdir: str) -> list
             raise UsageError(f"{log} and {seen[folder, n]} would write the same outputs ({folder}/{n}); give each log once")
         seen[folder, n] = log
     return out
-
-
-def expand_inputs(inputs: list[str], passed_over: list[str] | None = None) -> list[str]:
-    """Logs from paths, globs, directories (their log files) and list files (``@list.txt``: one path per line).
-
-    In a directory a file is a log when its suffix is one only logs have (``LOG_ONLY_SUFFIXES``), or a log's
-    suffix and its first bytes are a log's (``looks_like_log``); the others (a ``notes.txt``) are appended to
-    ``passed_over``. Files named, listed or globbed are all taken."""
-    found: list[str] = []
-    for item in inputs:
-        if item.startswith("@"):
-            try:
-                with open(item[1:], encoding="utf-8") as fh:
-                    found += [ln.strip() for ln in fh if ln.strip() and not ln.startswith("#")]
-            except OSError as exc:
-                raise UsageError(f"{item[1:]}: cannot read the list of logs ({exc.strerror})") from None
-        elif os.path.isdir(item):
-            for p in sorted(glob.glob(os.path.join(glob.escape(item), "**", "*"), recursive=True)):
-                if not os.path.isfile(p):
-                    continue
-                if p.lower().endswith(LOG_ONLY_SUFFIXES) or (p.lower().endswith(LOG_SUFFIXES) and looks_like_log(p)):
-                    found.append(p)
-                elif passed_over is not None:
-                    passed_over.append(os.path.normpath(p))
-        elif any(ch in item for ch in "*?["):
-            found += [p for p in glob.glob(item, recursive=True) if os.path.isfile(p)]
-        else:
-            found.append(item)
-    logs = sorted(dict.fromkeys(os.path.normpath(p) for p in found))
-    if not logs:
-        raise UsageError("no logs found in " + " ".join(inputs))
-    return logs
 
 
 def _current(done: dict, job: Job, settings: ChargeSettings, log_sha: str) -> bool:
