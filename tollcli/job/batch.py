@@ -275,6 +275,8 @@ def die_with_parent(parent_pid: int) -> None:
         # one unwinding: the parent's death sends SIGTERM twice (PR_SET_PDEATHSIG and the watcher below); a second
         # one arriving while the first unwinds would interrupt the discarding of a half-written output
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if not _IN_JOB:  # idle, waiting for a job: nothing to discard, and a normal exit would wait for the pool's
+            os._exit(128 + signum)  # queue threads to flush into a pipe nobody reads any more
         raise SystemExit(128 + signum)  # unwind: the outputs being written are discarded; then _run_in_worker ends
 
     signal.signal(signal.SIGTERM, stop)
@@ -289,12 +291,20 @@ def die_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="watch-parent", daemon=True).start()
 
 
+#: whether this pool worker is processing a log (its SIGTERM unwinds the outputs) or idle (it just ends)
+_IN_JOB = False
+
+
 def _run_in_worker(job: Job) -> dict:
     """``run_one`` in a pool worker: a worker told to stop unwinds its log's outputs, then ends (never takes another)."""
+    global _IN_JOB
+    _IN_JOB = True
     try:
         return run_one(job)
     except BaseException:  # noqa: BLE001 - SIGTERM or an interrupt: what was written has been discarded on the way out
         os._exit(143)
+    finally:
+        _IN_JOB = False
 
 
 def _fleet_jobs(jobs: list[Job], table: dict, fleet: str) -> list[Job]:
