@@ -275,8 +275,13 @@ def die_with_parent(parent_pid: int) -> None:
         # one unwinding: the parent's death sends SIGTERM twice (PR_SET_PDEATHSIG and the watcher below); a second
         # one arriving while the first unwinds would interrupt the discarding of a half-written output
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        if not _IN_JOB:  # idle, waiting for a job: nothing to discard, and a normal exit would wait for the pool's
-            os._exit(128 + signum)  # queue threads to flush into a pipe nobody reads any more
+        if not _IN_JOB:  # idle, waiting for a job: nothing to discard
+            os._exit(128 + signum)
+        # should the unwinding be swallowed (a handler runs between any two bytecodes, also inside a __del__ or a
+        # weakref callback, whose exceptions Python ignores), the worker still ends: it never takes another log
+        ender = threading.Timer(STOP_GRACE_S, os._exit, args=(128 + signum,))
+        ender.daemon = True
+        ender.start()
         raise SystemExit(128 + signum)  # unwind: the outputs being written are discarded; then _run_in_worker ends
 
     signal.signal(signal.SIGTERM, stop)
@@ -291,6 +296,8 @@ def die_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="watch-parent", daemon=True).start()
 
 
+#: how long a pool worker told to stop may take to discard what it was writing before it is ended, s
+STOP_GRACE_S = 5.0
 #: whether this pool worker is processing a log (its SIGTERM unwinds the outputs) or idle (it just ends)
 _IN_JOB = False
 
