@@ -50,7 +50,9 @@ class TariffPricer:
     """The true fee of a passage: the tariff (``--tariff``, else the one each invoice records, found where it names
     it or beside it with its recorded SHA-256) at the passage's entry time, for the invoice's vehicle."""
 
-    def __init__(self, tariff: str | None, geo: str | None, vehicle_class: str | None, vehicle_attrs: dict | None):
+    def __init__(self, found: list[tuple[str, dict]], tariff: str | None, geo: str | None, vehicle_class: str | None,
+                 vehicle_attrs: dict | None):  # fmt: skip
+        self.path_of = {id(inv): path for path, inv in found}  # where each invoice is (its tariff may lie beside it)
         self.tariff, self.geo, self.vehicle_class, self.vehicle_attrs = tariff, geo, vehicle_class, vehicle_attrs
         self.cache: dict[tuple, tuple] = {}
         self.sources: set[str] = set()
@@ -76,7 +78,7 @@ class TariffPricer:
         return self.cache[key]
 
     def __call__(self, invoice: dict, gid: str, when):
-        loaded = self._load(invoice, invoice.get("_path", ""))
+        loaded = self._load(invoice, self.path_of.get(id(invoice), ""))
         if loaded is None:
             return None
         doc, geo_objects, index = loaded
@@ -123,13 +125,13 @@ def audit(
         return
     found = _expand(runs)
     paths = [p for p, _ in found]
-    invoices = [{**inv, "_path": p} for p, inv in found]
+    invoices = [inv for _, inv in found]
     if truth:
         check_same_trip(invoices, paths, truth)
     geo_objects = load_geoobjects(geo) if geo else None
     if tariff and geo_objects is None:
         raise UsageError("--tariff prices geo-objects by their road class: give --geo too")
-    pricer = TariffPricer(tariff, geo, vehicle_class, opt.vehicle_attrs(vehicle_attr))
+    pricer = TariffPricer(found, tariff, geo, vehicle_class, opt.vehicle_attrs(vehicle_attr))
     if truth:
         if geo_objects is None and not is_id_list(truth):
             raise UsageError("a truth trajectory needs --geo to know where the geo-objects are")

@@ -139,13 +139,22 @@ def sniff_format(log: str) -> str:
     which reads the NMEA sentences beside it), else ``nmea``."""
     if log == "-":
         return "nmea"
+    return format_of_head(read_head(log))
+
+
+def read_head(log: str) -> bytes:
+    """The first ``SNIFF_BYTES`` of a log (decompressed)."""
     stream = open_binary(log)
     try:
-        head = stream.read(SNIFF_BYTES)
+        return stream.read(SNIFF_BYTES)
     except (OSError, EOFError, zlib.error) as exc:
         raise DataError(f"{log}: cannot read compressed data ({exc})") from None
     finally:
         stream.close()
+
+
+def format_of_head(head: bytes) -> str:
+    """:func:`sniff_format` of a log's first bytes."""
     first = head.split(b"\n", 1)[0]
     if b"millisSinceGpsEpoch" in first:
         return "gsdc-derived"
@@ -167,16 +176,10 @@ def looks_like_log(path: str) -> bool:
     """Whether a file's first bytes are a receiver log of a kind tollcli reads (a pseudorange header, RINEX,
     GnssLogger, u-blox, or an NMEA sentence): a folder's ``notes.txt`` is not one."""
     try:
-        if sniff_format(path) != "nmea":
-            return True
-        stream = open_binary(path)
-        try:
-            head = stream.read(SNIFF_BYTES)
-        finally:
-            stream.close()
-    except (OSError, EOFError, zlib.error, TollError):
+        head = read_head(path)
+    except (OSError, TollError):
         return True  # unreadable: processing it says why
-    return bool(_NMEA_SENTENCE.search(head)) or b"\xb5\x62" in head
+    return format_of_head(head) != "nmea" or bool(_NMEA_SENTENCE.search(head)) or b"\xb5\x62" in head
 
 
 def read_table(path: str):
