@@ -59,8 +59,9 @@ def test_risk_report_bounds_and_revenue_at_risk():
     seen = {"geoobject": "B", "entry_utc": "x", "n_inside": 40, "n_valid": 0, "statuses": {"fault_detected": 40}}
     report = risk_report([_inv([("A", "1.00")], "1.00", not_charged=[seen])], {"B": Decimal("2.00")})
     assert report["money_at_risk"] == "2.00" and report["revenue_at_risk"][0]["why"] == {"fault_detected": 40}
-    # n = 3 independent positions vouched by a residual test, P_MD 5e-5: all three must be off by more than HAL
-    assert report["charges"][0]["p_false_bound"] == pytest.approx(5e-5**3)
+    # 3 positions vouched by a residual test, but no times to tell how far apart: they count as one, P_MD 5e-5
+    assert report["charges"][0]["p_false_bound"] == pytest.approx(5e-5)
+    assert report["charges"][0]["n_vouched"] == 3 and report["charges"][0]["n_independent_errors"] == 1
 
 
 def test_cli_process_then_audit_the_parallel_road_drive(tmp_path):

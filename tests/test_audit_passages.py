@@ -117,11 +117,18 @@ def test_a_gsdc_ground_truth_and_a_batch_folder_are_read(drives, tmp_path):
 def test_the_false_charge_bound_falls_with_the_evidence():
     line = {"geoobject": "A", "fee": "1.00", "entry_utc": "2026-03-02T08:00:00Z"}
 
-    def bound(n: int, vouched: dict) -> float:
-        inv = {"vehicle": "v", "total": "1.00", "lines": [{**line, "n_valid_independent": n, "vouched_by": vouched}],
-               "not_charged": [], "parameters": {"p_md": 5e-5, "n_th": 1}}  # fmt: skip
+    def bound(vouched: dict, spacing_s: float = 30.0, tc_s: float = 5.0) -> float:
+        evidence = [{"time_utc": f"2026-03-02T08:{int(i * spacing_s) // 60:02d}:{int(i * spacing_s) % 60:02d}Z",
+                     "integrity_source": source} for source, k in vouched.items() for i in range(k)]  # fmt: skip
+        evidence.sort(key=lambda e: e["time_utc"])
+        n = sum(vouched.values())
+        inv = {"vehicle": "v", "total": "1.00", "lines": [{**line, "n_valid_independent": n, "vouched_by": vouched, "evidence": evidence}],
+               "not_charged": [], "parameters": {"p_md": 5e-5, "n_th": 1, "tc_s": tc_s}}  # fmt: skip
         return risk_report([inv], {})["charges"][0]["p_false_bound"]
 
-    assert bound(22, {"grs": 22}) < bound(2, {"grs": 2}) == pytest.approx(2.5e-9)
-    assert bound(3, {"gst": 3}) == 1.0 and bound(3, {"gst": 1, "pseudorange": 2}) == pytest.approx(false_charge_bound(2, 5e-5))
-    assert "P_MD ** n_vouched" in risk_report([], {})["p_false_bound_meaning"]
+    assert bound({"grs": 22}) < bound({"grs": 2}) == pytest.approx(2.5e-9)
+    assert bound({"gst": 3}) == 1.0
+    # positions 5 s apart (T_c) share their errors: only those 30 s apart count — 22 over 105 s are 4
+    assert bound({"grs": 22}, spacing_s=5.0) == pytest.approx(false_charge_bound(4, 5e-5))
+    assert bound({"grs": 22}, spacing_s=5.0, tc_s=60.0) == pytest.approx(false_charge_bound(2, 5e-5))
+    assert "P_MD ** n_independent" in risk_report([], {})["p_false_bound_meaning"]

@@ -48,10 +48,19 @@ def test_integrity_on_the_sample_nmea(tmp_path):
 
 
 def test_integrity_gsdc_auto_detected():
-    proc = run_cli("integrity", str(shared("gsdc2021", "Pixel4_derived.csv")), "--sigma-model", "input", "-q")
+    proc = run_cli("integrity", str(shared("gsdc2021", "Pixel4_derived.csv")), "-q")
     assert proc.returncode == 0, proc.stderr.decode()
     table = pd.read_csv(io.BytesIO(proc.stdout))
-    assert len(table) == 7 and set(table["raim_status"]) == {"valid"}
+    assert len(table) == 7 and set(table["raim_status"]) <= {"valid", "fault_detected"}
+    assert (table["raim_status"] == "valid").sum() >= 5 and (table["raim_mode"] == "ss").all()
+    assert (table["environment"] == "open").all() and (table["variance_factor"] < 1.5).all()
+    # the phone's own σ (rawPrUncM) are smaller than its residuals show: its epochs read urban, nothing is valid
+    proc = run_cli("integrity", str(shared("gsdc2021", "Pixel4_derived.csv")), "--sigma-model", "input", "-q")
+    table = pd.read_csv(io.BytesIO(proc.stdout))
+    assert (table["environment"] == "urban").all() and not (table["raim_status"] == "valid").any()
+    etc = pd.read_csv(io.BytesIO(run_cli("integrity", str(shared("gsdc2021", "Pixel4_derived.csv")), "--sigma-model", "input",
+                                         "--raim", "etc", "--environment", "open", "-q").stdout))  # fmt: skip
+    assert set(etc["raim_status"]) == {"valid"}  # the papers' ETC under the phone's σ, as before
 
 
 @pytest.mark.parametrize(

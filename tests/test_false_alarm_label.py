@@ -30,7 +30,7 @@ def test_a_750_m_fault_is_detected_not_excused_as_a_false_alarm(tmp_path):
                 "--fault-bias", "750", "--fault-at", "30", "--fault-duration", "20", "-o", str(tmp_path / "sim"), "-q")  # fmt: skip
     assert r.returncode == 0, r.stderr
     out = tmp_path / "epochs.csv"
-    assert run_cli("integrity", str(tmp_path / "sim" / "drive.nmea"), "--hal", "15", "-o", str(out), "-q").returncode == 0
+    assert run_cli("integrity", str(tmp_path / "sim" / "drive.nmea"), "--raim", "etc", "--hal", "15", "-o", str(out), "-q").returncode == 0
     epochs = pd.read_csv(out)
     truth = pd.read_csv(tmp_path / "sim" / "truth.csv")
     faulty = truth["faulty"].to_numpy(bool)[: len(epochs)]

@@ -111,11 +111,11 @@ def test_tolled_selection_rules(helsinki):
             tolled_ways(ways, bad)
 
 
-def _charged(tmp_path, drive, geo):
+def _charged(tmp_path, drive, geo, *extra):
     tariff = tmp_path / "t.toml"
     tariff.write_text('currency = "EUR"\n[road_class.primary]\ncar = 1.00\n')
     inv = drive / "invoice.json"
-    r = run_cli("process", str(drive / "drive.nmea"), "--geo", str(geo), "--tariff", str(tariff), "-o", str(inv))
+    r = run_cli("process", str(drive / "drive.nmea"), "--geo", str(geo), "--tariff", str(tariff), "-o", str(inv), *extra)
     assert r.returncode == 0, r.stderr
     return {line["geoobject"] for line in json.loads(inv.read_text())["lines"]}
 
@@ -166,7 +166,10 @@ def test_a_drive_along_tolled_sections_is_charged_each_one(tmp_path, helsinki):
     assert r.returncode == 0, r.stderr
     truth = set(json.loads((drive / "truth-geoobjects.json").read_text()))
     assert truth == {c for c in best if c in built}
-    assert _charged(tmp_path, drive, geo) == truth
+    # HAL 5–17 m: the papers' ETC (HPL = HAL) charges every section; the default solution separation, whose HPL
+    # for this receiver is 6–10 m, charges only where it can protect the HAL — never a section not driven
+    assert _charged(tmp_path, drive, geo, "--raim", "etc") == truth
+    assert _charged(tmp_path, drive, geo) <= truth
     # the same drive under a per-km truck toll: each section charged its length (junction to junction, on the
     # ellipsoid) at the rate of the truck's Euro class
     tariff = tmp_path / "per-km.toml"
@@ -176,7 +179,7 @@ def test_a_drive_along_tolled_sections_is_charged_each_one(tmp_path, helsinki):
                       '[[table.rate]]\nroad_class = "primary"\neuro_class = "euro6"\nper_km = 0.387\n')  # fmt: skip
     inv = drive / "per-km.json"
     r = run_cli("process", str(drive / "drive.nmea"), "--geo", str(geo), "--tariff", str(tariff), "--vehicle-class", "truck",
-                "--vehicle-attr", "euro_class=euro6", "-o", str(inv))  # fmt: skip
+                "--vehicle-attr", "euro_class=euro6", "--raim", "etc", "-o", str(inv))  # fmt: skip
     assert r.returncode == 0, r.stderr
     lines = json.loads(inv.read_text())["lines"]
     assert {line["geoobject"] for line in lines} == truth and len(lines) == len(truth)

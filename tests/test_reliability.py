@@ -38,7 +38,7 @@ def test_verify_reproduces_the_invoice(invoiced):
     code, message = _verify(invoiced)
     assert code == 0 and "reproduced byte for byte" in message
     inv = json.loads((invoiced / "inv.json").read_text())
-    assert inv["tool"].startswith("tollcli ") and inv["parameters"]["raim"] == "etc"
+    assert inv["tool"].startswith("tollcli ") and inv["parameters"]["raim"] == "ss"
     assert inv["content_sha256"] == content_sha256(inv)
 
 

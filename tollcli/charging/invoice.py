@@ -143,16 +143,18 @@ def _evidence(positions: pd.DataFrame) -> dict[tuple, list[dict]]:
     kept = positions[positions["independent"].to_numpy(bool)]
     times = iso_utc(kept["time_utc"]) if len(kept) else []
     out: dict[tuple, list[dict]] = {}
-    numbers = [[None if v != v else v for v in kept[c].to_numpy(float).tolist()] for c in ("test_stat", "threshold", "p_fa")]
+    numbers = [[None if v != v else v for v in kept[c].to_numpy(float).tolist()] if c in kept else [None] * len(kept)
+               for c in ("test_stat", "threshold", "p_fa", "hpl_m", "separation_ratio")]  # fmt: skip
     vouching = kept["integrity_source"] if "integrity_source" in kept else kept["test_stat_source"]
-    for gid, passage, epoch, when, status, stat, threshold, p_fa, source, vouched in zip(
+    for gid, passage, epoch, when, status, stat, threshold, p_fa, hpl, ratio, source, vouched in zip(
         kept["geoobject"], kept["passage"].tolist(), kept["epoch_row"].tolist(), times, kept["raim_status"],
         *numbers, kept["test_stat_source"], vouching,
     ):  # fmt: skip
-        out.setdefault((gid, passage), []).append(
-            {"epoch": epoch, "time_utc": when, "raim_status": status, "test_stat": stat, "threshold": threshold,
-             "p_fa": p_fa, "test_stat_source": source, "integrity_source": vouched}  # fmt: skip
-        )
+        item = {"epoch": epoch, "time_utc": when, "raim_status": status, "test_stat": stat, "threshold": threshold,
+                "p_fa": p_fa, "test_stat_source": source, "integrity_source": vouched}  # fmt: skip
+        if ratio is not None:  # solution separation: the bound it was declared against and its largest separation
+            item.update(hpl_m=hpl, separation_ratio=ratio)
+        out.setdefault((gid, passage), []).append(item)
     return out
 
 

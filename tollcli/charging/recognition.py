@@ -104,7 +104,8 @@ def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params:
 PAIR_COLUMNS = ("epoch_row", "obj", "raim_status", "test_stat", "threshold", "p_fa", "test_stat_source", "integrity_source",
                 "raim_valid")  # fmt: skip
 #: ``direction``: '' or why a carriageway does not count the position (wrong_direction, direction_unknown)
-OPTIONAL_PAIR_COLUMNS = ("direction",)
+#: ``hpl_m`` / ``separation_ratio``: the bound a position was declared against and its largest separation (NaN: none)
+OPTIONAL_PAIR_COLUMNS = ("direction", "hpl_m", "separation_ratio")
 
 
 def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams, row_offset: int = 0,
@@ -118,7 +119,8 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
     rows, obj, px, py = candidate_pairs(epochs, geo)
     if rows.size == 0:
         return {"epoch_row": np.zeros(0, np.int64), "obj": np.zeros(0, np.int64), "raim_status": np.zeros(0, object),
-                "test_stat": np.zeros(0), "threshold": np.zeros(0), "p_fa": np.zeros(0),
+                "test_stat": np.zeros(0), "threshold": np.zeros(0), "p_fa": np.zeros(0), "hpl_m": np.zeros(0),
+                "separation_ratio": np.zeros(0),
                 "test_stat_source": np.zeros(0, object), "integrity_source": np.zeros(0, object),
                 "raim_valid": np.zeros(0, bool), "direction": np.zeros(0, object)}  # fmt: skip
     raim = run_raim(meas.take(rows), params, hal_m=geo.hal_m[obj],
@@ -129,7 +131,8 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
     shifted_inside = np.ones(rows.size, bool)
     shifted_inside[moved] = shapely.contains_xy(geo.polygons[obj[moved]], px[moved] + de[moved], py[moved] + dn[moved])
     return {"epoch_row": rows + row_offset, "obj": obj, "raim_status": status, "test_stat": raim["test_stat"].to_numpy(),
-            "threshold": raim["threshold"].to_numpy(), "p_fa": raim["p_fa"].to_numpy(),
+            "threshold": raim["threshold"].to_numpy(), "p_fa": raim["p_fa"].to_numpy(), "hpl_m": raim["hpl_m"].to_numpy(),
+            "separation_ratio": raim["separation_ratio"].to_numpy(),
             "test_stat_source": raim["test_stat_source"].to_numpy(dtype=object),
             "integrity_source": raim["integrity_source"].to_numpy(dtype=object),
             "raim_valid": np.isin(status, VALID_STATUSES) & shifted_inside,
@@ -168,7 +171,7 @@ def positions_from_pairs(pairs: dict[str, np.ndarray], time_utc: pd.Series, geo:
 
 
 POSITION_COLUMNS = ("epoch_row", "geoobject", "time_utc", "passage", "raim_status", "test_stat", "threshold", "p_fa",
-                    "test_stat_source", "integrity_source", "valid", "independent", "verdict")  # fmt: skip
+                    "hpl_m", "separation_ratio", "test_stat_source", "integrity_source", "valid", "independent", "verdict")  # fmt: skip
 
 
 def empty_positions() -> pd.DataFrame:
@@ -221,6 +224,8 @@ def passages(cols: dict[str, np.ndarray], geo: GeoObjects, tc_s: float = 5.0, pa
         "epoch_row": cols["epoch_row"][by_obj], "geoobject": geo.ids[obj], "time_utc": cols["time_utc"][by_obj],
         "passage": passage, "raim_status": cols["raim_status"][by_obj], "test_stat": cols["test_stat"][by_obj],
         "threshold": cols["threshold"][by_obj], "p_fa": cols["p_fa"][by_obj],
+        "hpl_m": cols.get("hpl_m", np.full(obj.size, np.nan))[by_obj],
+        "separation_ratio": cols.get("separation_ratio", np.full(obj.size, np.nan))[by_obj],
         "test_stat_source": cols["test_stat_source"][by_obj], "integrity_source": cols["integrity_source"][by_obj],
         "valid": valid, "independent": independent,
         "verdict": cols["verdict"][by_obj],

@@ -8,8 +8,9 @@ road driven twice is two passages, each with its entry and exit time.
 
 Accepted trajectory columns (case-insensitive): latitude ``lat_deg``, ``latdeg``, ``lat``, ``latitude``,
 ``latitudedegrees``; longitude ``lon_deg``, ``lngdeg``, ``lon``, ``lng``, ``longitude``, ``longitudedegrees``;
-time ``time_utc``, ``time``, ``timestamp`` (ISO 8601) or ``unixtimemillis`` (GSDC, ms since 1970);
-course ``heading_deg``, ``course_deg``, ``bearingdegrees``.
+time ``time_utc``, ``time``, ``timestamp`` (ISO 8601), ``unixtimemillis`` (GSDC 2022, ms since 1970) or
+``millissincegpsepoch`` (GSDC 2021, GPS ms since 1980-01-06); course ``heading_deg``, ``course_deg``,
+``bearingdegrees``. A libRSF ground-truth file (smartLoc ``point3`` lines, ECEF) is read as its trajectory.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ LAT_COLUMNS = ("lat_deg", "latdeg", "lat", "latitude", "latitudedegrees")
 LON_COLUMNS = ("lon_deg", "lngdeg", "lon", "lng", "longitude", "longitudedegrees")
 TIME_COLUMNS = ("time_utc", "time", "timestamp")
 UNIX_MS_COLUMNS = ("unixtimemillis",)
+GPS_MS_COLUMNS = ("millissincegpsepoch",)
 COURSE_COLUMNS = ("heading_deg", "course_deg", "bearingdegrees")
 PASSAGE_COLUMNS = ("geoobject", "entry_utc", "exit_utc")
 
@@ -49,6 +51,8 @@ def is_id_list(path: str) -> bool:
             head = fh.read(4096).lstrip()
     except (OSError, UnicodeDecodeError):
         return True
+    if head.startswith(("point3 ", "pseudorange3 ", "odom3 ")):
+        return False  # a libRSF ground truth
     first = head.splitlines()[0] if head else ""
     return head.startswith("[") or ("lat" not in first.lower() and "," not in first and not head.startswith("{"))
 
@@ -69,6 +73,10 @@ def truth_trajectory(path: str) -> pd.DataFrame:
     text = read_truth_text(path).strip()
     if text.startswith("{"):
         return _geojson(text, path)
+    if text.startswith(("point3 ", "pseudorange3 ", "odom3 ")):
+        from tollcli.readers.librsf import librsf_truth
+
+        return librsf_truth(path)[["lat_deg", "lon_deg", "time_utc"]]
     from io import StringIO
 
     try:
@@ -103,6 +111,13 @@ def _times(table: pd.DataFrame) -> pd.Series:
     column = _pick(table, UNIX_MS_COLUMNS)
     if column is not None:
         return pd.to_datetime(pd.to_numeric(table[column], errors="coerce"), unit="ms", utc=True).reset_index(drop=True)
+    column = _pick(table, GPS_MS_COLUMNS)
+    if column is not None:
+        from tollcli.readers.gps_time import gps_millis_to_utc
+
+        millis = pd.to_numeric(table[column], errors="coerce").to_numpy(float)
+        utc = gps_millis_to_utc(np.nan_to_num(millis).astype(np.int64)).astype("datetime64[ns]")
+        return pd.Series(pd.DatetimeIndex(np.where(np.isfinite(millis), utc, np.datetime64("NaT"))).tz_localize("UTC"))
     return pd.Series(pd.NaT, index=range(len(table)), dtype="datetime64[ns, UTC]")
 
 

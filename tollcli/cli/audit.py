@@ -14,7 +14,7 @@ import pandas as pd
 import typer
 
 from tollcli.charging.audit import MONEY_UNKNOWN, audit_with_truth, check_same_trip, findings_of, load_invoice, risk_report
-from tollcli.charging.truth_passages import is_id_list, truth_passages
+from tollcli.charging.truth_passages import is_id_list, truth_passages, truth_trajectory
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
 from tollcli.cli import options as opt
@@ -116,7 +116,7 @@ def audit(
     if epochs:
         if not truth or is_id_list(truth):
             raise UsageError("--epochs needs --truth to be a trajectory (CSV with time_utc, lat_deg, lon_deg)")
-        integrity = check_against_truth(read_table(epochs), read_table(truth))
+        integrity = check_against_truth(read_table(epochs), truth_trajectory(truth))
     if not runs:
         report = {"mode": "integrity", "integrity": integrity}
         summary = (f"{integrity['with_position']} positions: {integrity['positioning_failures']} positioning failures, "

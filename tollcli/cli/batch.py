@@ -32,7 +32,10 @@ def batch(
     nav: opt.Nav = None,
     policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all.")] = None,
     integrity_sources: opt.IntegritySources = "auto",
-    raim: opt.RaimMode = "etc",
+    raim: opt.RaimMode = "ss",
+    environment: opt.Environment = "auto",
+    p_sat: opt.PSat = 1e-5,
+    p_const: opt.PConst = 1e-8,
     p_md: opt.PMd = 5e-5,
     p_fa: opt.PFa = 5e-3,
     fde: opt.Fde = False,
@@ -63,6 +66,7 @@ def batch(
         warn(f"  passed over {len(passed_over)} files that are not receiver logs: {', '.join(passed_over[:5])}"
              + (" …" if len(passed_over) > 5 else ""), quiet)  # fmt: skip
     settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), raim=raim, p_md=p_md, p_fa=p_fa, policy=policy,
+                              environment=environment, p_sat=p_sat, p_const=p_const,
                               fde=fde, sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th,
                               integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip
     with progress(f"batch of {len(logs)} logs", quiet) as advance:

@@ -6,6 +6,7 @@ import json
 from collections import Counter
 from typing import Annotated, Optional
 
+import numpy as np
 import pandas as pd
 import typer
 
@@ -13,6 +14,7 @@ from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
 from tollcli.errors import UsageError
 from tollcli.gnss.sigma_models import SIGMA_MODELS, NominalModel
+from tollcli.integrity.environment import classify
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.io.sources import sniff_format
@@ -28,7 +30,10 @@ def integrity(
     fmt: opt.InputFormat = "auto",
     nav: opt.Nav = None,
     integrity_sources: opt.IntegritySources = "auto",
-    raim: opt.RaimMode = "etc",
+    raim: opt.RaimMode = "ss",
+    environment: opt.Environment = "auto",
+    p_sat: opt.PSat = 1e-5,
+    p_const: opt.PConst = 1e-8,
     hal: opt.Hal = 50.0,
     p_md: opt.PMd = 5e-5,
     p_fa: opt.PFa = 5e-3,
@@ -69,7 +74,9 @@ def integrity(
     try:
         if integrity_sources not in LEVEL_CHOICES:
             raise ValueError(f"--integrity-sources {integrity_sources}: use one of {', '.join(LEVEL_CHOICES)}")
-        params = RaimParams(mode=raim, hal_m=hal, p_md=p_md, p_fa=p_fa, fde=fde, sources=LEVELS.get(integrity_sources))
+        params = RaimParams(mode=raim, hal_m=hal, p_md=p_md, p_fa=p_fa, fde=fde, p_sat=p_sat, p_const=p_const,
+                            sources=LEVELS.get(integrity_sources))
+        classify(np.zeros(0), environment)  # the setting checked before anything is read
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     nominal = NominalModel(iono=iono)
@@ -81,16 +88,16 @@ def integrity(
     with writer:
         if checks or roads:
             tables = [c.table for c in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav,
-                                                      date=day)]
+                                                      date=day, environment=environment)]
             if kind == "nmea":
                 check_usable(stats)  # a log without one epoch: the data error, before any check runs
             table = with_checks(pd.concat(tables, ignore_index=True), roads)
             _tally(table, counts)
             writer.write(table)
         elif kind == "nmea":
-            _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day)
+            _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment)
         else:
-            table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal)
+            table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal, environment)
             _tally(table, counts)
             writer.write(table)
         writer.commit()
@@ -99,13 +106,16 @@ def integrity(
     ignored = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "note" and k[1]}
     summary = {"statuses": statuses, "epochs": sum(statuses.values()), "format": kind,
                "integrity_sources": sources, "integrity_sources_setting": integrity_sources, "gst_rms_ignored": ignored,
-               "raim": raim, "hal_m": hal, "p_md": p_md, "p_fa": p_fa if raim == "classic" else None,
-               "fde": fde, "sigma_model": sigma_model}  # fmt: skip
+               "raim": raim, "hal_m": hal, "p_md": p_md, "p_fa": p_fa if raim != "etc" else None,
+               "fde": fde, "sigma_model": sigma_model, "environment_setting": environment,
+               "environments": {k[1]: n for k, n in sorted(counts.items()) if k[0] == "environment"}}  # fmt: skip
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
     else:
         text = f"{log}: {summary['epochs']} epochs: " + ", ".join(f"{n} {s}" for s, n in statuses.items())
         text += "; decided by " + ", ".join(f"{s} {n}" for s, n in sources.items())
+        if summary["environments"]:
+            text += "; environment " + ", ".join(f"{n} {e or 'unknown'}" for e, n in summary["environments"].items())
         if ignored:
             text += f"; GST RMS ignored on {sum(ignored.values())} epochs (no range-residual RMS: " + ", ".join(
                 f"{n} {k}" for k, n in ignored.items()) + ")"
@@ -116,14 +126,13 @@ def integrity(
 
 def _tally(table: pd.DataFrame, counts: Counter) -> None:
     """Count the statuses, deciding sources and GST RMS notes of a table."""
-    for kind, column in (("status", "raim_status"), ("source", "integrity_source"), ("note", "gst_rms_note")):
+    for kind, column in (("status", "raim_status"), ("source", "integrity_source"), ("note", "gst_rms_note"),
+                         ("environment", "environment")):
         counts.update((kind, v) for v in table[column].astype(str))
 
 
 def with_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
     """The speed, map-matching and HIT columns added to a whole trip's integrity table."""
-    import numpy as np
-
     from tollcli.geodesy import enu_rotation, geodetic2ecef
     from tollcli.integrity.kalman_hit import hit
     from tollcli.integrity.map_matching import load_roads
@@ -145,9 +154,10 @@ def with_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
     return pd.concat([table.reset_index(drop=True), extra, k[["hit_m"]]], axis=1)
 
 
-def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None) -> None:
+def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto") -> None:
     with progress(f"checking {log}", quiet) as advance:
-        for chunk in iter_integrity(log, "nmea", params, sigma_model, sigma, nominal, strict, stats, date=day):
+        for chunk in iter_integrity(log, "nmea", params, sigma_model, sigma, nominal, strict, stats, date=day,
+                                    environment=environment):
             writer.write(chunk.table)
             _tally(chunk.table, counts)
             advance(len(chunk.table))
@@ -155,5 +165,5 @@ def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, count
     warn(stats.summary(), quiet)
 
 
-def _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal) -> pd.DataFrame:
-    return next(iter_integrity(log, kind, params, sigma_model, sigma, nominal, nav=nav)).table
+def _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal, environment="auto") -> pd.DataFrame:
+    return next(iter_integrity(log, kind, params, sigma_model, sigma, nominal, nav=nav, environment=environment)).table

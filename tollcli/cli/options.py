@@ -36,7 +36,7 @@ def require_json(output: str) -> str:
     if output != "-" and not output.lower().endswith(".json"):
         raise UsageError(f"{output}: this command writes JSON: name the file .json (or - for stdout)")
     return output
-InputFormat = Annotated[str, typer.Option("--format", help="Input: auto, nmea, gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX).")]
+InputFormat = Annotated[str, typer.Option("--format", help="Input: auto, nmea, gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX), librsf (libRSF text: smartLoc pseudorange3/odom3).")]
 Nav = Annotated[Optional[str], typer.Option("--nav", help="Navigation file, RINEX 2 or 3 (GPS, Galileo): the orbits for rinex and gnsslogger input; replaces the file's own satellites for device-gnss and ubx.")]
 
 
@@ -64,7 +64,10 @@ DateOpt = Annotated[
     typer.Option("--date", formats=["%Y-%m-%d"], help="UTC date of the first epoch, for logs without RMC/ZDA dates (YYYY-MM-DD)."),
 ]
 
-RaimMode = Annotated[str, typer.Option("--raim", help="RAIM: etc (HPL = HAL, P_FA per epoch) or classic (fixed P_FA, HPL ≤ HAL).")]
+RaimMode = Annotated[str, typer.Option("--raim", help="RAIM: ss (solution separation over every satellite and constellation left out: several faults at once, HPL from the fault modes; the default), etc (paper 001's toll RAIM: HPL = HAL, P_FA per epoch, one fault) or classic (paper 001's civil-aviation RAIM: fixed P_FA, HPL ≤ HAL, one fault).")]
+Environment = Annotated[str, typer.Option("--environment", help="Error model's environment: auto (urban where the residuals of the last 30 s exceed the nominal model twofold: C/N0-weighted urban σ there), open (the nominal model throughout) or urban (the urban σ throughout).")]
+PSat = Annotated[float, typer.Option("--p-sat", help="--raim ss: prior probability of a satellite fault.")]
+PConst = Annotated[float, typer.Option("--p-const", help="--raim ss: prior probability of a constellation-wide fault.")]
 Hal = Annotated[float, typer.Option("--hal", help="Horizontal alert limit, m.", min=0.0)]
 PMd = Annotated[float, typer.Option("--p-md", help="Probability of missed detection.")]
 PFa = Annotated[float, typer.Option("--p-fa", help="Probability of false alarm: classic RAIM's design value; under ETC an alarm at a higher per-epoch P_FA reads probable_false_alarm.")]

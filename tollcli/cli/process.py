@@ -29,7 +29,10 @@ def process(
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings, tolled and free) for map-matching integrity.")] = None,
     policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")] = None,
     integrity_sources: opt.IntegritySources = "auto",
-    raim: opt.RaimMode = "etc",
+    raim: opt.RaimMode = "ss",
+    environment: opt.Environment = "auto",
+    p_sat: opt.PSat = 1e-5,
+    p_const: opt.PConst = 1e-8,
     p_md: opt.PMd = 5e-5,
     p_fa: opt.PFa = 5e-3,
     fde: opt.Fde = False,
@@ -54,6 +57,7 @@ def process(
     if output != "-" and not output.lower().endswith((".json", ".csv")):
         raise UsageError(f"{output}: invoices are written as .json or .csv")
     settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), vehicle=vehicle, raim=raim, p_md=p_md, p_fa=p_fa, fde=fde,
+                              environment=environment, p_sat=p_sat, p_const=p_const,
                               sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
                               date=date.date().isoformat() if date else None, policy=policy,
                               integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip

@@ -105,8 +105,8 @@ class FindingSettings:
 def _finding(kind: str, rows: tuple[int, int], t0: float, t1: float, lat0, lon0, lat1=None, lon1=None, **evidence) -> dict:
     """One finding; ``rows``: its first and last epoch rows (kept under ``_rows`` for streaming, not written)."""
     r = lambda v: None if v is None or not np.isfinite(v) else round(float(v), 7)  # noqa: E731
-    clean = {k: (round(float(v), 3) if isinstance(v, (float, np.floating)) else (int(v) if isinstance(v, np.integer) else v))
-             for k, v in evidence.items()}  # fmt: skip
+    clean = {k: ((round(float(v), 3) if np.isfinite(v) else None) if isinstance(v, (float, np.floating))
+                 else (int(v) if isinstance(v, np.integer) else v)) for k, v in evidence.items()}  # fmt: skip
     return {"kind": kind, "category": CATEGORY[kind], "start_utc": iso_from_seconds(t0), "end_utc": iso_from_seconds(t1),
             "lat_deg": r(lat0), "lon_deg": r(lon0), "end_lat_deg": r(lat1), "end_lon_deg": r(lon1), "evidence": clean,
             "_rows": (int(rows[0]), int(rows[1]))}  # fmt: skip

@@ -32,6 +32,7 @@ class Measurements:
     test_stat_source: np.ndarray | None = None  # (E,) 'grs', 'gst' (a plausible GST RMS), 'pseudorange', 'none'
     satellites_reported: np.ndarray | None = None  # (E,) the receiver reported its satellites (NMEA GSA/GSV); None: n/a
     receiver: ReceiverOutputs | None = None  # the receiver's own integrity outputs (NMEA GBS, GST)
+    cn0_dbhz: np.ndarray | None = None  # (E, N) carrier-to-noise density of each measurement (NaN: not reported)
 
     def take(self, rows: np.ndarray) -> Measurements:
         """The given epochs (rows may repeat: one per epoch and geo-object)."""

@@ -193,4 +193,4 @@ def nmea_measurements(
     reported = np.isin(epoch_ids, satellites["epoch"].to_numpy()) if n_epochs else np.zeros(0, bool)
     return Measurements(H, sigma, mask, labels, residual_m=np.where(have_grs[:, None], residual, np.nan),
                         test_stat_override=gst_stat, test_stat_source=source, satellites_reported=reported,
-                        receiver=receiver)  # fmt: skip
+                        receiver=receiver, cn0_dbhz=pad(used["cn0_dbhz"].to_numpy(float), row, slot, shape, np.nan))  # fmt: skip

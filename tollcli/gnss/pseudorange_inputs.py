@@ -4,7 +4,8 @@
 * ``rinex``: a RINEX 3 observation file with ``--nav`` (broadcast ephemerides);
 * ``gnsslogger``: an Android GnssLogger text file (``Raw`` records) with ``--nav``;
 * ``device-gnss``: a GSDC 2022/2023 ``device_gnss.csv`` — its own satellite columns, or ``--nav``'s orbits;
-* ``ubx``: a u-blox log with ``RXM-RAWX`` — satellites from its own ``RXM-SFRBX`` subframes, or ``--nav``.
+* ``ubx``: a u-blox log with ``RXM-RAWX`` — satellites from its own ``RXM-SFRBX`` subframes, or ``--nav``;
+* ``librsf``: a libRSF text log (smartLoc): corrected pseudoranges with their satellites' positions.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from tollcli.errors import DataError, UsageError
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.sigma_models import NominalModel
 
-PSEUDORANGE_FORMATS = ("gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx")
+PSEUDORANGE_FORMATS = ("gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
 
 
 def pseudorange_epochs(log: str, kind: str, nav: str | None, sigma_model: str, sigma_m: float,
@@ -32,6 +33,14 @@ def pseudorange_epochs(log: str, kind: str, nav: str | None, sigma_model: str, s
         if nav is None:
             raise UsageError("RINEX input needs --nav NAVFILE (broadcast ephemerides)")
         return rinex_epochs(log, nav, sigma_model, sigma_m, nominal)
+    if kind == "librsf":
+        from tollcli.gnss.librsf_positions import librsf_epochs
+        from tollcli.readers.librsf import read_librsf
+
+        try:
+            return librsf_epochs(read_librsf(log, strict), sigma_model, sigma_m, nominal)
+        except DataError as exc:
+            raise DataError(exc.args[0] if exc.args[0].startswith(log) else f"{log}: {exc}") from None
     if kind in ("gnsslogger", "device-gnss", "ubx"):
         return _raw_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
     raise UsageError(f"{log}: {kind} is not a pseudorange format")

@@ -147,6 +147,6 @@ def raw_epochs(m: pd.DataFrame, sigma_model: str = "nominal", sigma_m: float = 5
         "clock_drift_mps": vel["clock_drift_mps"],
         "n_doppler": vel["n_doppler"],
     })  # fmt: skip
-    meas = Measurements(g["H"], sigma, mask, labels, dy_m=g["dy_m"],
+    meas = Measurements(g["H"], sigma, mask, labels, dy_m=g["dy_m"], cn0_dbhz=cn0,
                         test_stat_source=np.full(n_epochs, "pseudorange", dtype=object))  # fmt: skip
     return epochs, meas

@@ -85,7 +85,7 @@ def rinex_epochs(obs_path: str, nav_path: str, sigma_model: str = "nominal", sig
             "n_measurements": mask.sum(axis=1).astype(np.int16),
         }
     )
-    meas = Measurements(H, sigma, mask, labels, dy_m=g["dy_m"],
+    meas = Measurements(H, sigma, mask, labels, dy_m=g["dy_m"], cn0_dbhz=cn0,
                         test_stat_source=np.full(epoch_times.size, "pseudorange", dtype=object))  # fmt: skip
     return epochs, meas
 

@@ -105,9 +105,6 @@ def hit(east_m: np.ndarray, north_m: np.ndarray, speed_mps: np.ndarray, t_s: np.
 
 def hpl_sbas_m(geometry, sigma_m: np.ndarray) -> np.ndarray:
     """K_H · d_major per epoch from a batched WLS geometry (``tollcli.gnss.wls.Geometry``) and σ (E, N)."""
-    A = geometry.A[:, :2, :]
-    var = np.where(geometry.weight > 0, np.nan_to_num(sigma_m), 0.0) ** 2
-    cov = np.einsum("eun,en,evn->euv", A, var, A)
-    de, dn, den = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
-    d_major = np.sqrt(0.5 * (de + dn) + np.sqrt(0.25 * (de - dn) ** 2 + den**2))
-    return np.where(geometry.singular | (geometry.n_meas == 0), np.nan, K_H_SBAS * d_major)
+    from tollcli.integrity.model_bound import sigma_major_m
+
+    return K_H_SBAS * sigma_major_m(geometry, sigma_m)

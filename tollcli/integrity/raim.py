@@ -28,7 +28,7 @@ from tollcli.integrity import design
 
 STATUSES = ("valid", "fault_detected", "excluded_valid", "unavailable", "unmonitored", "insufficient", "probable_false_alarm")
 VALID, FAULT, EXCLUDED, UNAVAILABLE, UNMONITORED, INSUFFICIENT, PROBABLE_FALSE_ALARM = range(7)
-MODES = ("etc", "classic")
+MODES = ("ss", "etc", "classic")
 #: what each status tells an auditor (reports and invoices quote these)
 STATUS_MEANINGS = {
     "valid": "the RAIM test passed (t ≤ Th): the position is trusted within the HAL",
@@ -50,11 +50,15 @@ STATUS_MEANINGS = {
 class RaimParams:
     """What the RAIM is asked to guarantee."""
 
-    mode: str = "etc"  # "etc" (HPL = HAL, P_FA varies) or "classic" (P_FA fixed, HPL varies)
+    #: "ss" (solution separation: multiple faults, HPL from the fault modes, the default), "etc" (paper 001's
+    #: toll variant: HPL = HAL, P_FA varies) or "classic" (paper 001's civil-aviation RAIM: P_FA fixed, HPL varies)
+    mode: str = "ss"
     hal_m: float = 50.0
     p_md: float = 5e-5
     p_fa: float = 5e-3  # classic: the design P_FA; ETC: an alarm above it is a probable_false_alarm
     fde: bool = False
+    p_sat: float = 1e-5  # ss: prior probability of a satellite fault
+    p_const: float = 1e-8  # ss: prior probability of a constellation-wide fault
     exact_threshold: bool = False  # ETC: exact ncx2 quantile per epoch instead of the safe look-up table
     #: the integrity sources that may validate a position (``integrity.sources.LEVELS``); None: the strictest
     #: level the epochs given support (see :func:`tollcli.integrity.sources.level_for`)
@@ -64,7 +68,7 @@ class RaimParams:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ValueError(f"RAIM mode {self.mode!r}: use one of {', '.join(MODES)}")
-        for name in ("p_md", "p_fa"):
+        for name in ("p_md", "p_fa", "p_sat", "p_const"):
             value = getattr(self, name)
             if not 0.0 < value < 1.0:
                 raise ValueError(f"{name} = {value}: a probability strictly between 0 and 1")

@@ -22,6 +22,7 @@ import pandas as pd
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.wls import Geometry, residuals_from_prefit, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
+from tollcli.integrity.solution_separation import separation_detection, separation_exclusion
 from tollcli.integrity.kalman_hit import hpl_sbas_m
 from tollcli.gnss.receiver_outputs import GST_RMS_NOTES
 from tollcli.integrity.raim import (
@@ -43,7 +44,7 @@ RAIM_COLUMNS = (
     "raim_mode", "n_used", "dof", "slope_max_m", "test_stat", "test_stat_source", "threshold", "lambda_det",
     "hpl_m", "hal_m", "p_fa", "p_md", "raim_status", "integrity_source", "residual_status", "gbs_status", "gst_status",
     "hpl_gbs_m", "hpl_gst_m", "gst_rms_note", "excluded_sv", "fde_shift_e_m", "fde_shift_n_m",
-    "hpl_sbas_m",
+    "hpl_sbas_m", "separation_ratio",
 )  # fmt: skip
 _STATUS_OR_NONE = np.array(STATUSES + ("",), dtype=object)  # index -1: no verdict
 
@@ -63,12 +64,20 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     else:
         residual = np.full(meas.mask.shape, np.nan)
     t = wsse(residual, geometry)
+    per_satellite = np.isfinite(t)  # residuals of every used measurement (not a GST approximation)
     if meas.test_stat_override is not None:
         t = np.where(np.isnan(t), meas.test_stat_override, t)
-    detection = detect(geometry, t, params, hal_m=hal_m)
     excluded_sv = np.full(n_epochs, "", dtype=object)
     shift = np.zeros((n_epochs, 3))
-    if params.fde:
+    ratio = np.full(n_epochs, np.nan)
+    if params.mode == "ss":
+        detection, ratio = separation_detection(meas.H, meas.sigma_m, meas.mask, np.where(per_satellite[:, None], residual, np.nan),
+                                            geometry, t, params, hal_m)  # fmt: skip
+        if params.fde:
+            excluded_sv, shift = separation_exclusion(meas, geometry, residual, detection, ratio, params)
+    else:
+        detection = detect(geometry, t, params, hal_m=hal_m)
+    if params.fde and params.mode != "ss":
         exclusion = exclude(meas.H, meas.sigma_m, meas.mask, residual, geometry, detection, params)
         hit = exclusion.excluded_slot >= 0
         excluded_sv[hit] = meas.sv[np.flatnonzero(hit), exclusion.excluded_slot[hit]]
@@ -107,6 +116,7 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
             "fde_shift_e_m": shift[:, 0],
             "fde_shift_n_m": shift[:, 1],
             "hpl_sbas_m": hpl_sbas_m(geometry, meas.sigma_m),
+            "separation_ratio": ratio,
         }
     )
 

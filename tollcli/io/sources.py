@@ -126,7 +126,7 @@ def read_json(path: str, what: str):
 
 
 #: the input formats (``--format``): ``auto`` is :func:`sniff_format`
-INPUT_KINDS = ("auto", "nmea", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx")
+INPUT_KINDS = ("auto", "nmea", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
 #: a u-blox RXM-RAWX frame's first bytes (sync chars, class 0x02, id 0x15)
 UBX_RAWX = b"\xb5\x62\x02\x15"
 SNIFF_BYTES = 1 << 16
@@ -136,7 +136,8 @@ def sniff_format(log: str) -> str:
     """The log's kind from its first bytes (stdin: ``nmea``): ``gsdc-derived`` or ``device-gnss`` (their CSV
     headers), ``rinex`` (the RINEX header), ``gnsslogger`` (a ``# Raw,`` header line), ``ubx`` (a u-blox
     ``RXM-RAWX`` frame in the first 64 KiB: raw measurements; UBX without them stays with the NMEA reader,
-    which reads the NMEA sentences beside it), else ``nmea``."""
+    which reads the NMEA sentences beside it), ``librsf`` (a ``pseudorange3``/``odom3``/``point3`` line first),
+    else ``nmea``."""
     if log == "-":
         return "nmea"
     return format_of_head(read_head(log))
@@ -166,6 +167,8 @@ def format_of_head(head: bytes) -> str:
         return "gnsslogger"
     if UBX_RAWX in head:
         return "ubx"
+    if head.lstrip().startswith((b"pseudorange3 ", b"odom3 ", b"point3 ")):
+        return "librsf"
     return "nmea"
 
 

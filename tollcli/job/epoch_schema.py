@@ -32,11 +32,11 @@ EPOCH_COLUMNS: dict[str, str] = {
     "receiver_h_acc_m": "float64", "receiver_speed_mps": "float64",
     "pos_disagreement_m": "float64", "date_disagreement_days": "float64", "date_jump_days": "float64",
     # the integrity verdict
-    "raim_mode": "string", "n_used": "int16", "dof": "int16", "slope_max_m": "float64", "test_stat": "float64",
+    "environment": "string", "variance_factor": "float64", "raim_mode": "string", "n_used": "int16", "dof": "int16", "slope_max_m": "float64", "test_stat": "float64",
     "test_stat_source": "string", "threshold": "float64", "lambda_det": "float64", "hpl_m": "float64",
     "hal_m": "float64", "p_fa": "float64", "p_md": "float64", "raim_status": "string", "integrity_source": "string",
     "residual_status": "string", "gbs_status": "string", "gst_status": "string", "hpl_gbs_m": "float64",
-    "hpl_gst_m": "float64", "hpl_sbas_m": "float64", "gst_rms_note": "string", "excluded_sv": "string",
+    "hpl_gst_m": "float64", "hpl_sbas_m": "float64", "separation_ratio": "float64", "gst_rms_note": "string", "excluded_sv": "string",
     "fde_shift_e_m": "float64", "fde_shift_n_m": "float64", "raim_lat_deg": "float64", "raim_lon_deg": "float64",
 }  # fmt: skip
 

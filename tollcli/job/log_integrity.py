@@ -13,6 +13,7 @@ from tollcli.geodesy import enu_shift2geodetic
 from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
 from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
+from tollcli.integrity.environment import EnvironmentCarry, with_environment
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim, settle_sources
 from tollcli.readers.nmea import ReadStats, iter_nmea_tables
@@ -33,22 +34,38 @@ def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
 
 def iter_integrity(log: str, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
                    nominal: NominalModel | None = None, strict: bool = False, stats: ReadStats | None = None,
-                   nav: str | None = None, date: dt.date | None = None) -> Iterator[IntegrityChunk]:  # fmt: skip
+                   nav: str | None = None, date: dt.date | None = None, environment: str = "auto") -> Iterator[IntegrityChunk]:  # fmt: skip
     """Integrity tables of ``log`` (``kind``: nmea or a pseudorange format); NMEA is streamed in chunks.
 
-    ``date``: the UTC date of the first epoch, for NMEA logs without RMC/ZDA dates.
+    ``date``: the UTC date of the first epoch, for NMEA logs without RMC/ZDA dates. ``environment``: auto
+    (each epoch's class from its residuals, :mod:`tollcli.integrity.environment`), open or urban.
     """
     nominal = nominal or NominalModel()
     if kind != "nmea":
         epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
-        yield IntegrityChunk(with_raim_position(pd.concat([epochs, run_raim(meas, params)], axis=1)), None)
+        meas, env_columns = measured_environment(epochs, meas, environment)
+        table = pd.concat([epochs, env_columns, run_raim(meas, params)], axis=1)
+        yield IntegrityChunk(with_raim_position(table), None)
         return
     if sigma_model == "input":
         raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")
-    carry = AngleCarry()
+    carry, env_carry = AngleCarry(), EnvironmentCarry()
     for chunk in iter_nmea_tables(log, strict=strict, stats=stats if stats is not None else ReadStats(), date=date):
         meas = nmea_measurements(chunk.epochs, chunk.satellites, sigma_model, sigma_m, nominal, carry)
         params = settle_sources(params, meas)  # the level is the log's, from its first epoch with a source
+        meas, env_columns = measured_environment(chunk.epochs, meas, environment, env_carry)
         raim = run_raim(meas, params)
-        table = chunk.epochs.rename(columns={"n_used": "n_used_receiver"})
-        yield IntegrityChunk(with_raim_position(pd.concat([table.reset_index(drop=True), raim], axis=1)), chunk.satellites)
+        table = chunk.epochs.rename(columns={"n_used": "n_used_receiver"}).reset_index(drop=True)
+        yield IntegrityChunk(with_raim_position(pd.concat([table, env_columns, raim], axis=1)), chunk.satellites)
+
+
+def measured_environment(epochs: pd.DataFrame, meas, setting: str, carry: EnvironmentCarry | None = None):
+    """``meas`` with the urban σ on the epochs whose residuals say urban, and the ``environment`` and
+    ``variance_factor`` columns (one row per epoch, index 0…)."""
+    from tollcli.times import epoch_seconds
+
+    try:
+        meas, env, factor = with_environment(meas, epoch_seconds(epochs), setting, carry)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    return meas, pd.DataFrame({"environment": pd.array(env, dtype="string"), "variance_factor": factor})

@@ -26,11 +26,13 @@ from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
 from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.gnss.wls import wls_geometry
-from tollcli.integrity.raim import RaimParams
+from tollcli.integrity.environment import ENVIRONMENTS, EnvironmentCarry
+from tollcli.integrity.raim import MODES, RaimParams
 from tollcli.integrity.run import level_name, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.io.sources import INPUT_KINDS, BLOCK_BYTES as SOURCE_BLOCK_BYTES
 from tollcli.io.sources import printable_path, sniff_format
+from tollcli.job.log_integrity import measured_environment
 from tollcli.job.streaming import TailCharger, choose_policy, has_speeds
 from tollcli.readers.nmea import ReadStats, iter_nmea_tables
 from tollcli.readers.nmea.reader import check_usable
@@ -42,12 +44,16 @@ class ChargeSettings:
 
     vehicle_class: str = "car"
     vehicle: str | None = None
-    raim: str = "etc"
+    raim: str = "ss"
     p_md: float = 5e-5
     p_fa: float = 5e-3
     fde: bool = False
     sigma_model: str = "nominal"
     sigma_m: float = 5.0
+    #: the error model's environment: auto (each epoch's from its residuals), open (nominal) or urban
+    environment: str = "auto"
+    p_sat: float = 1e-5  # ss: prior of a satellite fault
+    p_const: float = 1e-8  # ss: prior of a constellation-wide fault
     tc_s: float = 5.0
     n_th: int = 1
     strict: bool = False
@@ -78,10 +84,14 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
         bad("tc_s (--tc)", settings.tc_s, f"the correlation time must be a number ≥ {MIN_TC_S} s")
     if not isinstance(settings.n_th, int) or isinstance(settings.n_th, bool) or settings.n_th < 1:
         bad("n_th (--n-th)", settings.n_th, "the threshold must be a whole number ≥ 1")
-    for name in ("p_md", "p_fa"):
+    for name in ("p_md", "p_fa", "p_sat", "p_const"):
         value = getattr(settings, name)
         if not isinstance(value, number) or not 0 < value < 1:
             bad(f"{name} (--{name.replace('_', '-')})", value, "a probability strictly between 0 and 1")
+    if settings.raim not in MODES:
+        bad("raim (--raim)", settings.raim, f"one of {', '.join(MODES)}")
+    if settings.environment not in ENVIRONMENTS:
+        bad("environment (--environment)", settings.environment, f"one of {', '.join(ENVIRONMENTS)}")
     if not isinstance(settings.sigma_m, number) or not math.isfinite(settings.sigma_m) or settings.sigma_m <= 0:
         bad("sigma_m (--sigma)", settings.sigma_m, "a standard deviation > 0 m")
     if settings.integrity_sources not in LEVEL_CHOICES:
@@ -140,6 +150,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     """
     try:
         params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde,
+                            p_sat=settings.p_sat, p_const=settings.p_const,
                             sources=LEVELS.get(settings.integrity_sources))  # "auto" (or a bad value, refused below): None
     except ValueError as exc:
         raise UsageError(str(exc)) from None
@@ -150,7 +161,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     kind = sniff_format(log) if settings.input_format == "auto" else settings.input_format
     stats = None
     nominal = NominalModel()
-    epoch_raim = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, sources=params.sources)
+    epoch_raim = replace(params, fde=False)
     finding_settings = FindingSettings.for_class(settings.vehicle_class)
     if kind == "nmea":
         charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
@@ -159,6 +170,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         positions, step_s = None, charger.step_s
     else:
         epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
+        meas, env_columns = measured_environment(epochs, meas, settings.environment)
         params = settle_sources(params, meas)
         per_epoch = run_raim(meas, replace(epoch_raim, sources=params.sources))
         pairs = inside_pairs(epochs, meas, geo_objects, params)
@@ -174,7 +186,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
 
         step_s = nominal_step_s(epoch_seconds(epochs)) if len(epochs) > 1 else None
         if epoch_table is not None:
-            epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), per_epoch], axis=1))
+            epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), env_columns,
+                                          per_epoch], axis=1))  # fmt: skip
     inputs = {"log": printable_path(log), "geoobjects": printable_path(geo), "tariff": printable_path(tariff),
               "geoobjects_sha256": geo_objects.source_sha256 or file_sha256(geo), "tariff_sha256": file_sha256(tariff)}  # fmt: skip
     if log != "-":
@@ -238,7 +251,7 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
     date = dt.date.fromisoformat(settings.date) if settings.date else None
     model = settings.sigma_model if settings.sigma_model != "input" else "nominal"
     stats = ReadStats()
-    carry = AngleCarry()
+    carry, env_carry = AngleCarry(), EnvironmentCarry()
     table_parts = []
     offset = 0
     for chunk in iter_nmea_tables(log, strict=settings.strict, date=date, stats=stats, chunk_epochs=CHUNK_EPOCHS,
@@ -248,6 +261,7 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
             continue
         meas = nmea_measurements(epochs, chunk.satellites, model, settings.sigma_m, nominal, carry=carry)
         params = settle_sources(params, meas)  # the log's level, from its first epoch with a source
+        meas, env_columns = measured_environment(epochs, meas, settings.environment, env_carry)
         epoch_raim = replace(epoch_raim, sources=params.sources)
         geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)  # once for the epoch RAIM and every HAL
         raim = run_raim(meas, epoch_raim, geometry=geometry)
@@ -256,7 +270,7 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
         charger.add(epochs[list(KEPT_EPOCH_COLUMNS)], raim[list(KEPT_RAIM_COLUMNS)], cn0, pairs)
         if epoch_table is not None:
             table_parts.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}),
-                                          raim.reset_index(drop=True)], axis=1))  # fmt: skip
+                                          env_columns, raim.reset_index(drop=True)], axis=1))  # fmt: skip
         offset += len(epochs)
         del chunk, epochs, meas, geometry, raim, pairs, cn0  # freed before the next chunk is read, not after
     check_usable(stats)
@@ -286,6 +300,9 @@ def settings_from_invoice(invoice: dict) -> ChargeSettings:
     if not isinstance(recorded, dict):
         raise DataError("the invoice's parameters are not a table of settings")
     fields = ChargeSettings.__dataclass_fields__
-    return ChargeSettings(**{k: recorded[k] for k in fields if k in recorded})
+    settings = ChargeSettings(**{k: recorded[k] for k in fields if k in recorded})
+    if "environment" not in recorded:  # an invoice from before the environment was measured: the nominal model throughout
+        settings.environment = "open"
+    return settings
 
 

@@ -49,8 +49,10 @@ def load_run(invoice_path: str, truth_path: str | None = None) -> RunData:
     settings = settings_from_invoice(invoice)
     geo = load_geoobjects(geo_path)
     hal = float(np.min(geo.hal_m))
-    params = RaimParams(mode=settings.raim, hal_m=hal, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde)
-    chunks = list(iter_integrity(log, sniff_format(log), params, settings.sigma_model, settings.sigma_m, stats=ReadStats()))
+    params = RaimParams(mode=settings.raim, hal_m=hal, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde,
+                        p_sat=settings.p_sat, p_const=settings.p_const)
+    chunks = list(iter_integrity(log, sniff_format(log), params, settings.sigma_model, settings.sigma_m, stats=ReadStats(),
+                                 environment=settings.environment))
     epochs = pd.concat([c.table for c in chunks], ignore_index=True) if chunks else pd.DataFrame()
     if epochs.empty:
         raise DataError(f"{log}: no epochs")
@@ -65,7 +67,9 @@ def load_run(invoice_path: str, truth_path: str | None = None) -> RunData:
     epochs["geoobject"] = inside
     truth = check = None
     if truth_path:
-        truth = read_table(truth_path)
+        from tollcli.charging.truth_passages import truth_trajectory
+
+        truth = truth_trajectory(truth_path)
         check = check_against_truth(epochs, truth)
         epochs["horiz_error_m"] = errors_against_truth(epochs, truth)[0]
     return RunData(invoice, epochs, geo, read_features(geo_path), hal, truth, check)

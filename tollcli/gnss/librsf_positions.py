@@ -1,0 +1,80 @@
+"""WLS positions and RAIM measurements from a libRSF log (smartLoc: pseudoranges already corrected).
+
+The file gives, per satellite-epoch, a pseudorange with the satellite clock and the atmosphere removed, its
+variance, the satellite's ECEF position at transmission, elevation and C/N0 (:mod:`tollcli.readers.librsf`).
+The position is the iterated, Sagnac-corrected WLS of :mod:`tollcli.gnss.pseudorange_wls` with one
+receiver clock per constellation, batched over epochs; the odometry's forward speed is the epoch's
+``speed_mps`` (the vehicle's own wheel speed, nearest in time).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from tollcli.errors import DataError
+from tollcli.gnss.measurements import Measurements, pad, slots, sv_labels
+from tollcli.gnss.pseudorange_wls import final_geometry, solve_positions
+from tollcli.gnss.sigma_models import NominalModel, sigma_for
+from tollcli.readers.librsf import LibrsfLog, librsf_times
+from tollcli.times import nearest_index
+
+GALILEO_ID0 = 300  # smartLoc numbers Galileo satellites 300 + PRN
+
+
+def librsf_epochs(log: LibrsfLog, sigma_model: str = "nominal", sigma_m: float = 5.0,
+                  nominal: NominalModel | None = None) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
+    """WLS position per epoch (an epoch table) and the RAIM measurements at that position."""
+    d = log.pseudoranges
+    if d.empty:
+        raise DataError("no pseudorange3 line: a libRSF ground-truth file is a --truth, not a log")
+    t_key = np.round(d["t_s"].to_numpy(float) * 1e3).astype(np.int64)
+    epoch_ms, row = np.unique(t_key, return_inverse=True)
+    order = np.argsort(row, kind="stable")
+    d, row = d.iloc[order], row[order]
+    n_epochs = epoch_ms.size
+    slot, n_slots = slots(row, n_epochs)
+    shape = (n_epochs, n_slots)
+    mask = pad(np.ones(len(d), bool), row, slot, shape, False)
+    sat = np.stack([pad(d[c].to_numpy(float), row, slot, shape, 0.0) for c in ("x_sv_m", "y_sv_m", "z_sv_m")], -1)
+    pr = pad(d["pr_m"].to_numpy(float), row, slot, shape, 0.0)
+    var = d["pr_var_m2"].to_numpy(float)
+    unc = pad(np.sqrt(np.where(var > 0, var, np.nan)), row, slot, shape, np.nan)
+    cn0 = pad(d["cn0_dbhz"].to_numpy(float), row, slot, shape, np.nan)
+    sat_id = d["sat"].to_numpy(np.int64)
+    galileo = sat_id >= GALILEO_ID0
+    const_rows = np.where(galileo, "Galileo", "GPS").astype(object)
+    const = pad(const_rows, row, slot, shape, "")
+    labels = pad(sv_labels(const_rows, np.where(galileo, sat_id - GALILEO_ID0, sat_id)), row, slot, shape, "")
+    clock_index = pad(galileo.astype(np.int64), row, slot, shape, 0)
+
+    sigma_iter = np.where(mask, np.where(np.isfinite(unc), unc, sigma_m), np.nan)
+    x = solve_positions(sat, pr, mask, sigma_iter, clock_index=clock_index)
+    g = final_geometry(sat, pr, mask, x, clock_index=clock_index)
+    sigma = np.where(mask, sigma_for(sigma_model, elev_deg=g["elev_deg"], cn0_dbhz=cn0, constellation=const,
+                                     lat_deg=g["lat_deg"][:, None], lon_deg=g["lon_deg"][:, None], sigma_input_m=unc,
+                                     sigma_const_m=sigma_m, nominal=nominal), np.nan)  # fmt: skip
+    ok = mask.sum(axis=1) >= 4
+    epochs = pd.DataFrame(
+        {
+            "epoch": np.arange(n_epochs, dtype=np.int64),
+            "time_utc": librsf_times(epoch_ms / 1e3),
+            "lat_deg": np.where(ok, g["lat_deg"], np.nan),
+            "lon_deg": np.where(ok, g["lon_deg"], np.nan),
+            "height_m": np.where(ok, g["height_m"], np.nan),
+            "clock_bias_m": np.where(ok, x[:, 3], np.nan),
+            "n_measurements": mask.sum(axis=1).astype(np.int16),
+            "speed_mps": _odometry_speed(log.odometry, epoch_ms),
+        }
+    )
+    meas = Measurements(g["H"], sigma, mask, labels, dy_m=g["dy_m"], cn0_dbhz=cn0,
+                        test_stat_source=np.full(n_epochs, "pseudorange", dtype=object))  # fmt: skip
+    return epochs, meas
+
+
+def _odometry_speed(odometry: pd.DataFrame, epoch_ms: np.ndarray) -> np.ndarray:
+    """The odometer's forward speed (m/s) nearest each epoch (within 0.5 s), NaN without one."""
+    if odometry.empty:
+        return np.full(epoch_ms.size, np.nan)
+    k, gap = nearest_index(np.round(odometry["t_s"].to_numpy(float) * 1e3).astype(np.int64), epoch_ms)
+    return np.where(gap <= 500, odometry["vx_mps"].to_numpy(float)[k], np.nan)

@@ -1,0 +1,30 @@
+"""A covariance-only protection level from the used satellites' geometry and an error model (no fault detection).
+
+HPL = K_H(P_MD) · σ_major, σ_major the semi-major axis of the WLS horizontal position covariance
+(A Σ Aᵀ)_EN under the per-measurement σ's, K_H(P_MD) = √(−2 ln P_MD) (the radius a circular 2-D Gaussian of
+σ = σ_major exceeds with probability P_MD; 4.45 at P_MD 5e-5). It bounds the error as far as the σ's bound the
+real errors, and detects nothing: a fault passes it unseen. ``benchmarks/integrity_truth.py`` measures it
+against truth under the nominal and the urban σ (the bound a receiver reporting only its satellites can have).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tollcli.gnss.wls import Geometry
+from tollcli.integrity.sources import k_h
+
+
+def sigma_major_m(geometry: Geometry, sigma_m: np.ndarray) -> np.ndarray:
+    """σ_major (m) per epoch of a batched WLS geometry under σ (E, N); NaN where singular or empty."""
+    A = geometry.A[:, :2, :]
+    var = np.where(geometry.weight > 0, np.nan_to_num(sigma_m), 0.0) ** 2
+    cov = np.einsum("eun,en,evn->euv", A, var, A)
+    de, dn, den = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
+    d_major = np.sqrt(0.5 * (de + dn) + np.sqrt(0.25 * (de - dn) ** 2 + den**2))
+    return np.where(geometry.singular | (geometry.n_meas == 0), np.nan, d_major)
+
+
+def model_hpl_m(geometry: Geometry, sigma_m: np.ndarray, p_md: float) -> np.ndarray:
+    """K_H(P_MD) · σ_major per epoch (m)."""
+    return k_h(p_md) * sigma_major_m(geometry, sigma_m)

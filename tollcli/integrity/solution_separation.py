@@ -1,0 +1,215 @@
+"""Multiple-hypothesis solution separation (the fault-mode form of advanced RAIM), batched over epochs.
+
+For every epoch the all-in-view WLS position x̂₀ is compared with the position of each **fault-tolerant
+subset** x̂ₖ: the set without one satellite (a single-satellite fault, prior ``p_sat``) and, where two or more
+constellations are used, without one whole constellation (a constellation-wide fault, prior ``p_const``).
+Horizontally, with Σ the measurement covariance and σ_major(C) the semi-major axis of a 2×2 covariance C:
+
+* separation Δₖ = x̂ₖ − x̂₀ = (Aₖ − A₀)·y (east, north), its σ_ss,k = σ_major((Aₖ − A₀) Σ (Aₖ − A₀)ᵀ);
+* a 2-D Gaussian of semi-major σ leaves a circle of radius K·σ with probability at most exp(−K²/2), so
+  K(p) = √(−2 ln p) bounds any horizontal error at probability p (the form of the receivers' bounds,
+  :func:`tollcli.integrity.sources.k_h`);
+* the integrity budget p_md is split in halves, fault-free and faulted; a mode is **monitored** when its prior
+  pₖ exceeds its share of the faulted half, p_md / (2·N), N the modes present;
+* test: a fault is detected when |Δₖ| > Tₖ = K(p_fa / N_mon)·σ_ss,k for a monitored mode;
+* protection level HPL = max(K(p_md / 2)·σ₀, maxₖ(Tₖ + K(p_md / (2·N·pₖ))·σₖ)), σₖ = σ_major of x̂ₖ: under
+  mode k the subset is fault-free and, with no alarm, |x̂₀ − x̂ₖ| ≤ Tₖ (the triangle inequality);
+* **faults not monitored**: P_NM, the prior probability of two or more satellites or constellations failing at
+  once (no subset leaves them all out), ≈ (Σ pₖ)² / 2, plus the priors of the modes too rare to monitor.
+  Where P_NM exceeds half the budget (p_md / 2) the epoch is ``unavailable``: its HPL cannot account for the
+  faults it does not exclude.
+
+Defaults: p_sat 1e-5 (ARAIM's satellite fault prior), p_const 1e-8 (GPS's committed constellation fault
+rate; ARAIM takes 1e-4 for Galileo until it commits one: ``--p-const 1e-4`` monitors constellation faults too,
+at a price in HPL — a receiver's single constellation is a weak geometry).
+
+Verdicts: ``insufficient`` (a subset would have fewer measurements than unknowns), ``unavailable``
+(HPL > HAL or P_NM too large), ``fault_detected`` (a separation above its threshold), ``valid`` (none, and
+HPL ≤ HAL). Everything is vectorised over epochs × subsets; there is no loop over epochs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tollcli.gnss.wls import Geometry, wls_geometry
+from tollcli.integrity.raim import FAULT, INSUFFICIENT, UNAVAILABLE, UNMONITORED, VALID, Detection
+
+P_SAT = 1e-5  # ARAIM's usual prior of a satellite fault per approach
+P_CONST = 1e-8  # and of a constellation-wide fault
+
+
+@dataclass
+class SeparationResult:
+    hpl_m: np.ndarray  # (E,) the protection level
+    max_ratio: np.ndarray  # (E,) the largest |Δ| / T over subsets and axes (> 1: a fault detected)
+    worst_slot: np.ndarray  # (E,) the slot whose single-satellite subset separates most (-1: a constellation or none)
+    p_nm: np.ndarray  # (E,) the prior of the faults not monitored
+    n_modes: np.ndarray  # (E,) fault modes monitored
+    enough: np.ndarray  # (E,) every subset solvable
+
+
+def radius_factor(p) -> np.ndarray:
+    """K(p) = √(−2 ln p): a 2-D Gaussian of semi-major σ leaves the circle of radius K·σ with probability ≤ p."""
+    return np.sqrt(-2.0 * np.log(np.clip(np.asarray(p, float), 1e-300, 1.0)))
+
+
+def _major_sigma(A: np.ndarray, var: np.ndarray) -> np.ndarray:
+    """Semi-major σ of the east-north part of A·y for independent y of variance ``var`` (A: (..., U, N))."""
+    e, n = A[..., 0, :], A[..., 1, :]
+    see, snn, sen = (e * e * var).sum(-1), (n * n * var).sum(-1), (e * n * var).sum(-1)
+    return np.sqrt(np.maximum(0.5 * (see + snn) + np.sqrt(0.25 * (see - snn) ** 2 + sen**2), 0.0))
+
+
+def solution_separation(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, dy_m: np.ndarray | None,
+                        clock_index: np.ndarray | None, geometry: Geometry, p_md: float, p_fa: float,
+                        p_sat: float = P_SAT, p_const: float = P_CONST) -> SeparationResult:  # fmt: skip
+    """The multiple-hypothesis solution separation of every epoch (see the module docstring).
+
+    ``H`` (E, N, U), ``sigma_m``/``mask``/``dy_m`` (E, N): the WLS inputs (``dy_m`` the pre-fit residuals at
+    the linearisation point, or None: the protection level alone, no test); ``clock_index`` (E, N): each
+    measurement's constellation clock (None: one constellation).
+    """
+    n_epochs, n_slots = mask.shape
+    if n_slots == 0 or n_epochs == 0:  # no satellite at all: nothing to separate
+        nan, none = np.full(n_epochs, np.nan), np.zeros(n_epochs, np.int64)
+        return SeparationResult(nan, nan.copy(), none - 1, np.zeros(n_epochs), none, np.zeros(n_epochs, bool))
+    used = mask & (geometry.weight > 0)
+    var = np.where(used, 1.0 / np.where(used, geometry.weight, 1.0), 0.0)
+    const = np.zeros(mask.shape, np.int64) if clock_index is None else np.where(used, clock_index, -1)
+    n_const = int(const.max(initial=0)) + 1
+    # the subsets: slot j left out (j < N), then constellation c left out (N + c)
+    drop = np.concatenate([np.broadcast_to(np.eye(n_slots, dtype=bool), (n_epochs, n_slots, n_slots)),
+                           const[:, None, :] == np.arange(n_const)[None, :, None]], axis=1)  # (E, K, N)
+    present = drop.any(axis=2) & np.concatenate([used, np.zeros((n_epochs, n_const), bool)], axis=1)
+    const_used = np.stack([(used & (const == c)).any(axis=1) for c in range(n_const)], axis=1)
+    present[:, n_slots:] = const_used & (const_used.sum(axis=1, keepdims=True) >= 2)
+    n_k = drop.shape[1]
+    sub_mask = (used[:, None, :] & ~drop).reshape(-1, n_slots)
+    sub = wls_geometry(np.repeat(H, n_k, axis=0), np.repeat(sigma_m, n_k, axis=0), sub_mask)
+    A_k = sub.A.reshape(n_epochs, n_k, *sub.A.shape[1:])
+    solvable = (~sub.singular & (sub.dof >= 0)).reshape(n_epochs, n_k)
+    enough = ~(present & ~solvable).any(axis=1) & (geometry.dof >= 1) & ~geometry.singular
+    dA = A_k - geometry.A[:, None]
+    sigma_0 = _major_sigma(geometry.A, var)  # (E,)
+    sigma_k = _major_sigma(A_k, var[:, None, :])  # (E, K)
+    sigma_ss = _major_sigma(dA, var[:, None, :])
+    prior = np.where(np.arange(n_k) < n_slots, p_sat, p_const)[None, :] * present
+    # a mode whose prior is below what the budget leaves each mode needs no monitoring: its prior joins P_NM
+    share = p_md / (2.0 * np.maximum(present.sum(axis=1), 1))[:, None]
+    monitored = present & (prior > share)
+    n_modes = monitored.sum(axis=1)
+    threshold = radius_factor(p_fa / np.maximum(n_modes, 1))[:, None] * sigma_ss
+    k_md = radius_factor(np.where(monitored, share / np.where(monitored, prior, 1.0), 1.0))
+    bound = np.where(monitored, threshold + k_md * sigma_k, 0.0)
+    hpl = np.maximum(radius_factor(p_md / 2.0) * sigma_0, bound.max(axis=1, initial=0.0))
+    p_total = prior.sum(axis=1)
+    p_nm = 0.5 * p_total**2 + np.where(present & ~monitored, prior, 0.0).sum(axis=1)
+    ratio = np.zeros(n_epochs)
+    worst = np.full(n_epochs, -1, np.int64)
+    if dy_m is not None:
+        sep = np.linalg.norm(np.einsum("ekqn,en->ekq", dA[..., :2, :], np.where(used, dy_m, 0.0)), axis=-1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.where(monitored & (threshold > 0), sep / threshold, 0.0)
+        ratio = r.max(axis=1)
+        k = np.argmax(r, axis=1)
+        worst = np.where((k < n_slots) & (ratio > 1.0), k, -1)
+    nan = ~enough
+    return SeparationResult(np.where(nan, np.nan, hpl), np.where(nan, np.nan, ratio), worst, p_nm, n_modes, enough)
+
+
+def clock_columns(H: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Each measurement's receiver-clock (constellation) column index, from H's one-hot clock columns."""
+    if H.shape[-1] <= 3:
+        return np.zeros(mask.shape, np.int64)
+    return np.argmax(H[..., 3:], axis=-1).astype(np.int64)
+
+
+def separation_detection(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, residual_m: np.ndarray,
+                         geometry: Geometry, test_stat: np.ndarray, params, hal_m) -> tuple[Detection, np.ndarray]:  # fmt: skip
+    """The RAIM verdict of every epoch by solution separation (``params.mode == "ss"``), as a :class:`Detection`.
+
+    Returns the detection (``test_stat`` the χ² statistic t as given, ``threshold`` and ``lambda_det`` NaN: the
+    test is on the separations; ``hpl_m`` the protection level) and each epoch's **separation ratio**, the
+    largest normalised separation maxₖ |Δₖ| / Tₖ (the test passes at ≤ 1; for an epoch with a statistic but no
+    residuals, a GST RMS, t over the χ²_k threshold at p_fa).
+
+    ``residual_m``: the all-in-view post-fit residuals (the separations are (Aₖ − A₀)·r: the same as from the
+    pre-fit ones, since every Aₖ·H = I); NaN rows: no residuals, the epoch is ``unmonitored`` with its HPL.
+    """
+    n = mask.shape[0]
+    hal = np.broadcast_to(np.asarray(params.hal_m if hal_m is None else hal_m, dtype=float), (n,)).copy()
+    used = mask & (geometry.weight > 0)
+    have = ~(used & ~np.isfinite(residual_m)).any(axis=1) & (geometry.n_meas > 0)  # every used residual
+    chi2_only = ~have & np.isfinite(test_stat)  # a statistic without residuals (GST RMS): the χ² test at p_fa
+    r = np.where(mask & have[:, None], np.nan_to_num(residual_m), 0.0)
+    ss = solution_separation(H, sigma_m, mask, r, clock_columns(H, mask), geometry, params.p_md, params.p_fa,
+                             params.p_sat, params.p_const)  # fmt: skip
+    insufficient = (geometry.dof < 1) | geometry.singular | (geometry.n_meas == 0)
+    status = np.full(n, VALID, dtype=np.int8)
+    ratio = np.where(have, ss.max_ratio, np.nan)
+    if chi2_only.any():
+        from tollcli.integrity.design import stored_classic_threshold
+
+        k = np.maximum(geometry.dof[chi2_only], 1)
+        ratio[chi2_only] = test_stat[chi2_only] / stored_classic_threshold(params.p_fa, k)
+    with np.errstate(invalid="ignore"):
+        status[ratio > 1.0] = FAULT
+        status[~np.isfinite(ratio)] = UNMONITORED
+        status[~ss.enough | ~(ss.hpl_m <= hal) | (ss.p_nm > params.p_md / 2.0)] = UNAVAILABLE
+    status[insufficient] = INSUFFICIENT
+    nan_if = np.where(insufficient, np.nan, 1.0)
+    detection = Detection(
+        dof=np.maximum(geometry.dof, 0), slope_max_m=geometry.slope_max_m * nan_if,
+        test_stat=test_stat, threshold=np.full(n, np.nan), lambda_det=np.full(n, np.nan), hpl_m=ss.hpl_m * nan_if,
+        hal_m=hal, p_fa=np.full(n, params.p_fa) * nan_if, status=status,
+    )  # fmt: skip
+    return detection, ratio * nan_if
+
+
+def separation_exclusion(meas, geometry: Geometry, residual_m: np.ndarray, detection: Detection, ratio: np.ndarray,
+                         params) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """FDE by solution separation: where a fault was detected, drop the satellite whose subset separates most;
+    if the rest passes the whole test again (its own subsets, HPL ≤ HAL), the epoch is ``excluded_valid``.
+
+    Updates ``detection`` and the separation ``ratio`` in place; returns the excluded satellite per epoch ('' none) and the position's
+    change (E, 3) east, north, up (m) when it is dropped.
+    """
+    from tollcli.gnss.wls import take_epochs
+    from tollcli.integrity.raim import EXCLUDED
+
+    n = meas.mask.shape[0]
+    excluded = np.full(n, "", dtype=object)
+    shift = np.zeros((n, 3))
+    flagged = np.flatnonzero((detection.status == FAULT) & (detection.dof >= 2))
+    if flagged.size == 0:
+        return excluded, shift
+    H, sigma, mask = meas.H[flagged], meas.sigma_m[flagged], meas.mask[flagged]
+    r = np.nan_to_num(residual_m[flagged])
+    first = solution_separation(H, sigma, mask, r, clock_columns(H, mask), take_epochs(geometry, flagged),
+                                params.p_md, params.p_fa, params.p_sat, params.p_const)  # fmt: skip
+    rows = np.flatnonzero(first.worst_slot >= 0)
+    if rows.size == 0:
+        return excluded, shift
+    slot = first.worst_slot[rows]
+    sub_mask = mask[rows].copy()
+    sub_mask[np.arange(rows.size), slot] = False
+    sub_geom = wls_geometry(H[rows], sigma[rows], sub_mask)
+    # the subset's own residuals: r₍ⱼ₎ = r − H·Δx, Δx = A₍ⱼ₎·r (the all-in-view residuals re-fitted)
+    r_rows = np.where(sub_mask, r[rows], 0.0)
+    dx = np.einsum("eun,en->eu", sub_geom.A, r_rows)
+    sub_r = np.where(sub_mask, r_rows - np.einsum("enu,eu->en", H[rows], dx), np.nan)
+    sub_t = np.where(sub_mask, sub_geom.weight * np.nan_to_num(sub_r) ** 2, 0.0).sum(axis=1)
+    again, again_ratio = separation_detection(H[rows], sigma[rows], sub_mask, sub_r, sub_geom, sub_t, params,
+                                    detection.hal_m[flagged[rows]])  # fmt: skip
+    ok = again.status == VALID
+    epochs = flagged[rows[ok]]
+    excluded[epochs] = meas.sv[epochs, slot[ok]]
+    shift[epochs] = dx[ok, :3]
+    for name in ("dof", "slope_max_m", "test_stat", "threshold", "hpl_m"):
+        getattr(detection, name)[epochs] = getattr(again, name)[ok]
+    ratio[epochs] = again_ratio[ok]
+    detection.status[epochs] = EXCLUDED
+    return excluded, shift

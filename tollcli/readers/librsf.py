@@ -1,0 +1,81 @@
+"""libRSF text logs (TU Chemnitz smartLoc as the libRSF project distributes it), read into tables.
+
+Each line is one measurement, its kind first (the data set's ``readme.libRSF.txt``):
+
+* ``pseudorange3 t pr var x y z sat sys elev cn0`` — a pseudorange (m) with atmosphere and satellite clock
+  already removed, its variance (m²), the satellite's ECEF position at transmission (m, in the ECEF frame of
+  that time), satellite id (GPS 1–32; Galileo 300 + PRN), system, elevation (deg), C/N0 (dB-Hz);
+* ``odom3 t vx vy vz wx wy wz`` + 6 variances — the vehicle's odometry (m/s, rad/s, body frame);
+* ``point3 t X Y Z`` + 9 zeros — the reference trajectory (ECEF, m): the ``_GT`` file.
+
+Times are seconds from the start of the recording; the files carry no date. They are placed at
+``LIBRSF_T0`` (1970-01-01T00:00:00Z) + t, in logs and truth alike, so the two stay comparable.
+Lines of another kind are passed over; a line of a known kind whose fields are not numbers is malformed:
+skipped and counted (``--strict``: an error naming its line).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from tollcli.errors import DataError, UsageError
+
+LIBRSF_T0 = pd.Timestamp("1970-01-01T00:00:00Z")
+KINDS = {"pseudorange3": 11, "odom3": 14, "point3": 14}  # fields per line, the kind included
+PSEUDORANGE_COLUMNS = ("t_s", "pr_m", "pr_var_m2", "x_sv_m", "y_sv_m", "z_sv_m", "sat", "sys", "elev_deg", "cn0_dbhz")
+ODOMETRY_COLUMNS = ("t_s", "vx_mps", "vy_mps", "vz_mps", "wx_radps", "wy_radps", "wz_radps")
+POINT_COLUMNS = ("t_s", "x_m", "y_m", "z_m")
+
+
+@dataclass
+class LibrsfLog:
+    pseudoranges: pd.DataFrame  # one row per satellite-epoch, PSEUDORANGE_COLUMNS
+    odometry: pd.DataFrame  # ODOMETRY_COLUMNS
+    points: pd.DataFrame  # POINT_COLUMNS (the ground-truth file)
+    malformed: int  # lines of a known kind that were skipped
+
+
+def read_librsf(path: str, strict: bool = False) -> LibrsfLog:
+    """The three kinds of measurement of a libRSF file as tables (rows in file order)."""
+    try:
+        raw = pd.read_csv(path, sep=r"\s+", header=None, names=range(15), dtype=str, engine="c", comment="#")
+    except FileNotFoundError:
+        raise UsageError(f"{path}: no such file") from None
+    except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: not a readable libRSF text file ({str(exc).splitlines()[0]})") from None
+    except pd.errors.EmptyDataError:
+        raise DataError(f"{path}: empty: no libRSF measurements") from None
+    kind = raw[0].to_numpy(object)
+    tables, malformed = {}, 0
+    for name, columns in (("pseudorange3", PSEUDORANGE_COLUMNS), ("odom3", ODOMETRY_COLUMNS), ("point3", POINT_COLUMNS)):
+        rows = np.flatnonzero(kind == name)
+        values = raw.iloc[rows, 1 : 1 + len(columns)].apply(pd.to_numeric, errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(values).all(axis=1)
+        if bad.any() and strict:
+            raise DataError(f"{path}:{int(rows[np.argmax(bad)]) + 1}: a {name} line whose fields are not {len(columns)} numbers")
+        malformed += int(bad.sum())
+        tables[name] = pd.DataFrame(values[~bad], columns=list(columns))
+    if not any(len(t) for t in tables.values()):
+        raise DataError(f"{path}: no pseudorange3, odom3 or point3 line: not a libRSF log")
+    pr = tables["pseudorange3"]
+    pr["sat"], pr["sys"] = pr["sat"].astype(np.int64), pr["sys"].astype(np.int64)
+    return LibrsfLog(pr, tables["odom3"], tables["point3"], malformed)
+
+
+def librsf_times(t_s) -> pd.DatetimeIndex:
+    """UTC times of libRSF time stamps (seconds from the recording's start, placed at ``LIBRSF_T0``)."""
+    return pd.DatetimeIndex(LIBRSF_T0 + pd.to_timedelta(np.round(np.asarray(t_s, float) * 1e3), unit="ms"))
+
+
+def librsf_truth(path: str) -> pd.DataFrame:
+    """A libRSF ground-truth file (``point3``) as a trajectory: ``time_utc``, ``lat_deg``, ``lon_deg``, ``height_m``."""
+    from tollcli.geodesy import ecef2geodetic
+
+    points = read_librsf(path).points
+    if points.empty:
+        raise DataError(f"{path}: no point3 line: not a libRSF ground-truth file")
+    lat, lon, h = ecef2geodetic(points["x_m"].to_numpy(), points["y_m"].to_numpy(), points["z_m"].to_numpy())
+    return pd.DataFrame({"time_utc": librsf_times(points["t_s"]), "lat_deg": lat, "lon_deg": lon, "height_m": h})
