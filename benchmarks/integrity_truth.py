@@ -77,8 +77,10 @@ def drives() -> list[Drive]:
                          os.path.join(g22, "ground_truth.csv")))  # fmt: skip
     for name in ("rural-clean", "urban-clean", "rural-fault", "urban-fault"):
         d = os.path.join(ROOT, "samples", "sim", name)
-        out.append(Drive(f"simulated {name}", os.path.join(d, "drive-derived.csv"), "gsdc-derived", os.path.join(d, "truth.csv"),
-                         hals=(50.0, 40.0, 30.0)))  # fmt: skip
+        out.append(Drive(f"simulated {name} (pseudoranges, one clock)", os.path.join(d, "drive-derived.csv"), "gsdc-derived",
+                         os.path.join(d, "truth.csv"), hals=(50.0, 40.0, 30.0)))  # fmt: skip
+        out.append(Drive(f"simulated {name} (NMEA GRS, a clock per constellation)", os.path.join(d, "drive.nmea"), "nmea",
+                         os.path.join(d, "truth.csv"), hals=(50.0, 40.0, 30.0)))  # fmt: skip
     return out
 
 
@@ -113,8 +115,21 @@ def run_setting(drive: Drive, truth: pd.DataFrame, mode: str, fde: bool, environ
     return table, err, valid
 
 
+def measurements(drive: Drive):
+    """The drive's epochs and RAIM measurements (a whole log)."""
+    if drive.kind != "nmea":
+        return pseudorange_epochs(drive.log, drive.kind, None, drive.sigma_model, 5.0, NominalModel())
+    from tollcli.gnss.measurements import Measurements
+    from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
+    from tollcli.readers.nmea import iter_nmea_tables
+
+    chunks = list(iter_nmea_tables(drive.log, chunk_epochs=10**9))
+    assert len(chunks) == 1
+    return chunks[0].epochs, nmea_measurements(chunks[0].epochs, chunks[0].satellites, "nominal", 5.0, NominalModel(), AngleCarry())
+
+
 def model_level(drive: Drive, truth: pd.DataFrame, hal: float) -> list[tuple[str, dict]]:
-    epochs, meas = pseudorange_epochs(drive.log, drive.kind, None, drive.sigma_model, 5.0, NominalModel())
+    epochs, meas = measurements(drive)
     err, _ = errors_against_truth(epochs, truth, tolerance_s=0.2)
     rows = []
     for label, sigma in (("model level, nominal σ", meas.sigma_m), ("model level, urban σ", urban_sigma_m(meas.sigma_m, meas.cn0_dbhz))):
@@ -208,7 +223,8 @@ def main(argv: list[str] | None = None) -> int:
                 lines.append(f"| {label} | {hal:g} | {c['valid']} / {c['epochs']} | {c['availability_pct']:.1f} % | {c['MI']} | "
                              f"**{c['HMI']}** | {c['max_hpe_valid_m']:.1f} |")  # fmt: skip
                 if label.startswith("ss (default)") and hal == drive.hals[0] and not args.no_plots:
-                    png = f"stanford-{drive.name.split(' (')[0].lower().replace(' ', '-')}{'-' + drive.sigma_model if drive.sigma_model != 'nominal' else ''}.png"
+                    png = (f"stanford-{drive.name.split(' (')[0].lower().replace(' ', '-')}"
+                           f"{'-' + drive.sigma_model if drive.sigma_model != 'nominal' else ''}{'-nmea' if drive.kind == 'nmea' else ''}.png")
                     stanford(os.path.join(OUT, png), f"{drive.name}: defaults, HAL {hal:g} m", err, table["hpl_m"].to_numpy(float), valid, hal)
                     lines_png = f"![Stanford diagram]({png})"
                 if label.startswith("ss (default)") and hal == drive.hals[0]:

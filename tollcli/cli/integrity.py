@@ -97,7 +97,8 @@ def integrity(
         elif kind == "nmea":
             _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment)
         else:
-            table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal, environment)
+            table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal, environment, strict)
+            counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
             _tally(table, counts)
             writer.write(table)
         writer.commit()
@@ -108,12 +109,15 @@ def integrity(
                "integrity_sources": sources, "integrity_sources_setting": integrity_sources, "gst_rms_ignored": ignored,
                "raim": raim, "hal_m": hal, "p_md": p_md, "p_fa": p_fa if raim != "etc" else None,
                "fde": fde, "sigma_model": sigma_model, "environment_setting": environment,
-               "environments": {k[1]: n for k, n in sorted(counts.items()) if k[0] == "environment"}}  # fmt: skip
+               "environments": {k[1]: n for k, n in sorted(counts.items()) if k[0] == "environment"},
+               "skipped_lines": counts["skipped", "lines"]}  # fmt: skip
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
     else:
         text = f"{log}: {summary['epochs']} epochs: " + ", ".join(f"{n} {s}" for s, n in statuses.items())
         text += "; decided by " + ", ".join(f"{s} {n}" for s, n in sources.items())
+        if counts["skipped", "lines"]:
+            text += f"; skipped {counts['skipped', 'lines']} malformed lines (--strict: an error)"
         if summary["environments"]:
             text += "; environment " + ", ".join(f"{n} {e or 'unknown'}" for e, n in summary["environments"].items())
         if ignored:
@@ -165,5 +169,5 @@ def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, count
     warn(stats.summary(), quiet)
 
 
-def _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal, environment="auto") -> pd.DataFrame:
-    return next(iter_integrity(log, kind, params, sigma_model, sigma, nominal, nav=nav, environment=environment)).table
+def _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal, environment="auto", strict=False) -> pd.DataFrame:
+    return next(iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, nav=nav, environment=environment)).table

@@ -67,6 +67,7 @@ def librsf_epochs(log: LibrsfLog, sigma_model: str = "nominal", sigma_m: float =
             "speed_mps": _odometry_speed(log.odometry, epoch_ms),
         }
     )
+    epochs.attrs["skipped_lines"] = log.malformed  # malformed lines the reader passed over
     meas = Measurements(g["H"], sigma, mask, labels, dy_m=g["dy_m"], cn0_dbhz=cn0,
                         test_stat_source=np.full(n_epochs, "pseudorange", dtype=object))  # fmt: skip
     return epochs, meas

@@ -14,16 +14,16 @@ measurements at once, a street canyon, raise it. An epoch is ``urban`` where f >
 measurements then get the urban σ of :func:`tollcli.gnss.sigma_models.urban_sigma_m` (C/N0-weighted: NLOS
 signals, weaker, count less); elsewhere the σ stays as the error model gave it. There is no middle ground on
 purpose: widening the nominal σ by the measured factor widens the RAIM's thresholds faster than its bound and
-lets canyon errors through (Potsdamer Platz: 25 positions > 50 m declared valid that way, none with either the
-nominal or the urban σ).
+let Potsdamer Platz positions more than 50 m off through when it was tried; the urban σ lets none through.
 
 Epochs without residuals have no f: they keep their σ (``environment`` ''); ``--environment open`` keeps the
 error model throughout, ``--environment urban`` makes every epoch urban.
 
-Measured (``benchmarks/integrity_truth.py``): f is 1.5–10 on the Potsdamer Platz drive (median 4.0), 0.1–0.7
-on the simulator's fault-free urban and rural drives (their errors are the nominal model's), at most 2.1 during
-the simulated single-satellite faults, and 0.6–1.3 on the GSDC 2021 Pixel 4 epochs under the nominal model
-(1.7–3.0 under the phone's own, smaller σ: those epochs are urban).
+Measured (``benchmarks/integrity_truth.py``, docs/integrity.md): f is 1.53–9.95 on the Potsdamer Platz drive
+(median 3.96; the epochs the nominal σ would let through have 2.2 or more), 0.03–0.72 on the simulator's
+fault-free urban and rural drives (their errors are the nominal model's), at most 2.1 during the simulated
+single-satellite faults, and 0.6–1.3 on the GSDC 2021 Pixel 4 epochs under the nominal model (1.7–3.0 under
+the phone's own, smaller σ: those epochs are urban).
 
 The window runs across the chunks of a streamed log (:class:`EnvironmentCarry`), each window summed over its own
 epochs, so a log read in chunks gets the same classes as read whole.
@@ -53,7 +53,7 @@ class EnvironmentCarry:
     k: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-def test_statistics(meas: Measurements) -> tuple[np.ndarray, np.ndarray]:
+def robust_statistics(meas: Measurements) -> tuple[np.ndarray, np.ndarray]:
     """The residual test statistic of every epoch under ``meas``'s own σ **without its most deviating
     measurement**, t₍ⱼ₎ = t − r_j² / (σ_j² (I − B)_jj) for the largest such term, and its k − 1 degrees of
     freedom: one faulty satellite (what the RAIM detects) does not widen the model; many deviating ones (a
@@ -131,7 +131,7 @@ def with_environment(meas: Measurements, time_s: np.ndarray, setting: str = "aut
     ``setting`` open: ``meas`` unchanged (the error model throughout; the classes the residuals give are still
     reported); urban: the urban σ on every epoch.
     """
-    t, k = test_statistics(meas)
+    t, k = robust_statistics(meas)
     factor = variance_factor(np.asarray(time_s, float), t, k, carry=carry)
     if setting == "open":
         return meas, classify(factor), factor

@@ -9,11 +9,13 @@ Horizontally, with Σ the measurement covariance and σ_major(C) the semi-major 
 * a 2-D Gaussian of semi-major σ leaves a circle of radius K·σ with probability at most exp(−K²/2), so
   K(p) = √(−2 ln p) bounds any horizontal error at probability p (the form of the receivers' bounds,
   :func:`tollcli.integrity.sources.k_h`);
-* the integrity budget p_md is split in halves, fault-free and faulted; a mode is **monitored** when its prior
-  pₖ exceeds its share of the faulted half, p_md / (2·N), N the modes present;
+* a mode is **monitored** when its prior pₖ exceeds p_md / (2·N), N the modes present (a rarer mode could
+  not take a fair share of the budget);
 * test: a fault is detected when |Δₖ| > Tₖ = K(p_fa / N_mon)·σ_ss,k for a monitored mode;
-* protection level HPL = max(K(p_md / 2)·σ₀, maxₖ(Tₖ + K(p_md / (2·N·pₖ))·σₖ)), σₖ = σ_major of x̂ₖ: under
-  mode k the subset is fault-free and, with no alarm, |x̂₀ − x̂ₖ| ≤ Tₖ (the triangle inequality);
+* protection level: the smallest L with exp(−(L/σ₀)²/2) + Σₖ pₖ·exp(−((L − Tₖ)/σₖ)²/2) ≤ p_md − P_NM
+  (σₖ = σ_major of x̂ₖ: under mode k the subset is fault-free and, with no alarm, |x̂₀ − x̂ₖ| ≤ Tₖ by the
+  triangle inequality), solved for every epoch at once by bisection — the ARAIM integrity equation with the
+  budget going where it is needed, no fixed split;
 * **faults not monitored**: P_NM, the prior probability of two or more satellites or constellations failing at
   once (no subset leaves them all out), ≈ (Σ pₖ)² / 2, plus the priors of the modes too rare to monitor.
   Where P_NM exceeds half the budget (p_md / 2) the epoch is ``unavailable``: its HPL cannot account for the
@@ -54,6 +56,38 @@ class SeparationResult:
 def radius_factor(p) -> np.ndarray:
     """K(p) = √(−2 ln p): a 2-D Gaussian of semi-major σ leaves the circle of radius K·σ with probability ≤ p."""
     return np.sqrt(-2.0 * np.log(np.clip(np.asarray(p, float), 1e-300, 1.0)))
+
+
+def _risk(hpl: np.ndarray, sigma_0: np.ndarray, prior: np.ndarray, threshold: np.ndarray, sigma_k: np.ndarray) -> np.ndarray:
+    """The integrity risk at protection level ``hpl`` (E,): exp(−(L/σ₀)²/2) + Σₖ pₖ·exp(−((L − Tₖ)/σₖ)²/2), each
+    term the bound on a 2-D Gaussian leaving a circle (a mode's term is pₖ while L ≤ Tₖ)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        free = np.exp(-0.5 * (hpl / sigma_0) ** 2)
+        over = np.maximum(hpl[:, None] - threshold, 0.0) / sigma_k
+        modes = prior * np.exp(-0.5 * np.where(np.isfinite(over), over, np.inf) ** 2)
+    return np.where(sigma_0 > 0, free, 0.0) + np.nansum(modes, axis=1)
+
+
+def _solve_hpl(sigma_0: np.ndarray, prior: np.ndarray, threshold: np.ndarray, sigma_k: np.ndarray,
+               budget: np.ndarray, iterations: int = 48) -> np.ndarray:  # fmt: skip
+    """The smallest L whose :func:`_risk` is within ``budget`` (E,), by bisection over every epoch at once: the
+    budget shared among the fault-free case and the monitored modes as each needs it (NaN: no L does)."""
+    n_modes = np.maximum((prior > 0).sum(axis=1), 1)
+    with np.errstate(invalid="ignore"):
+        # an L that surely suffices: every term at most budget / (modes + 1)
+        share = budget / (n_modes + 1.0)
+        hi_free = radius_factor(share) * sigma_0
+        hi_modes = np.where(prior > 0, threshold + radius_factor(np.minimum(share[:, None] / np.where(prior > 0, prior, 1.0), 1.0))
+                            * sigma_k, 0.0).max(axis=1, initial=0.0)  # fmt: skip
+    hi = np.fmax(hi_free, hi_modes)
+    lo = np.zeros_like(hi)
+    ok = (budget > 0) & np.isfinite(hi)
+    hi = np.where(ok, hi, 0.0)
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        fits = _risk(mid, sigma_0, prior, threshold, sigma_k) <= budget
+        hi, lo = np.where(fits, mid, hi), np.where(fits, lo, mid)
+    return np.where(ok, hi, np.nan)
 
 
 def _major_sigma(A: np.ndarray, var: np.ndarray) -> np.ndarray:
@@ -102,11 +136,9 @@ def solution_separation(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, dy
     monitored = present & (prior > share)
     n_modes = monitored.sum(axis=1)
     threshold = radius_factor(p_fa / np.maximum(n_modes, 1))[:, None] * sigma_ss
-    k_md = radius_factor(np.where(monitored, share / np.where(monitored, prior, 1.0), 1.0))
-    bound = np.where(monitored, threshold + k_md * sigma_k, 0.0)
-    hpl = np.maximum(radius_factor(p_md / 2.0) * sigma_0, bound.max(axis=1, initial=0.0))
     p_total = prior.sum(axis=1)
     p_nm = 0.5 * p_total**2 + np.where(present & ~monitored, prior, 0.0).sum(axis=1)
+    hpl = _solve_hpl(sigma_0, np.where(monitored, prior, 0.0), threshold, sigma_k, np.maximum(p_md - p_nm, 0.0))
     ratio = np.zeros(n_epochs)
     worst = np.full(n_epochs, -1, np.int64)
     if dy_m is not None:

@@ -44,8 +44,9 @@ def iter_integrity(log: str, kind: str, params: RaimParams, sigma_model: str = "
     if kind != "nmea":
         epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
         meas, env_columns = measured_environment(epochs, meas, environment)
-        table = pd.concat([epochs, env_columns, run_raim(meas, params)], axis=1)
-        yield IntegrityChunk(with_raim_position(table), None)
+        table = with_raim_position(pd.concat([epochs, env_columns, run_raim(meas, params)], axis=1))
+        table.attrs["skipped_lines"] = int(epochs.attrs.get("skipped_lines", 0))
+        yield IntegrityChunk(table, None)
         return
     if sigma_model == "input":
         raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")
