@@ -119,7 +119,6 @@ def measurements(drive: Drive):
     """The drive's epochs and RAIM measurements (a whole log)."""
     if drive.kind != "nmea":
         return pseudorange_epochs(drive.log, drive.kind, None, drive.sigma_model, 5.0, NominalModel())
-    from tollcli.gnss.measurements import Measurements
     from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
     from tollcli.readers.nmea import iter_nmea_tables
 

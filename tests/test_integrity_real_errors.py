@@ -13,7 +13,6 @@ from conftest import SAMPLES, run_cli, shared
 
 from tollcli.errors import DataError
 from tollcli.gnss.wls import observation_matrix, wls_geometry
-from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.solution_separation import radius_factor, solution_separation
 
 BERLIN = "smartloc/Berlin_Potsdamer_Platz_"
@@ -173,3 +172,48 @@ def test_gsdc2021_and_librsf_truths_are_trajectories():
     assert len(gsdc) > 5 and gsdc["time_utc"].notna().all() and str(gsdc["time_utc"].iloc[0]).startswith("2020-05-14 22:10")
     berlin = truth_trajectory(_berlin("GT.txt"))
     assert len(berlin) == 1_372 and berlin["lat_deg"].between(52.50, 52.52).all() and not is_id_list(_berlin("GT.txt"))
+
+
+def _streets_around_the_drive(tmp_path, offset_m: float = 150.0) -> str:
+    """Three tolled streets: one along a straight stretch the Berlin drive took (its NE diagonal), two parallel
+    to it ``offset_m`` away on either side; geo-objects of HAL 50 m built by the product."""
+    lat0, lon0 = 52.5, 13.37
+    kx, ky = 111_320.0 * np.cos(np.radians(lat0)), 111_132.0
+    p, q = np.array([0.0028 * kx, 0.00775 * ky]), np.array([0.0056 * kx, 0.00905 * ky])
+    d = (q - p) / np.linalg.norm(q - p)
+    n = np.array([-d[1], d[0]])
+
+    def street(sid: str, off: float) -> dict:
+        a, b = p + off * n, q + off * n
+        return {"type": "Feature", "properties": {"id": sid, "name": sid, "road_class": "primary"},
+                "geometry": {"type": "LineString", "coordinates": [[lon0 + a[0] / kx, lat0 + a[1] / ky], [lon0 + b[0] / kx, lat0 + b[1] / ky]]}}  # fmt: skip
+
+    roads = tmp_path / "streets.geojson"
+    roads.write_text(json.dumps({"type": "FeatureCollection", "features": [
+        street("DRIVEN", 0.0), street("LEFT", offset_m), street("RIGHT", -offset_m)]}))  # fmt: skip
+    geo = tmp_path / "geo.geojson"
+    assert run_cli("geoobjects", "build", str(roads), "-o", str(geo), "--hal-max", "50", "-q").returncode == 0
+    return str(geo)
+
+
+def test_on_the_real_city_drive_the_defaults_charge_no_street_not_driven_and_say_why(tmp_path):
+    """Metamorphic on real data: tolled streets laid around the Potsdamer Platz drive's own track. The papers'
+    ETC under the nominal σ charges a street the vehicle never drove (its positions up to 79 m off are
+    'valid'); the defaults charge none — and, unable to vouch for any position in that canyon, none driven
+    either, with the reason in the invoice and the summary line."""
+    geo = _streets_around_the_drive(tmp_path)
+    tariff = tmp_path / "t.toml"
+    tariff.write_text('currency = "EUR"\n[road_class.primary]\ncar = 1.00\n')
+    audits = {}
+    for name, args in (("defaults", ()), ("etc", ("--raim", "etc", "--environment", "open"))):
+        invoice, report = tmp_path / f"{name}.json", tmp_path / f"{name}-audit.json"
+        proc = run_cli("process", _berlin("Input.txt"), "--geo", geo, "--tariff", str(tariff), "-o", str(invoice), *args)
+        assert proc.returncode == 0, proc.stderr.decode()
+        if name == "defaults":
+            assert b"mostly unavailable: the protection level exceeds the geo-object's HAL" in proc.stderr
+            doc = json.loads(invoice.read_text())
+            assert doc["lines"] == [] and "unavailable" in doc["status_notes"] and doc["parameters"]["raim"] == "ss"
+        assert run_cli("audit", str(invoice), "--truth", _berlin("GT.txt"), "--geo", geo, "-q", "-o", str(report)).returncode == 0
+        audits[name] = json.loads(report.read_text())
+    assert audits["defaults"]["passages_driven"] == audits["etc"]["passages_driven"] >= 1
+    assert audits["defaults"]["false_recognitions"] == 0 < audits["etc"]["false_recognitions"]

@@ -154,8 +154,10 @@ def test_a_terminate_signal_taken_by_another_thread_still_waits():
         "        with signals_held():\n"  # nested: the outer block decides
         "            signal.pthread_kill(other.ident, signal.SIGTERM)\n"
         "            signal.pthread_kill(other.ident, signal.SIGTERM)\n"
-        "            for _ in range(200000):\n"
-        "                pass\n"  # many bytecodes: time for a handler to run, were it not deferred
+        "            import time\n"
+        "            t0 = time.monotonic()\n"
+        "            while time.monotonic() - t0 < 0.5:\n"
+        "                pass\n"  # half a second of bytecodes: time for a handler to run, were it not deferred (loaded machines too)
         "            reached.append('inner')\n"
         "        reached.append('outer')\n"
         "    reached.append('after')\n"

@@ -102,7 +102,27 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
     if "probable_false_alarm" in seen:  # the auditor reads why so many positions alarmed, and what it does not mean
         doc["status_notes"] = {"probable_false_alarm": STATUS_MEANINGS["probable_false_alarm"]
                                + f" (p_fa = {parameters.get('p_fa')}; see each position's p_fa in the evidence)"}  # fmt: skip
+    if parameters.get("raim") == "ss":  # the default RAIM's verdicts, in the words the summary line quotes
+        notes = {k: SEPARATION_NOTES[k] for k in ("unavailable", "fault_detected") if k in seen}
+        if notes:
+            doc["status_notes"] = {**doc.get("status_notes", {}), **notes}
     return doc
+
+
+#: what the solution-separation RAIM's denials mean (first sentence: the process summary's reason)
+SEPARATION_NOTES = {
+    "unavailable": (
+        "the protection level exceeds the geo-object's HAL for this receiver here. The solution separation bounds "
+        "the position over every satellite that may have failed and over the noise; few satellites, a weak geometry "
+        "or a street canyon (environment 'urban': the residuals of the last 30 s exceed the error model 1.5-fold, "
+        "so each satellite's σ is tens of metres, from its C/N0) make it larger than the HAL, and the position "
+        "cannot be vouched for; each position's hpl_m is in the epoch table (tollcli integrity)"
+    ),
+    "fault_detected": (
+        "a satellite disagrees with the others: leaving one out moves the position further than its threshold "
+        "allows (separation_ratio > 1 at P_FA = p_fa) — a credible alarm; the position is not charged on"
+    ),
+}
 
 
 def _rate_fields(price) -> dict:

@@ -467,9 +467,15 @@ def _raim_alarm(epochs: pd.DataFrame, raim: pd.DataFrame, t: np.ndarray, s: Find
         out.append(_finding("raim_persistent_alarm", (a, b), t[a], t[b], lat, lon, alarm_share=float(np.mean(alarm[a : b + 1])),
                             expected_false_alarm_share=float(np.mean(np.clip(p_fa[a : b + 1], 0.0, 1.0))),
                             median_test_stat=float(np.nanmedian(raim["test_stat"].to_numpy(float)[a : b + 1])),
-                            median_threshold=float(np.nanmedian(raim["threshold"].to_numpy(float)[a : b + 1])),
+                            median_threshold=_nanmedian(raim["threshold"].to_numpy(float)[a : b + 1]),  # NaN: ss
                             median_hdop=float(np.nanmedian(hdop[a : b + 1]))))  # fmt: skip
     return out
+
+
+def _nanmedian(values: np.ndarray) -> float:
+    """The median of the finite values (NaN, without a warning, when there are none)."""
+    finite = values[np.isfinite(values)]
+    return float(np.median(finite)) if finite.size else float("nan")
 
 
 def settings_dict(settings: FindingSettings) -> dict:

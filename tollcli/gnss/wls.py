@@ -112,6 +112,17 @@ def residuals_from_prefit(H: np.ndarray, geometry: Geometry, dy_m: np.ndarray, m
     return r, dx
 
 
+def post_fit_residuals(H: np.ndarray, geometry: Geometry, mask: np.ndarray, dy_m: np.ndarray | None,
+                       residual_m: np.ndarray | None) -> np.ndarray:
+    """The post-fit residuals (E, N) of a batch: from pre-fit residuals ``dy_m`` when given, else the receiver's
+    own (``residual_m``, e.g. NMEA GRS), else NaN."""
+    if dy_m is not None:
+        return residuals_from_prefit(H, geometry, dy_m, mask)[0]
+    if residual_m is not None:
+        return residual_m
+    return np.full(mask.shape, np.nan)
+
+
 def wsse(residual_m: np.ndarray, geometry: Geometry) -> np.ndarray:
     """Test statistic t = rᵀΣ⁻¹r per epoch (NaN where any used residual is missing)."""
     used = geometry.weight > 0

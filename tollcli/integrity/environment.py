@@ -37,7 +37,7 @@ import numpy as np
 
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.sigma_models import urban_sigma_m
-from tollcli.gnss.wls import residuals_from_prefit, wls_geometry, wsse
+from tollcli.gnss.wls import post_fit_residuals, wls_geometry, wsse
 
 ENVIRONMENTS = ("auto", "open", "urban")
 ENV_WINDOW_S = 30.0
@@ -62,12 +62,9 @@ def robust_statistics(meas: Measurements) -> tuple[np.ndarray, np.ndarray]:
 
     geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
     n = meas.mask.shape[0]
-    if meas.dy_m is not None:
-        residual, _ = residuals_from_prefit(meas.H, geometry, meas.dy_m, meas.mask)
-    elif meas.residual_m is not None:
-        residual = meas.residual_m
-    else:
+    if meas.dy_m is None and meas.residual_m is None:
         return np.full(n, np.nan), np.zeros(n)
+    residual = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
     t = wsse(residual, geometry)
     checked = (geometry.weight > 0) & (geometry.redundancy > REDUNDANCY_EPS)
     with np.errstate(divide="ignore", invalid="ignore"):

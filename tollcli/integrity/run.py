@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.gnss.measurements import Measurements
-from tollcli.gnss.wls import Geometry, residuals_from_prefit, wls_geometry, wsse
+from tollcli.gnss.wls import Geometry, post_fit_residuals, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
 from tollcli.integrity.solution_separation import separation_detection, separation_exclusion
 from tollcli.integrity.kalman_hit import hpl_sbas_m
@@ -57,12 +57,7 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     if geometry is None:
         geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
     n_epochs = meas.mask.shape[0]
-    if meas.dy_m is not None:
-        residual, _ = residuals_from_prefit(meas.H, geometry, meas.dy_m, meas.mask)
-    elif meas.residual_m is not None:
-        residual = meas.residual_m
-    else:
-        residual = np.full(meas.mask.shape, np.nan)
+    residual = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
     t = wsse(residual, geometry)
     per_satellite = np.isfinite(t)  # residuals of every used measurement (not a GST approximation)
     if meas.test_stat_override is not None:

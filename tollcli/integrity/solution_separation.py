@@ -41,6 +41,7 @@ from tollcli.integrity.raim import FAULT, INSUFFICIENT, UNAVAILABLE, UNMONITORED
 
 P_SAT = 1e-5  # ARAIM's usual prior of a satellite fault per approach
 P_CONST = 1e-8  # and of a constellation-wide fault
+BLOCK_EPOCHS = 512  # epochs whose subsets are solved together
 
 
 @dataclass
@@ -104,8 +105,25 @@ def solution_separation(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, dy
 
     ``H`` (E, N, U), ``sigma_m``/``mask``/``dy_m`` (E, N): the WLS inputs (``dy_m`` the pre-fit residuals at
     the linearisation point, or None: the protection level alone, no test); ``clock_index`` (E, N): each
-    measurement's constellation clock (None: one constellation).
+    measurement's constellation clock (None: one constellation). Epochs are taken ``BLOCK_EPOCHS`` at a time
+    (every subset of a block at once): the working memory is a block's, whatever the batch.
     """
+    n_epochs = mask.shape[0]
+    if n_epochs > BLOCK_EPOCHS:
+        from tollcli.gnss.wls import take_epochs
+
+        parts = []
+        for a in range(0, n_epochs, BLOCK_EPOCHS):
+            rows = np.arange(a, min(a + BLOCK_EPOCHS, n_epochs))
+            parts.append(solution_separation(H[rows], sigma_m[rows], mask[rows], None if dy_m is None else dy_m[rows],
+                                             None if clock_index is None else clock_index[rows], take_epochs(geometry, rows),
+                                             p_md, p_fa, p_sat, p_const))  # fmt: skip
+        return SeparationResult(*(np.concatenate([getattr(p, f) for p in parts]) for f in SeparationResult.__dataclass_fields__))
+    return _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry, p_md, p_fa, p_sat, p_const)
+
+
+def _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry: Geometry, p_md: float, p_fa: float, p_sat: float,
+                      p_const: float) -> SeparationResult:  # fmt: skip
     n_epochs, n_slots = mask.shape
     if n_slots == 0 or n_epochs == 0:  # no satellite at all: nothing to separate
         nan, none = np.full(n_epochs, np.nan), np.zeros(n_epochs, np.int64)

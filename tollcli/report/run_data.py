@@ -18,7 +18,7 @@ from tollcli.charging.recognition import GeoObjects, load_geoobjects
 from tollcli.errors import DataError
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.truth_check import check_against_truth, errors_against_truth
-from tollcli.io.sources import read_table, sniff_format
+from tollcli.io.sources import sniff_format
 from tollcli.job.log_integrity import iter_integrity
 from tollcli.job.pipeline import settings_from_invoice
 from tollcli.job.verify import locate_input
