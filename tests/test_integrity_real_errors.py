@@ -217,3 +217,34 @@ def test_on_the_real_city_drive_the_defaults_charge_no_street_not_driven_and_say
         audits[name] = json.loads(report.read_text())
     assert audits["defaults"]["passages_driven"] == audits["etc"]["passages_driven"] >= 1
     assert audits["defaults"]["false_recognitions"] == 0 < audits["etc"]["false_recognitions"]
+    page = tmp_path / "report.html"  # the report reads the libRSF truth too: errors and the Stanford regions
+    assert run_cli("report", str(tmp_path / "defaults.json"), "--truth", _berlin("GT.txt"), "-q", "-o", str(page)).returncode == 0
+    assert "hazardous" in page.read_text()
+
+
+def test_the_urban_sigma_bounds_every_potsdamer_platz_error_as_a_covariance():
+    """Known answer on real data: K_H(5e-5)·σ_major of the all-in-view WLS under the urban σ is above the error of
+    every epoch of the drive (the largest error is 4.2 σ_major, K_H 4.45); under the nominal σ errors reach
+    about 19 σ_major."""
+    from tollcli.gnss.librsf_positions import librsf_epochs
+    from tollcli.gnss.sigma_models import urban_sigma_m
+    from tollcli.integrity.model_bound import sigma_major_m
+    from tollcli.integrity.sources import k_h
+    from tollcli.integrity.truth_check import errors_against_truth
+    from tollcli.readers.librsf import librsf_truth, read_librsf
+
+    from tollcli.geodesy import enu_shift2geodetic
+    from tollcli.gnss.wls import residuals_from_prefit
+
+    epochs, meas = librsf_epochs(read_librsf(_berlin("Input.txt")))
+    truth = librsf_truth(_berlin("GT.txt"))
+    ratio = {}
+    for name, sigma in (("nominal", meas.sigma_m), ("urban", urban_sigma_m(meas.sigma_m, meas.cn0_dbhz))):
+        sigma = np.where(meas.mask, sigma, np.nan)
+        geometry = wls_geometry(meas.H, sigma, meas.mask)
+        _, dx = residuals_from_prefit(meas.H, geometry, meas.dy_m, meas.mask)  # the solution under these weights
+        lat, lon = enu_shift2geodetic(epochs["lat_deg"].to_numpy(), epochs["lon_deg"].to_numpy(), dx[:, 0], dx[:, 1])
+        err, matched = errors_against_truth(epochs.assign(lat_deg=lat, lon_deg=lon), truth)
+        assert matched.all()
+        ratio[name] = np.max(err / sigma_major_m(geometry, sigma))
+    assert 4.0 < ratio["urban"] < k_h(5e-5) < 15.0 < ratio["nominal"]

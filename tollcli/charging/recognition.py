@@ -126,7 +126,9 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
     raim = run_raim(meas.take(rows), params, hal_m=geo.hal_m[obj],
                     geometry=take_epochs(geometry, rows) if geometry is not None else None)
     status = raim["raim_status"].to_numpy(dtype=object)
-    de, dn = raim["fde_shift_e_m"].to_numpy(), raim["fde_shift_n_m"].to_numpy()
+    # the position the RAIM vouches for: its own weighted solution, after any exclusion
+    de = raim["fde_shift_e_m"].to_numpy() + raim["wls_shift_e_m"].to_numpy()
+    dn = raim["fde_shift_n_m"].to_numpy() + raim["wls_shift_n_m"].to_numpy()
     moved = np.flatnonzero((de != 0) | (dn != 0))  # an unshifted position is inside: it is a candidate pair
     shifted_inside = np.ones(rows.size, bool)
     shifted_inside[moved] = shapely.contains_xy(geo.polygons[obj[moved]], px[moved] + de[moved], py[moved] + dn[moved])

@@ -196,7 +196,7 @@ def urban_sigma_m(sigma_nominal_m, cn0_dbhz=None) -> np.ndarray:
     50 dB-Hz, 39 m at 35, 52 m at 30, 72 m at 25, 102 m at 20 on top of a few metres nominal. The form is the
     C/N0 weighting real receivers use (σ² = a + b·10^(−C/N0/10), softened to 15 dB a decade); the constants are
     set so that, on the smartLoc Potsdamer Platz drive (u-blox, 20 038 pseudoranges with truth), K·σ_major of
-    the all-in-view WLS bounds every horizontal error at K = 4.45 (P_MD 5e-5): the largest error is 4.2 σ_major
+    the all-in-view WLS bounds every horizontal error at K = 4.45 (P_MD 5e-5): the largest error is 4.1 σ_major
     (``benchmarks/integrity_truth.py`` measures it). NLOS signals, weaker, are weighted down by the same term.
     """
     cn0 = np.full(np.shape(sigma_nominal_m), np.nan) if cn0_dbhz is None else np.asarray(cn0_dbhz, dtype=float)

@@ -113,14 +113,16 @@ def residuals_from_prefit(H: np.ndarray, geometry: Geometry, dy_m: np.ndarray, m
 
 
 def post_fit_residuals(H: np.ndarray, geometry: Geometry, mask: np.ndarray, dy_m: np.ndarray | None,
-                       residual_m: np.ndarray | None) -> np.ndarray:
-    """The post-fit residuals (E, N) of a batch: from pre-fit residuals ``dy_m`` when given, else the receiver's
-    own (``residual_m``, e.g. NMEA GRS), else NaN."""
+                       residual_m: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The post-fit residuals (E, N) of a batch and the state correction (E, U) that goes with them: from
+    pre-fit residuals ``dy_m`` when given (the correction from the linearisation point to this geometry's
+    weighted solution), else the receiver's own (``residual_m``, e.g. NMEA GRS; correction 0), else NaN."""
     if dy_m is not None:
-        return residuals_from_prefit(H, geometry, dy_m, mask)[0]
+        return residuals_from_prefit(H, geometry, dy_m, mask)
+    zero = np.zeros((mask.shape[0], H.shape[-1]))
     if residual_m is not None:
-        return residual_m
-    return np.full(mask.shape, np.nan)
+        return residual_m, zero
+    return np.full(mask.shape, np.nan), zero
 
 
 def wsse(residual_m: np.ndarray, geometry: Geometry) -> np.ndarray:

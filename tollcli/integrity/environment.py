@@ -64,7 +64,7 @@ def robust_statistics(meas: Measurements) -> tuple[np.ndarray, np.ndarray]:
     n = meas.mask.shape[0]
     if meas.dy_m is None and meas.residual_m is None:
         return np.full(n, np.nan), np.zeros(n)
-    residual = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
+    residual, _ = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
     t = wsse(residual, geometry)
     checked = (geometry.weight > 0) & (geometry.redundancy > REDUNDANCY_EPS)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -6,7 +6,8 @@ Columns added to the epoch table (names as in the papers, units in the names):
 ``threshold``, ``lambda_det``, ``hpl_m``, ``hal_m``, ``p_fa``, ``p_md``,
 ``raim_status`` (the strictest verdict of every integrity source, :mod:`tollcli.integrity.sources`),
 ``integrity_source`` (the source that decided it), ``residual_status``/``gbs_status``/``gst_status``
-(each source's own verdict, '' where it gave none), ``hpl_gbs_m``/``hpl_gst_m`` (the receiver's
+(each source's own verdict, '' where it gave none), ``wls_shift_e_m``/``wls_shift_n_m`` (where the RAIM's own
+weighted solution lies from the reported position: pseudoranges solved with other weights, e.g. the urban σ), ``hpl_gbs_m``/``hpl_gst_m`` (the receiver's
 bounds; the satellite a GBS names as failed is the epoch table's ``gbs_failed_svid``), ``gst_rms_note`` (why a GST RMS was ignored), ``excluded_sv``, ``fde_shift_e_m``/``fde_shift_n_m`` (how far the
 position moves when the excluded measurement is dropped), ``hpl_sbas_m`` (paper 004's
 K_H·d_major from the per-satellite σ's: an accuracy bound, not a RAIM output).
@@ -43,7 +44,7 @@ from tollcli.integrity.sources import LEVELS, NONE, RESIDUAL_SOURCES, combine, l
 RAIM_COLUMNS = (
     "raim_mode", "n_used", "dof", "slope_max_m", "test_stat", "test_stat_source", "threshold", "lambda_det",
     "hpl_m", "hal_m", "p_fa", "p_md", "raim_status", "integrity_source", "residual_status", "gbs_status", "gst_status",
-    "hpl_gbs_m", "hpl_gst_m", "gst_rms_note", "excluded_sv", "fde_shift_e_m", "fde_shift_n_m",
+    "hpl_gbs_m", "hpl_gst_m", "gst_rms_note", "excluded_sv", "fde_shift_e_m", "fde_shift_n_m", "wls_shift_e_m", "wls_shift_n_m",
     "hpl_sbas_m", "separation_ratio",
 )  # fmt: skip
 _STATUS_OR_NONE = np.array(STATUSES + ("",), dtype=object)  # index -1: no verdict
@@ -57,7 +58,8 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     if geometry is None:
         geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
     n_epochs = meas.mask.shape[0]
-    residual = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
+    residual, correction = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
+    wls_shift = np.where(np.isfinite(correction[:, :2]), correction[:, :2], 0.0)  # its own solution from the reported
     t = wsse(residual, geometry)
     per_satellite = np.isfinite(t)  # residuals of every used measurement (not a GST approximation)
     if meas.test_stat_override is not None:
@@ -110,6 +112,8 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
             "excluded_sv": pd.array(excluded_sv, dtype="string"),
             "fde_shift_e_m": shift[:, 0],
             "fde_shift_n_m": shift[:, 1],
+            "wls_shift_e_m": wls_shift[:, 0],
+            "wls_shift_n_m": wls_shift[:, 1],
             "hpl_sbas_m": hpl_sbas_m(geometry, meas.sigma_m),
             "separation_ratio": ratio,
         }

@@ -26,9 +26,11 @@ class IntegrityChunk:
 
 
 def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
-    """Add ``raim_lat_deg``/``raim_lon_deg``: the position the RAIM vouches for (after any exclusion)."""
-    lat, lon = enu_shift2geodetic(table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float),
-                                  table["fde_shift_e_m"].to_numpy(float), table["fde_shift_n_m"].to_numpy(float))  # fmt: skip
+    """Add ``raim_lat_deg``/``raim_lon_deg``: the position the RAIM vouches for (its own weighted solution, after any
+    exclusion)."""
+    east = table["fde_shift_e_m"].to_numpy(float) + table["wls_shift_e_m"].to_numpy(float)
+    north = table["fde_shift_n_m"].to_numpy(float) + table["wls_shift_n_m"].to_numpy(float)
+    lat, lon = enu_shift2geodetic(table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float), east, north)
     return table.assign(raim_lat_deg=lat, raim_lon_deg=lon)
 
 
