@@ -1,8 +1,10 @@
 """Multiple-hypothesis solution separation (the fault-mode form of advanced RAIM), batched over epochs.
 
 For every epoch the all-in-view WLS position x̂₀ is compared with the position of each **fault-tolerant
-subset** x̂ₖ: the set without one satellite (a single-satellite fault, prior ``p_sat``) and, where two or more
-constellations are used, without one whole constellation (a constellation-wide fault, prior ``p_const``).
+subset** x̂ₖ: the set without one satellite (a single-satellite fault, prior ``p_sat``), where two or more
+constellations are used without one whole constellation (a constellation-wide fault, prior ``p_const``), and
+— where two satellites failing at once is not negligible, ½(N·p_sat)² > p_md/4 (``--p-sat`` 1e-3 in a city,
+say) — without every pair of satellites (prior p_sat²): several faults at once.
 Horizontally, with Σ the measurement covariance and σ_major(C) the semi-major axis of a 2×2 covariance C:
 
 * separation Δₖ = x̂ₖ − x̂₀ = (Aₖ − A₀)·y (east, north), its σ_ss,k = σ_major((Aₖ − A₀) Σ (Aₖ − A₀)ᵀ);
@@ -16,8 +18,9 @@ Horizontally, with Σ the measurement covariance and σ_major(C) the semi-major 
   (σₖ = σ_major of x̂ₖ: under mode k the subset is fault-free and, with no alarm, |x̂₀ − x̂ₖ| ≤ Tₖ by the
   triangle inequality), solved for every epoch at once by bisection — the ARAIM integrity equation with the
   budget going where it is needed, no fixed split;
-* **faults not monitored**: P_NM, the prior probability of two or more satellites or constellations failing at
-  once (no subset leaves them all out), ≈ (Σ pₖ)² / 2, plus the priors of the modes too rare to monitor.
+* **faults not monitored**: P_NM, the prior probability of more satellites failing at once than any subset leaves
+  out — (Σ p)² / 2 for two, (Σ p)³ / 6 for three where pairs are monitored — plus the priors of the modes too
+  rare to monitor.
   Where P_NM exceeds half the budget (p_md / 2) the epoch is ``unavailable``: its HPL cannot account for the
   faults it does not exclude.
 
@@ -109,12 +112,14 @@ def solution_separation(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, dy
     (every subset of a block at once): the working memory is a block's, whatever the batch.
     """
     n_epochs = mask.shape[0]
-    if n_epochs > BLOCK_EPOCHS:
+    pairs = (0.5 * (mask.sum(axis=1) * p_sat) ** 2 > p_md / 4.0).any()
+    block = max(BLOCK_EPOCHS // max(mask.shape[1] // 2, 1), 16) if pairs else BLOCK_EPOCHS  # pairs: N/2 × the subsets
+    if n_epochs > block:
         from tollcli.gnss.wls import take_epochs
 
         parts = []
-        for a in range(0, n_epochs, BLOCK_EPOCHS):
-            rows = np.arange(a, min(a + BLOCK_EPOCHS, n_epochs))
+        for a in range(0, n_epochs, block):
+            rows = np.arange(a, min(a + block, n_epochs))
             parts.append(solution_separation(H[rows], sigma_m[rows], mask[rows], None if dy_m is None else dy_m[rows],
                                              None if clock_index is None else clock_index[rows], take_epochs(geometry, rows),
                                              p_md, p_fa, p_sat, p_const))  # fmt: skip
@@ -132,12 +137,19 @@ def _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry: Geometry, p
     var = np.where(used, 1.0 / np.where(used, geometry.weight, 1.0), 0.0)
     const = np.zeros(mask.shape, np.int64) if clock_index is None else np.where(used, clock_index, -1)
     n_const = int(const.max(initial=0)) + 1
-    # the subsets: slot j left out (j < N), then constellation c left out (N + c)
+    # the subsets: slot j left out (j < N), constellation c left out (N + c), and — where two satellites failing at
+    # once is not negligible against the budget — every pair of slots left out (order 2)
+    n_sat = used.sum(axis=1)
+    pairs_needed = 0.5 * (n_sat * p_sat) ** 2 > p_md / 4.0
+    i, j = np.triu_indices(n_slots, 1) if pairs_needed.any() else (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    pair_drop = np.zeros((i.size, n_slots), bool)
+    pair_drop[np.arange(i.size), i] = pair_drop[np.arange(i.size), j] = True
     drop = np.concatenate([np.broadcast_to(np.eye(n_slots, dtype=bool), (n_epochs, n_slots, n_slots)),
-                           const[:, None, :] == np.arange(n_const)[None, :, None]], axis=1)  # (E, K, N)
-    present = drop.any(axis=2) & np.concatenate([used, np.zeros((n_epochs, n_const), bool)], axis=1)
+                           const[:, None, :] == np.arange(n_const)[None, :, None],
+                           np.broadcast_to(pair_drop, (n_epochs, i.size, n_slots))], axis=1)  # (E, K, N)
+    present = np.concatenate([used, np.zeros((n_epochs, n_const), bool), used[:, i] & used[:, j] & pairs_needed[:, None]], axis=1)
     const_used = np.stack([(used & (const == c)).any(axis=1) for c in range(n_const)], axis=1)
-    present[:, n_slots:] = const_used & (const_used.sum(axis=1, keepdims=True) >= 2)
+    present[:, n_slots : n_slots + n_const] = const_used & (const_used.sum(axis=1, keepdims=True) >= 2)
     n_k = drop.shape[1]
     sub_mask = (used[:, None, :] & ~drop).reshape(-1, n_slots)
     sub = wls_geometry(np.repeat(H, n_k, axis=0), np.repeat(sigma_m, n_k, axis=0), sub_mask)
@@ -148,14 +160,16 @@ def _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry: Geometry, p
     sigma_0 = _major_sigma(geometry.A, var)  # (E,)
     sigma_k = _major_sigma(A_k, var[:, None, :])  # (E, K)
     sigma_ss = _major_sigma(dA, var[:, None, :])
-    prior = np.where(np.arange(n_k) < n_slots, p_sat, p_const)[None, :] * present
+    kind = np.repeat([0, 1, 2], [n_slots, n_const, i.size])  # single satellite, constellation, pair of satellites
+    prior = np.array([p_sat, p_const, p_sat**2])[kind][None, :] * present
     # a mode whose prior is below what the budget leaves each mode needs no monitoring: its prior joins P_NM
     share = p_md / (2.0 * np.maximum(present.sum(axis=1), 1))[:, None]
     monitored = present & (prior > share)
     n_modes = monitored.sum(axis=1)
     threshold = radius_factor(p_fa / np.maximum(n_modes, 1))[:, None] * sigma_ss
-    p_total = prior.sum(axis=1)
-    p_nm = 0.5 * p_total**2 + np.where(present & ~monitored, prior, 0.0).sum(axis=1)
+    p_singles = (prior * (kind != 2)).sum(axis=1)
+    # faults no monitored subset leaves out: three satellites at once where pairs are monitored, else two
+    p_nm = np.where(pairs_needed, p_singles**3 / 6.0, 0.5 * p_singles**2) + np.where(present & ~monitored, prior, 0.0).sum(axis=1)
     hpl = _solve_hpl(sigma_0, np.where(monitored, prior, 0.0), threshold, sigma_k, np.maximum(p_md - p_nm, 0.0))
     ratio = np.zeros(n_epochs)
     worst = np.full(n_epochs, -1, np.int64)
@@ -165,7 +179,7 @@ def _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry: Geometry, p
             r = np.where(monitored & (threshold > 0), sep / threshold, 0.0)
         ratio = r.max(axis=1)
         k = np.argmax(r, axis=1)
-        worst = np.where((k < n_slots) & (ratio > 1.0), k, -1)
+        worst = np.where((kind[k] == 0) & (ratio > 1.0), k, -1)
     nan = ~enough
     return SeparationResult(np.where(nan, np.nan, hpl), np.where(nan, np.nan, ratio), worst, p_nm, n_modes, enough)
 
