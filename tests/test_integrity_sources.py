@@ -92,3 +92,38 @@ def test_auto_settles_on_the_strictest_level_of_the_first_epoch_with_a_source():
     assert settle_sources(RaimParams(), meas(with_grs)).sources == LEVELS["residual"]
     gst_only = plain + [compose.gga(100.0, 42.7, 2.9, n_used=6), compose.gst(100.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0, 2.0)]
     assert settle_sources(RaimParams(), meas(gst_only)).sources == LEVELS["covariance"]
+
+
+def test_a_gbs_names_a_fault_only_when_its_bias_is_significant():
+    """Read as the receiver meant it: GBS names its *most likely* failed satellite whatever the bias. 1.5 σ → no
+    fault (its bound decides); 10 σ → fault; a missed-detection probability ≤ p_fa → fault; a satellite named with
+    no figures → fault; a 3-satellite 2-D fix (no redundancy) → no GBS verdict at all."""
+    import pandas as pd
+
+    from tollcli.gnss.receiver_outputs import receiver_outputs
+    from tollcli.integrity.raim import FAULT, VALID
+    from tollcli.integrity.sources import NONE, receiver_verdicts
+
+    epochs = pd.DataFrame({
+        "gbs_err_lat_m": [2.0] * 6, "gbs_err_lon_m": [3.0] * 6, "gbs_failed_svid": [-1, 8, 8, 8, 8, 8],
+        "gbs_bias_m": [np.nan, 1.5, 10.0, 1.0, np.nan, 0.0], "gbs_bias_sd_m": [np.nan, 1.0, 1.0, 1.0, np.nan, 0.0],
+        "gbs_p_md": [np.nan, np.nan, np.nan, 1e-4, np.nan, np.nan],
+        "n_used": [9, 9, 9, 9, 9, 3], "fix_mode": [3, 3, 3, 3, 3, 2],
+    })  # fmt: skip
+    verdict = receiver_verdicts(receiver_outputs(epochs), np.full(6, 50.0), 5e-5, p_fa=5e-3)["gbs"]
+    assert verdict.tolist() == [VALID, VALID, FAULT, FAULT, FAULT, NONE]
+
+
+def test_the_zed_f9t_insignificant_gbs_bias_is_no_longer_a_fault():
+    """ublox-zed-f9t-ubx_nmea_l5.log: at 19:33:42 the receiver names satellite 8 with a 12.6 m bias of σ 219.6 m
+    (0.06 σ): the epoch was fault_detected; it is the receiver's bound's now."""
+    import io
+
+    import pandas as pd
+    from conftest import run_cli, shared
+
+    proc = run_cli("integrity", str(shared("gpsd", "ublox-zed-f9t-ubx_nmea_l5.log")), "-q")
+    table = pd.read_csv(io.BytesIO(proc.stdout))
+    named = table["gbs_failed_svid"] == 8
+    assert named.sum() == 1 and (table.loc[named, "gbs_status"] != "fault_detected").all()
+    assert "fault_detected" not in set(table["raim_status"])

@@ -1,7 +1,13 @@
 """What a receiver says about its own integrity, per epoch: GBS (its RAIM) and GST (its error ellipse).
 
 * GBS (satellite fault detection): the expected 1σ errors in latitude and longitude (m)
-  and the most likely failed satellite (none when the receiver's RAIM found no fault).
+  and the most likely failed satellite (none when the receiver's RAIM found no fault), with its
+  probability of missed detection, its estimated bias and the bias's standard deviation: a
+  receiver names its *most likely* failed satellite even when the bias is insignificant
+  (``gbs_bias_ratio`` = |bias| / σ_bias says how significant; whether it is a fault is the
+  integrity sources' call, :func:`tollcli.integrity.sources.gbs_fault`). ``gbs_redundant``: the fix
+  had more satellites than unknowns (a 2-D fix more than 3, a 3-D fix more than 4; unknown counts
+  count as redundant) — without redundancy a receiver's RAIM checked nothing.
   ``gbs_sigma_major_m`` = the larger of the two σ's (GBS gives no correlation: the
   largest the horizontal σ can be along any axis is at most this, and the bound
   uses it as the major axis).
@@ -43,6 +49,9 @@ class ReceiverOutputs:
 
     gbs_sigma_major_m: np.ndarray
     gbs_failed_svid: np.ndarray
+    gbs_bias_ratio: np.ndarray  # |bias| / its σ of the satellite GBS names (NaN: not given)
+    gbs_p_md: np.ndarray  # GBS probability of missed detection of that satellite (NaN: not given)
+    gbs_redundant: np.ndarray  # bool: the fix had more satellites than unknowns
     gst_sigma_major_m: np.ndarray
     gst_rms_m: np.ndarray  # the RMS where it counts as a residual statistic, else NaN
     gst_rms_note: np.ndarray  # codes into GST_RMS_NOTES
@@ -82,6 +91,13 @@ def receiver_outputs(epochs: pd.DataFrame, carry: RmsCarry | None = None) -> Rec
     n = len(epochs)
     gbs = _largest(_column(epochs, "gbs_err_lat_m"), _column(epochs, "gbs_err_lon_m"))
     failed = epochs["gbs_failed_svid"].to_numpy(np.int64) if "gbs_failed_svid" in epochs else np.full(n, -1, np.int64)
+    bias, bias_sd = _column(epochs, "gbs_bias_m"), _column(epochs, "gbs_bias_sd_m")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(bias_sd > 0, np.abs(bias) / np.where(bias_sd > 0, bias_sd, 1.0), np.nan)
+    n_used = _column(epochs, "n_used")
+    mode = _column(epochs, "fix_mode")
+    unknowns = np.where(mode == 2, 3, 4)
+    redundant = ~(np.isfinite(n_used) & (n_used > 0) & (n_used <= unknowns))
     gst = _largest(_column(epochs, "sigma_major_m"), _column(epochs, "sigma_lat_m"), _column(epochs, "sigma_lon_m"))
     rms = _column(epochs, "rms_residual_m")
     given = np.isfinite(rms)
@@ -97,4 +113,5 @@ def receiver_outputs(epochs: pd.DataFrame, carry: RmsCarry | None = None) -> Rec
         carry.implausible_line = int(epochs["line"].iat[first]) if "line" in epochs else first
     note = np.where(given & earlier & ~bad, 2, note)
     used = given & (note == 0)
-    return ReceiverOutputs(gbs, failed, gst, np.where(used, rms, np.nan), note.astype(np.int8))
+    return ReceiverOutputs(gbs, failed, ratio, _column(epochs, "gbs_p_md"), redundant, gst, np.where(used, rms, np.nan),
+                           note.astype(np.int8))  # fmt: skip

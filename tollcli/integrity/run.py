@@ -136,7 +136,7 @@ def _source_verdicts(meas: Measurements, status: np.ndarray, source: np.ndarray,
         verdicts["gbs"] = verdicts["gst"] = np.full(n, NONE)
         nan = np.full(n, np.nan)
         return verdicts, {"hpl_gbs_m": nan, "hpl_gst_m": nan, "gst_rms_note": pd.array(np.full(n, "", object), dtype="string")}  # fmt: skip
-    own = receiver_verdicts(r, np.broadcast_to(hal_m, (n,)), params.p_md)
+    own = receiver_verdicts(r, np.broadcast_to(hal_m, (n,)), params.p_md, params.p_fa)
     gst_rms = np.where(decided & (source == "gst"), status, NONE)
     verdicts["gbs"] = own["gbs"]
     verdicts["gst"] = strictest(gst_rms, own["gst_bound"])

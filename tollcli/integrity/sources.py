@@ -5,8 +5,10 @@ Sources (``integrity_source``):
 ===============  =========================================================================
 ``grs``          the residual test on the receiver's GRS range residuals (exact)
 ``pseudorange``  the residual test on pseudoranges the tool solved itself (exact)
-``gbs``          the receiver's own RAIM (NMEA GBS): a satellite named as failed →
-                 ``fault_detected``; otherwise HPL = K_H(P_MD)·σ_major of its expected
+``gbs``          the receiver's own RAIM (NMEA GBS): a satellite named as failed with a
+                 significant bias (|bias|/σ_bias beyond the p_fa quantile, or its missed-detection
+                 probability ≤ p_fa) → ``fault_detected``; no verdict where the fix had no
+                 redundancy; otherwise HPL = K_H(P_MD)·σ_major of its expected
                  errors, ``valid`` iff HPL ≤ HAL, else ``unavailable``
 ``gst``          the receiver's error ellipse (NMEA GST): HPL = K_H(P_MD)·σ_major, ``valid``
                  iff HPL ≤ HAL; and the residual test on its RMS field where that is a
@@ -52,7 +54,7 @@ LEVEL_CHOICES = ("auto", *LEVELS)
 SOURCE_MEANINGS = {
     "grs": "a residual test on the receiver's own range residuals (GRS): faults are detected at P_MD",
     "pseudorange": "a residual test on the pseudoranges, solved by this tool: faults are detected at P_MD",
-    "gbs": "the receiver's own RAIM (GBS): it named no failed satellite and its expected errors bound the position "
+    "gbs": "the receiver's own RAIM (GBS): it named no failed satellite with a significant bias and its expected errors bound the position "
     "within the HAL at P_MD (HPL = √(−2 ln P_MD)·σ_major); the fault detection is the receiver's, not re-checked here",
     "gst": "the receiver's error ellipse (GST) bounds the position within the HAL at P_MD (HPL = √(−2 ln P_MD)·σ_major); "
     "a covariance-only bound: it holds for fault-free errors and detects no fault (the audit's P(false charge) bound "
@@ -77,10 +79,29 @@ def bound_verdict(hpl_m: np.ndarray, hal_m: np.ndarray) -> np.ndarray:
         return np.where(np.isfinite(hpl_m), np.where(hpl_m <= hal_m, VALID, UNAVAILABLE), NONE)
 
 
-def receiver_verdicts(receiver: ReceiverOutputs, hal_m: np.ndarray, p_md: float) -> dict[str, np.ndarray]:
-    """HPLs and verdicts of the receiver's own outputs: ``hpl_gbs_m``, ``gbs``, ``hpl_gst_m``, ``gst_bound``."""
+def gbs_fault(receiver: ReceiverOutputs, p_fa: float) -> np.ndarray:
+    """Whether the satellite a GBS names is a fault, read as the receiver meant it: its bias is significant
+    (|bias| / σ_bias beyond the two-sided ``p_fa`` quantile of a Gaussian: 2.81 at 5e-3) or its probability of
+    missed detection is at most ``p_fa``; a satellite named with neither figure counts as a fault (the
+    receiver said no more)."""
+    from statistics import NormalDist
+
+    named = receiver.gbs_failed_svid >= 0
+    z = NormalDist().inv_cdf(1.0 - p_fa / 2.0)
+    ratio, prob = receiver.gbs_bias_ratio, receiver.gbs_p_md
+    with np.errstate(invalid="ignore"):
+        significant = (ratio > z) | (prob <= p_fa) | (~np.isfinite(ratio) & ~np.isfinite(prob))
+    return named & significant
+
+
+def receiver_verdicts(receiver: ReceiverOutputs, hal_m: np.ndarray, p_md: float, p_fa: float = 5e-3) -> dict[str, np.ndarray]:
+    """HPLs and verdicts of the receiver's own outputs: ``hpl_gbs_m``, ``gbs``, ``hpl_gst_m``, ``gst_bound``.
+
+    GBS: a significant fault (:func:`gbs_fault`) → ``fault_detected``; else its bound; no verdict where the fix
+    had no redundancy (the receiver's RAIM could check nothing)."""
     hpl_gbs = k_h(p_md) * receiver.gbs_sigma_major_m
-    gbs = np.where(receiver.gbs_failed_svid >= 0, FAULT, bound_verdict(hpl_gbs, hal_m))
+    gbs = np.where(gbs_fault(receiver, p_fa), FAULT, bound_verdict(hpl_gbs, hal_m))
+    gbs = np.where(receiver.gbs_redundant, gbs, NONE)
     hpl_gst = k_h(p_md) * receiver.gst_sigma_major_m
     return {"hpl_gbs_m": hpl_gbs, "gbs": gbs, "hpl_gst_m": hpl_gst, "gst_bound": bound_verdict(hpl_gst, hal_m)}
 
