@@ -213,6 +213,7 @@ def test_on_the_real_city_drive_the_defaults_charge_no_street_not_driven_and_say
             assert b"mostly unavailable: the protection level exceeds the geo-object's HAL" in proc.stderr
             doc = json.loads(invoice.read_text())
             assert doc["lines"] == [] and "unavailable" in doc["status_notes"] and doc["parameters"]["raim"] == "ss"
+            assert all(p["why"].startswith("the protection level exceeds the geo-object's HAL") for p in doc["not_charged"])
         assert run_cli("audit", str(invoice), "--truth", _berlin("GT.txt"), "--geo", geo, "-q", "-o", str(report)).returncode == 0
         audits[name] = json.loads(report.read_text())
     assert audits["defaults"]["passages_driven"] == audits["etc"]["passages_driven"] >= 1

@@ -28,6 +28,7 @@ def test_a_log_shorter_than_the_speed_window_says_so(tmp_path):
     invoice, err = _process(short, tmp_path)
     assert invoice["total"] == "0.00" and set(invoice["not_charged"][0]["statuses"]) == {"speed_no_data"}
     assert invoice["status_notes"]["speed_no_data"].startswith("log shorter than the speed window: 4 s")
+    assert invoice["not_charged"][0]["why"].startswith("log shorter than the speed window: 4 s")  # per passage too
     assert "log shorter than the speed window" in err and len(err.strip().splitlines()) == 1
 
 
@@ -37,3 +38,16 @@ def test_a_stationary_vehicle_says_so(tmp_path):
     invoice, err = _process(log, tmp_path)
     assert invoice["total"] == "0.00" and "speed_low_speed" in invoice["not_charged"][0]["statuses"]
     assert "stationary" in invoice["status_notes"]["speed_low_speed"] and "stationary" in err
+    assert "stationary" in invoice["not_charged"][0]["why"] and "speed_low_speed" in invoice["not_charged"][0]["why"]
+
+
+def test_a_log_without_integrity_sources_says_so_per_passage(tmp_path):
+    """GGA and RMC only (as Android's GnssLogger writes them): every position unmonitored; each passage says why."""
+    lines = [line for line in (SAMPLES / "sim" / "rural-clean" / "drive.nmea").read_text().splitlines()
+             if line[3:6] in ("GGA", "RMC")]  # fmt: skip
+    log = tmp_path / "gga-rmc.nmea"
+    log.write_text("\n".join(lines) + "\n")
+    invoice, err = _process(log, tmp_path)
+    assert invoice["total"] == "0.00" and len(invoice["not_charged"]) == 2
+    for passage in invoice["not_charged"]:
+        assert passage["why"].startswith("no integrity source in the log") and "unmonitored:" in passage["why"]

@@ -125,6 +125,35 @@ SEPARATION_NOTES = {
 }
 
 
+#: a status's reason in a user's words, where the invoice's notes have none of their own
+WHY_NOT = {
+    "unmonitored": "no integrity source in the log (no GRS, GBS or GST sentences, or no satellites at all): "
+                   "the positions could not be checked",
+    "insufficient": "too few satellites for a check (no more than the unknowns)",
+    "unavailable": "the protection level exceeds the geo-object's HAL for this receiver here",
+    "fault_detected": "a satellite disagreed with the others (a detected fault)",
+    "probable_false_alarm": "the RAIM test failed (the papers' ETC at a HAL this small fails often without a fault)",
+    "wrong_direction": "the vehicle drove against this carriageway's direction: the other carriageway",
+    "direction_unknown": "no course or too slow to tell the direction on this carriageway",
+    "mm_alarm": "map matching did not trust the road match", "mm_unmatched": "no road matched",
+    "mm_other_road": "map matching put the vehicle on another road",
+}  # fmt: skip
+
+
+def explain_not_charged(invoice: dict) -> None:
+    """Give each passage not charged its ``why``: the commonest reason its positions did not count, in words (the
+    invoice's own ``status_notes`` first, first sentence; else :data:`WHY_NOT`), with how many positions it held."""
+    notes = invoice.get("status_notes") or {}
+    for passage in invoice.get("not_charged", []):
+        failing = {k: int(n) for k, n in passage.get("statuses", {}).items() if k not in ("valid", "excluded_valid")}
+        if not failing:
+            passage["why"] = f"fewer valid independent positions than N_Th ({invoice.get('parameters', {}).get('n_th', 1)})"
+            continue
+        top = max(sorted(failing), key=failing.get)
+        words = notes[top].split(". ")[0] if top in notes else WHY_NOT.get(top, top)
+        passage["why"] = f"{words} ({top}: {failing[top]} of {passage.get('n_inside', sum(failing.values()))} positions)"
+
+
 def _rate_fields(price) -> dict:
     """An invoice line's pricing beyond fee and band: for per-km tables, what was charged for and at which rate."""
     if not price.table:

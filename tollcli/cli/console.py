@@ -50,6 +50,8 @@ def invoice_tables(invoice: dict):
     for line in invoice.get("not_charged", []):
         table.add_row(f"[red]{line['geoobject']}[/red]", line["entry_utc"], line["exit_utc"], str(line["n_valid_independent"]), "not charged",
                       *([""] * len(extra)), "", style="dim")  # fmt: skip
+        if line.get("why"):
+            table.add_row("", f"[dim]why: {line['why']}[/dim]", "", "", "", *([""] * len(extra)), "")
     table.add_row("[bold]TOTAL[/bold]", "", "", "", "", *([""] * len(extra)), f"[bold]{invoice['total']}[/bold]")
     counts: dict[str, int] = {}
     for line in invoice["lines"] + invoice.get("not_charged", []):

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, replace
 
 import pandas as pd
 
-from tollcli.charging.invoice import build_invoice, file_sha256, invoice_json, seal
+from tollcli.charging.invoice import build_invoice, explain_not_charged, file_sha256, invoice_json, seal
 from tollcli.charging.recognition import (
     charges,
     inside_pairs,
@@ -211,6 +211,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
                             continued=settings.continued, vehicle_attrs=settings.vehicle_attrs)  # fmt: skip
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
     _speed_notes(invoice, period, step_s)
+    explain_not_charged(invoice)
     return seal(invoice), stats
 
 
