@@ -14,7 +14,7 @@ from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
 from tollcli.errors import UsageError
 from tollcli.gnss.sigma_models import SIGMA_MODELS, NominalModel
-from tollcli.integrity.environment import classify
+from tollcli.integrity.environment import ENVIRONMENTS
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.io.sources import sniff_format
@@ -86,7 +86,8 @@ def integrity(
             raise ValueError(f"--integrity-sources {integrity_sources}: use one of {', '.join(LEVEL_CHOICES)}")
         params = RaimParams(mode=raim, hal_m=hal, p_md=p_md, p_fa=p_fa, fde=fde, p_sat=p_sat, p_const=p_const,
                             sources=LEVELS.get(integrity_sources))
-        classify(np.zeros(0), environment)  # the setting checked before anything is read
+        if environment not in ENVIRONMENTS:
+            raise ValueError(f"--environment {environment}: use one of {', '.join(ENVIRONMENTS)}")
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     nominal = NominalModel(iono=iono)
