@@ -68,6 +68,37 @@ def roads(n_objects: int, length_m: float, seg_m: float = 250.0) -> dict:
 
 
 UBLOX_LOG = "ublox-zed-f9p-nmea.log"  # the real u-blox pattern (GST with a 10⁵ "m" RMS field, GBS, ZDA, no GRS)
+SATELLITES_ONLY_LOG = "bu353s4.log"  # a real SiRF IV receiver writing GGA RMC GSA GSV only: the model level
+UBX_LOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "osnma" / "ublox" / "current_config.ubx"  # NAV-PVT + NAV-SAT
+
+
+def _track(k: int):
+    """Epoch k of the 25 m/s drive: its position on the road under the track, and the speed and course its positions
+    show (the flat road map stretches east-west by cos(latitude) over 900 km: the speed over ground follows it, so a
+    receiver's Doppler speed and its positions agree, as a real receiver's do)."""
+    from tollcli.geodesy import great_circle_distance_m
+
+    lon, lat = point(k * UBLOX_SPEED, 0.0)
+    lon1, lat1 = point((k + 1) * UBLOX_SPEED, 0.0)
+    speed = float(great_circle_distance_m(lat, lon, lat1, lon1))
+    y = math.sin(math.radians(lon1 - lon)) * math.cos(math.radians(lat1))
+    x = math.cos(math.radians(lat)) * math.sin(math.radians(lat1)) - math.sin(math.radians(lat)) * math.cos(
+        math.radians(lat1)) * math.cos(math.radians(lon1 - lon))  # fmt: skip
+    return lat, lon, speed, math.degrees(math.atan2(y, x)) % 360.0
+
+
+def satellites_only_drive(path: Path, n_epochs: int) -> None:
+    """A drive with the real GSA+GSV-only receiver's sentences (bu353s4.log), epoch by epoch."""
+    import real_patterns
+
+    real_patterns.drive(real_patterns.DATA / SATELLITES_ONLY_LOG, path, n_epochs, _track)
+
+
+def ubx_nav_drive(path: Path, n_epochs: int, bias: tuple[int, int, float] | None = None) -> None:
+    """A drive replaying the real u-blox recording's NAV-SAT (with prRes) and NAV-PVT, epoch by epoch."""
+    import real_patterns
+
+    real_patterns.ubx_drive(UBX_LOG, path, n_epochs, _track, bias=bias)
 
 
 def ublox_drive(path: Path, n_epochs: int) -> None:
@@ -95,16 +126,25 @@ def main() -> None:
     parser.add_argument("--hours", type=float, default=10.0)
     parser.add_argument("--objects", type=int, default=10_000)
     parser.add_argument("--memory-hours", type=float, nargs="*", default=[], help="drive lengths for the memory test, h")
-    parser.add_argument("--mix", choices=("compose", "ublox"), default="compose", help="the drive's sentence mix")
+    parser.add_argument("--mix", choices=("compose", "ublox", "satellites-only", "ubx"), default="compose",
+                        help="the drive's sentence mix: compose, ublox (ZED-F9P NMEA), satellites-only (bu353s4 GSA+GSV), "
+                        "ubx (the OSNMA recording's NAV-PVT + NAV-SAT)")  # fmt: skip
+    parser.add_argument("--environment", default="auto", help="tollcli's --environment (satellites-only: open declares open country)")
+    parser.add_argument("--bias-m", type=float, default=0.0, help="ubx mix: add this to one used satellite's prRes for 60 s mid-drive")
     args = parser.parse_args()
     n_epochs = int(args.hours * 3600)
     tollcli = [sys.executable, "-m", "tollcli"]
     tariff = Path(__file__).resolve().parents[1] / "geoobjects" / "example-tariff.toml"
     with tempfile.TemporaryDirectory() as tmp:
-        log = Path(tmp) / "drive.nmea"
-        speed = UBLOX_SPEED if args.mix == "ublox" else SPEED
+        log = Path(tmp) / ("drive.ubx" if args.mix == "ubx" else "drive.nmea")
+        speed = SPEED if args.mix == "compose" else UBLOX_SPEED
         if args.mix == "ublox":
             ublox_drive(log, n_epochs)
+        elif args.mix == "satellites-only":
+            satellites_only_drive(log, n_epochs)
+        elif args.mix == "ubx":
+            mid = n_epochs // 2
+            ubx_nav_drive(log, n_epochs, bias=(mid, mid + 59, args.bias_m) if args.bias_m else None)
         else:
             log.write_text("\n".join(straight_drive(n_epochs)) + "\n")
         road_file = Path(tmp) / "roads.geojson"
@@ -123,7 +163,8 @@ def main() -> None:
         subprocess.run([sys.executable, "-m", "compileall", "-q", str(Path(tollcli_package.__file__).parent)],
                        check=False, env=env, stdout=subprocess.DEVNULL)  # fmt: skip
         t_read, m_read = timed([*tollcli, "epochs", str(log), "-o", str(Path(tmp) / "e.parquet"), "-q"], env)
-        process = [*tollcli, "process", str(log), "--geo", str(geo_file), "--tariff", str(tariff), "-q"]
+        process = [*tollcli, "process", str(log), "--geo", str(geo_file), "--tariff", str(tariff), "-q",
+                   "--environment", args.environment]  # fmt: skip
         t_cold, m_cold = timed([*process, "-o", str(Path(tmp) / "invoice-cold.json")], env)
         t_proc, m_proc = min(timed([*process, "-o", str(Path(tmp) / "invoice.json")], env) for _ in range(3))
         invoice = json.loads((Path(tmp) / "invoice.json").read_text())
@@ -141,8 +182,20 @@ def main() -> None:
               f"findings: {sorted({f['kind'] for f in invoice['findings']['items']}) or 'none'}; "
               f"level {invoice['parameters']['integrity_sources_used']}, vouched by "
               f"{sorted({s for line in invoice['lines'] for s in line['vouched_by']})}")  # fmt: skip
-        t_py = plain_pynmea2(log)
-        print(f"pynmea2.parse alone on the same file: {t_py:6.2f} s; ratio process / pynmea2: {t_proc / t_py:.2f}")
+        if args.mix == "ubx" and args.bias_m:
+            import pandas as pd
+
+            table_path = Path(tmp) / "epochs.csv"
+            subprocess.run([*tollcli, "integrity", str(log), "-q", "-o", str(table_path)], check=True, env=env)
+            table = pd.read_csv(table_path, usecols=["raim_status", "integrity_source"])
+            mid = n_epochs // 2
+            window, rest = table.iloc[mid : mid + 60], pd.concat([table.iloc[:mid], table.iloc[mid + 60 :]])
+            print(f"+{args.bias_m:g} m on one used satellite's prRes for 60 epochs: "
+                  f"{dict(window.groupby(['raim_status', 'integrity_source']).size())} in those epochs; "
+                  f"elsewhere {dict(rest['raim_status'].value_counts())}")  # fmt: skip
+        if args.mix != "ubx":
+            t_py = plain_pynmea2(log)
+            print(f"pynmea2.parse alone on the same file: {t_py:6.2f} s; ratio process / pynmea2: {t_proc / t_py:.2f}")
         memory = []
         for hours in sorted(args.memory_hours):
             n = int(hours * 3600)

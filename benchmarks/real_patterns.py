@@ -11,6 +11,7 @@ only the clock moves on.
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -178,3 +179,69 @@ def _moved(kind: str, f: list[str], lat, lon, speed_mps, course_deg, when) -> li
     elif kind == "ZDA" and len(f) > 3:
         f[1], f[2], f[3] = f"{when.day:02d}", f"{when.month:02d}", f"{when.year:04d}"
     return f
+
+
+def ubx_epochs(log: Path) -> list[tuple[bytes, bytes]]:
+    """(NAV-PVT payload, NAV-SAT payload) of every epoch of a real u-blox log that has both, in order."""
+    from tollcli.readers.nmea import ReadStats
+    from tollcli.readers.ubx_nav import iter_frames
+
+    epochs, pvt, sat, itow = [], None, None, None
+    with open(log, "rb") as fh:
+        for cls, ident, payload, _ in iter_frames(fh, str(log), ReadStats(), False):
+            if (cls, ident) not in ((0x01, 0x07), (0x01, 0x35)):
+                continue
+            t = int.from_bytes(payload[:4], "little")
+            if t != itow:
+                if pvt is not None and sat is not None:
+                    epochs.append((pvt, sat))
+                pvt = sat = None
+                itow = t
+            if ident == 0x07:
+                pvt = payload
+            else:
+                sat = payload
+    if pvt is not None and sat is not None:
+        epochs.append((pvt, sat))
+    return epochs
+
+
+def ubx_drive(log: Path, out: Path, n_epochs: int, track, day0: tuple[int, int, int] = (6, 5, 2024),
+              bias: tuple[int, int, float] | None = None) -> int:  # fmt: skip
+    """A drive of ``n_epochs`` 1 Hz epochs replaying a real u-blox log's NAV-SAT (satellites, C/N0, used flags,
+    prRes) and NAV-PVT (fix type, flags, hAcc, DOP) epoch by epoch, with each NAV-PVT's time, position, velocity
+    and course set to ``track(k)`` (as :func:`drive` does for NMEA). ``bias`` (first epoch, last epoch, metres):
+    added to the prRes of the first satellite the fix used in those epochs (a fault the residual test must see).
+    Returns the number of frames written."""
+    import datetime as dt
+    import struct
+
+    from tollcli.readers.ubx_nav import frame
+
+    template = ubx_epochs(log)
+    start = dt.datetime(day0[2], day0[1], day0[0])
+    gps_epoch = dt.datetime(1980, 1, 6)
+    written = 0
+    with open(out, "wb") as fh:
+        for k in range(n_epochs):
+            pvt, sat = (bytearray(p) for p in template[k % len(template)])
+            lat, lon, speed, course = track(k)
+            when = start + dt.timedelta(seconds=k)
+            itow = int(round(((when - gps_epoch).total_seconds() + 18) % 604_800 * 1000))
+            struct.pack_into("<IHBBBBBB", pvt, 0, itow, when.year, when.month, when.day, when.hour, when.minute, when.second, 0x07)
+            struct.pack_into("<i", pvt, 16, 0)
+            struct.pack_into("<ii", pvt, 24, round(lon * 1e7), round(lat * 1e7))
+            c = math.radians(course)
+            struct.pack_into("<iii", pvt, 48, round(speed * math.cos(c) * 1000), round(speed * math.sin(c) * 1000), 0)
+            struct.pack_into("<ii", pvt, 60, round(speed * 1000), round(course * 1e5))
+            struct.pack_into("<I", sat, 0, itow)
+            if bias is not None and bias[0] <= k <= bias[1]:
+                for j in range(sat[5]):
+                    at = 8 + 12 * j
+                    if struct.unpack_from("<I", sat, at + 8)[0] & 0x08:  # the first used satellite
+                        res = struct.unpack_from("<h", sat, at + 6)[0]
+                        struct.pack_into("<h", sat, at + 6, res + round(bias[2] * 10))
+                        break
+            fh.write(frame(0x01, 0x35, bytes(sat)) + frame(0x01, 0x07, bytes(pvt)))
+            written += 2
+    return written

@@ -68,15 +68,22 @@ def test_gst_only_is_a_flagged_approximation_and_nothing_is_unmonitored():
     assert (out["test_stat_source"] == "gst").all() and (out["integrity_source"] == "gst").all()
     bare = _tables([line for line in compose.straight_drive(3) if "GST" not in line])
     out = run_raim(nmea_measurements(bare.epochs, bare.satellites), RaimParams("etc"))
-    assert (out["raim_status"] == "unmonitored").all() and out["hpl_m"].notna().all() and out["threshold"].notna().all()
+    # GSA + GSV only: the model level (geometry, no environment measured: the urban σ) bounds nothing within 50 m
+    assert (out["raim_status"] == "unavailable").all() and (out["integrity_source"] == "model").all()
+    assert (out["hpl_model_m"] > 50).all() and out["hpl_m"].notna().all() and out["threshold"].notna().all()
     classic = run_raim(nmea_measurements(bare.epochs, bare.satellites), RaimParams("classic"))
     assert classic["slope_max_m"].notna().all() and (classic["raim_status"] != "valid").all()
 
 
 def test_android_log_without_satellites_cannot_be_monitored():
+    """GGA + RMC only: no residual test; the model level's HDOP bound (HDOP · σ_worst, urban σ) is no charge."""
     tables = read_nmea(shared("android", "pixel6.nmea"))
     out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
-    assert len(out) == 48 and (out["raim_status"] == "unmonitored").all() and (out["test_stat_source"] == "none").all()
+    assert len(out) == 48 and (out["test_stat_source"] == "none").all()
+    assert (out["raim_status"] == "unavailable").all() and (out["integrity_source"] == "model").all()
+    no_hdop = tables.epochs.assign(hdop=np.nan)
+    out = run_raim(nmea_measurements(no_hdop, tables.satellites), RaimParams("etc"))
+    assert (out["raim_status"] == "unmonitored").all()
 
 
 def test_every_gpsd_log_gets_a_status_per_epoch():
@@ -129,8 +136,9 @@ def test_gsdc_bad_rows_do_not_raise(tmp_path):
     assert (out["raim_status"].iloc[2:] == "valid").all()
 
 
-def test_a_gga_only_log_is_unmonitored_and_a_gsa_without_satellites_insufficient(tmp_path):
-    """No satellites reported at all: nothing to monitor; satellites reported but too few used: insufficient."""
+def test_a_gga_only_log_is_model_level_and_a_gsa_without_satellites_insufficient(tmp_path):
+    """No satellites reported at all: the HDOP bound only (no charge under the urban σ); satellites reported but too
+    few used: insufficient."""
     from conftest import SAMPLES
 
     lines = (SAMPLES / "straight-drive.nmea").read_text().splitlines()
@@ -138,7 +146,7 @@ def test_a_gga_only_log_is_unmonitored_and_a_gsa_without_satellites_insufficient
     gga_only.write_text("\n".join(line for line in lines if line[3:6] in ("GGA", "RMC")) + "\n")
     tables = read_nmea(gga_only)
     out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
-    assert len(out) == 180 and (out["raim_status"] == "unmonitored").all()
+    assert len(out) == 180 and (out["raim_status"] == "unavailable").all() and (out["integrity_source"] == "model").all()
     no_used = tmp_path / "gsv.nmea"
     no_used.write_text("\n".join(line for line in lines if line[3:6] in ("GGA", "RMC", "GSV")) + "\n")
     tables = read_nmea(no_used)

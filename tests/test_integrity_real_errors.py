@@ -129,7 +129,8 @@ def test_the_environment_is_open_on_the_simulators_drives_and_does_not_depend_on
     for name in ("rural-clean", "urban-clean", "urban-fault"):
         epochs, meas = gsdc_epochs(read_gsdc_derived(SAMPLES / "sim" / name / "drive-derived.csv"))
         same, env, factor = with_environment(meas, epoch_seconds(epochs))
-        assert (env == "open").all() and same is meas and np.nanmax(factor) < 1.5, name
+        assert (env == "open").all() and np.array_equal(same.sigma_m, meas.sigma_m, equal_nan=True) and np.nanmax(factor) < 1.5, name
+        assert same.model_open.all() and np.array_equal(same.model_sigma_m, meas.sigma_m, equal_nan=True), name
     t, k = robust_statistics(meas)
     ts = epoch_seconds(epochs)
     whole = variance_factor(ts, t, k)

@@ -86,12 +86,16 @@ def test_auto_settles_on_the_strictest_level_of_the_first_epoch_with_a_source():
 
     plain = [compose.gga(99.0, 42.7, 2.9, n_used=6)]
     with_gbs = plain + [compose.gga(100.0, 42.7, 2.9, n_used=6), _gbs(100.0)]
-    assert settle_sources(RaimParams(), meas(plain)).sources is None  # nothing yet: decided later
+    assert settle_sources(RaimParams(), meas(plain)).sources == LEVELS["model"]  # GGA only: its HDOP, the model level
+    partial = plain + _epoch_with_grs(100.0, [0.1] * 6)  # a first epoch cut short, then the receiver's whole epochs
+    assert settle_sources(RaimParams(), meas(partial)).sources == LEVELS["residual"]
     assert settle_sources(RaimParams(), meas(with_gbs)).sources == LEVELS["receiver"]
     with_grs = _epoch_with_grs(100.0, [0.1] * 6) + [_gbs(100.0)]
     assert settle_sources(RaimParams(), meas(with_grs)).sources == LEVELS["residual"]
     gst_only = plain + [compose.gga(100.0, 42.7, 2.9, n_used=6), compose.gst(100.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0, 2.0)]
     assert settle_sources(RaimParams(), meas(gst_only)).sources == LEVELS["covariance"]
+    satellites_only = [line for line in compose.straight_drive(2) if line[3:6] in ("GGA", "RMC", "GSA", "GSV")]
+    assert settle_sources(RaimParams(), meas(satellites_only)).sources == LEVELS["model"]
 
 
 def test_a_gbs_names_a_fault_only_when_its_bias_is_significant():
@@ -122,7 +126,8 @@ def test_the_zed_f9t_insignificant_gbs_bias_is_no_longer_a_fault():
     import pandas as pd
     from conftest import run_cli, shared
 
-    proc = run_cli("integrity", str(shared("gpsd", "ublox-zed-f9t-ubx_nmea_l5.log")), "-q")
+    # its NMEA (GBS, GST); read as it is recognised, its UBX NAV-SAT prRes decide at the residual level instead
+    proc = run_cli("integrity", str(shared("gpsd", "ublox-zed-f9t-ubx_nmea_l5.log")), "-q", "--format", "nmea")
     table = pd.read_csv(io.BytesIO(proc.stdout))
     named = table["gbs_failed_svid"] == 8
     assert named.sum() == 1 and (table.loc[named, "gbs_status"] != "fault_detected").all()

@@ -42,7 +42,8 @@ def test_a_stationary_vehicle_says_so(tmp_path):
 
 
 def test_a_log_without_integrity_sources_says_so_per_passage(tmp_path):
-    """GGA and RMC only (as Android's GnssLogger writes them): every position unmonitored; each passage says why."""
+    """GGA and RMC only (as Android's GnssLogger writes them): only the model level's HDOP bound, above the HAL;
+    each passage says why in those words."""
     lines = [line for line in (SAMPLES / "sim" / "rural-clean" / "drive.nmea").read_text().splitlines()
              if line[3:6] in ("GGA", "RMC")]  # fmt: skip
     log = tmp_path / "gga-rmc.nmea"
@@ -50,4 +51,4 @@ def test_a_log_without_integrity_sources_says_so_per_passage(tmp_path):
     invoice, err = _process(log, tmp_path)
     assert invoice["total"] == "0.00" and len(invoice["not_charged"]) == 2
     for passage in invoice["not_charged"]:
-        assert passage["why"].startswith("no integrity source in the log") and "unmonitored:" in passage["why"]
+        assert passage["why"].startswith("the receiver reports no integrity output") and "unavailable:" in passage["why"]

@@ -106,7 +106,20 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
         notes = {k: SEPARATION_NOTES[k] for k in ("unavailable", "fault_detected") if k in seen}
         if notes:
             doc["status_notes"] = {**doc.get("status_notes", {}), **notes}
+    if parameters.get("integrity_sources_used") == "model" and "unavailable" in seen:  # the log's only evidence
+        doc["status_notes"] = {**doc.get("status_notes", {}), "unavailable": MODEL_UNAVAILABLE.format(
+            environment=parameters.get("environment", "auto"))}  # fmt: skip
     return doc
+
+
+#: why a log at the ``model`` level (satellites or HDOP, no integrity output) was not charged
+MODEL_UNAVAILABLE = (
+    "the receiver reports no integrity output (no GRS, GBS or GST, no pseudorange residuals): only the satellites' "
+    "geometry bounds its positions, and under the error model assumed here (environment {environment}: the urban σ "
+    "unless the residuals measured open sky or --environment open declares it) the protection level exceeds the "
+    "geo-object's HAL. Such a bound detects no fault; a receiver that writes GRS, GBS or GST (or u-blox NAV-SAT with "
+    "prRes) is charged on its own evidence"
+)
 
 
 #: what the solution-separation RAIM's denials mean (first sentence: the process summary's reason)
@@ -192,7 +205,9 @@ def _evidence(positions: pd.DataFrame) -> dict[tuple, list[dict]]:
     kept = positions[positions["independent"].to_numpy(bool)]
     times = iso_utc(kept["time_utc"]) if len(kept) else []
     out: dict[tuple, list[dict]] = {}
-    numbers = [[None if v != v else v for v in kept[c].to_numpy(float).tolist()] if c in kept else [None] * len(kept)
+    # ten significant digits: the figures an auditor reads, and the same whichever chunks the log was read in (a
+    # batch's padding changes the last bits of a float)
+    numbers = [[None if v != v else float(f"{v:.10g}") for v in kept[c].to_numpy(float).tolist()] if c in kept else [None] * len(kept)
                for c in ("test_stat", "threshold", "p_fa", "hpl_m", "separation_ratio")]  # fmt: skip
     vouching = kept["integrity_source"] if "integrity_source" in kept else kept["test_stat_source"]
     for gid, passage, epoch, when, status, stat, threshold, p_fa, hpl, ratio, source, vouched in zip(

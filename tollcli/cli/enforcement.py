@@ -30,6 +30,7 @@ from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for, write_text_atomic
 from tollcli.job.log_integrity import iter_integrity
 from tollcli.readers.nmea import ReadStats
+from tollcli.readers.navigation import NAVIGATION_KINDS
 from tollcli.readers.nmea.reader import check_usable
 
 VehicleClass = Annotated[str, typer.Option("--vehicle-class", help=f"Vehicle class, sets the top speed: {', '.join(CLASS_MAX_SPEED_MPS)}.")]
@@ -44,7 +45,7 @@ def _trip(log: str, hal: float, strict: bool, date=None) -> tuple[pd.DataFrame, 
         tables.append(chunk.table)
         if chunk.satellites is not None:
             sats.append(chunk.satellites)
-    if kind == "nmea":
+    if kind in NAVIGATION_KINDS:
         check_usable(stats)
     table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
     return table, (pd.concat(sats, ignore_index=True) if sats else None)

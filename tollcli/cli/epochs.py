@@ -10,7 +10,9 @@ import typer
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
 from tollcli.errors import UsageError
+from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for
+from tollcli.readers.navigation import iter_navigation_tables
 from tollcli.readers.nmea import ReadStats, iter_nmea_tables
 from tollcli.readers.nmea.reader import check_partial, check_usable
 
@@ -33,7 +35,7 @@ def epochs(
                      "slower, the same tables; for cross-checking a log)."),  # fmt: skip
     ] = "bulk",
 ) -> None:
-    """Decode an NMEA 0183 log into one row per epoch.
+    """Decode a receiver log (NMEA 0183, u-blox NAV messages, gpsd JSON) into one row per epoch.
 
     Columns carry their units (lat_deg, alt_m, speed_mps, ...). Lines that
     cannot be used are skipped and counted on stderr; --strict makes the first
@@ -50,7 +52,13 @@ def epochs(
     sat_writer = TableWriter(satellites, format_for(satellites)) if satellites else None
     with epoch_writer, (sat_writer or _Null()):
         with progress(f"reading {log}", quiet) as advance:
-            for chunk in iter_nmea_tables(log, strict=strict, date=date.date() if date else None, stats=stats, engine=reader):
+            day = date.date() if date else None
+            kind = sniff_format(log)
+            if kind not in ("ubx-nav", "gpsd-json"):  # NMEA (and what is nothing else: its errors say why)
+                chunks = iter_nmea_tables(log, strict=strict, date=day, stats=stats, engine=reader)
+            else:
+                chunks = iter_navigation_tables(log, kind, strict=strict, stats=stats)
+            for chunk in chunks:
                 epoch_writer.write(chunk.epochs)
                 if sat_writer is not None:
                     sat_writer.write(chunk.satellites)

@@ -21,6 +21,7 @@ from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for
 from tollcli.job.log_integrity import iter_integrity
 from tollcli.readers.nmea import ReadStats
+from tollcli.readers.navigation import NAVIGATION_KINDS
 from tollcli.readers.nmea.reader import check_partial, check_usable
 
 
@@ -100,13 +101,13 @@ def integrity(
         if checks or roads:
             tables = [c.table for c in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav,
                                                       date=day, environment=environment)]
-            if kind == "nmea":
+            if kind in NAVIGATION_KINDS:
                 check_usable(stats)  # a log without one epoch: the data error, before any check runs
             table = with_checks(pd.concat(tables, ignore_index=True), roads)
             _tally(table, counts)
             writer.write(table)
-        elif kind == "nmea":
-            _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment)
+        elif kind in NAVIGATION_KINDS:
+            _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
         else:
             table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal, environment, strict)
             counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
@@ -135,7 +136,7 @@ def integrity(
             text += f"; GST RMS ignored on {sum(ignored.values())} epochs (no range-residual RMS: " + ", ".join(
                 f"{n} {k}" for k, n in ignored.items()) + ")"
         warn(text, quiet)
-    if kind == "nmea":
+    if kind in NAVIGATION_KINDS:
         check_partial(stats, max_bad)
 
 
@@ -169,9 +170,10 @@ def with_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
     return pd.concat([table.reset_index(drop=True), extra, k[["hit_m"]]], axis=1)
 
 
-def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto") -> None:
+def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto",
+          kind="nmea") -> None:
     with progress(f"checking {log}", quiet) as advance:
-        for chunk in iter_integrity(log, "nmea", params, sigma_model, sigma, nominal, strict, stats, date=day,
+        for chunk in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, date=day,
                                     environment=environment):
             writer.write(chunk.table)
             _tally(chunk.table, counts)

@@ -36,7 +36,7 @@ def require_json(output: str) -> str:
     if output != "-" and not output.lower().endswith(".json"):
         raise UsageError(f"{output}: this command writes JSON: name the file .json (or - for stdout)")
     return output
-InputFormat = Annotated[str, typer.Option("--format", help="Input: auto, nmea, gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX), librsf (libRSF text: smartLoc pseudorange3/odom3).")]
+InputFormat = Annotated[str, typer.Option("--format", help="Input: auto, nmea, ubx-nav (u-blox NAV-PVT/SOL/POSLLH, NAV-SAT/SVINFO with prRes, NAV-DOP, NAV-PL, HNR-PVT), gpsd-json (gpspipe -w, gpsdecode: TPV, SKY, GST), gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX), librsf (libRSF text: smartLoc pseudorange3/odom3).")]
 Nav = Annotated[Optional[str], typer.Option("--nav", help="Navigation file, RINEX 2 or 3 (GPS, Galileo): the orbits for rinex and gnsslogger input; replaces the file's own satellites for device-gnss and ubx.")]
 
 

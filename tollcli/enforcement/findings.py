@@ -333,7 +333,8 @@ def _cn0_checks(epochs: pd.DataFrame, summary: pd.DataFrame, t: np.ndarray, fx, 
             if b - a + 1 >= 2:
                 lat, lon = _where(epochs, a)
                 out.append(_finding(kind, (a, b), t[a], t[b], lat, lon, baseline_cn0_dbhz=base_med[a], cn0_dbhz=np.nanmin(med[a : b + 1]) if np.isfinite(med[a : b + 1]).any() else None,
-                                    baseline_tracked=base_n[a], tracked=int(np.min(n[a : b + 1])), epochs=b - a + 1))  # fmt: skip
+                                    baseline_tracked=base_n[a], tracked=int(np.nanmin(n[a : b + 1])) if np.isfinite(n[a : b + 1]).any() else None,
+                                    epochs=b - a + 1))  # fmt: skip
     with np.errstate(invalid="ignore"):
         uniform = (n >= 5) & (std < s.uniform_std_db) & (med >= s.uniform_min_dbhz)
     for a, b in runs(uniform):

@@ -33,6 +33,10 @@ class Measurements:
     satellites_reported: np.ndarray | None = None  # (E,) the receiver reported its satellites (NMEA GSA/GSV); None: n/a
     receiver: ReceiverOutputs | None = None  # the receiver's own integrity outputs (NMEA GBS, GST)
     cn0_dbhz: np.ndarray | None = None  # (E, N) carrier-to-noise density of each measurement (NaN: not reported)
+    #: (E, N) the σ the ``model`` bound uses: the σ of the environment the residuals measured, the urban σ where
+    #: they measured none (:func:`tollcli.integrity.environment.with_environment`); None: not set (urban σ)
+    model_sigma_m: np.ndarray | None = None
+    model_open: np.ndarray | None = None  # (E,) bool: the model bound may take open sky (measured, or declared)
 
     def take(self, rows: np.ndarray) -> Measurements:
         """The given epochs (rows may repeat: one per epoch and geo-object)."""

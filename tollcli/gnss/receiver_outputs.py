@@ -55,9 +55,10 @@ class ReceiverOutputs:
     gst_sigma_major_m: np.ndarray
     gst_rms_m: np.ndarray  # the RMS where it counts as a residual statistic, else NaN
     gst_rms_note: np.ndarray  # codes into GST_RMS_NOTES
+    hdop: np.ndarray | None = None  # the receiver's HDOP (GSA, GGA, NAV-DOP; NaN where not given)
 
     def take(self, rows: np.ndarray) -> ReceiverOutputs:
-        return ReceiverOutputs(**{f.name: getattr(self, f.name)[rows] for f in fields(self)})
+        return ReceiverOutputs(**{f.name: None if getattr(self, f.name) is None else getattr(self, f.name)[rows] for f in fields(self)})
 
 
 class RmsCarry:
@@ -114,4 +115,4 @@ def receiver_outputs(epochs: pd.DataFrame, carry: RmsCarry | None = None) -> Rec
     note = np.where(given & earlier & ~bad, 2, note)
     used = given & (note == 0)
     return ReceiverOutputs(gbs, failed, ratio, _column(epochs, "gbs_p_md"), redundant, gst, np.where(used, rms, np.nan),
-                           note.astype(np.int8))  # fmt: skip
+                           note.astype(np.int8), _column(epochs, "hdop"))  # fmt: skip

@@ -17,7 +17,12 @@ purpose: widening the nominal σ by the measured factor widens the RAIM's thresh
 let Potsdamer Platz positions more than 50 m off through when it was tried; the urban σ lets none through.
 
 Epochs without residuals have no f: they keep their σ (``environment`` ''); ``--environment open`` keeps the
-error model throughout, ``--environment urban`` makes every epoch urban.
+error model throughout, ``--environment urban`` makes every epoch urban. The ``model`` bound (a covariance
+from the satellites' geometry alone, :mod:`tollcli.integrity.model_bound`) gets the σ of the environment the
+residuals measured, and the urban σ where nothing measured one: a receiver that reports only its satellites
+shows no sign of a street canyon, so its bound cannot assume open country — ``--environment open`` declares
+it (a motorway network in open country) and the nominal σ then holds (shown on the GSDC drives, not on
+Potsdamer Platz: docs/integrity.md).
 
 Measured (``benchmarks/integrity_truth.py``, docs/integrity.md): f is 1.53–9.95 on the Potsdamer Platz drive
 (median 3.96; the epochs the nominal σ would let through have 2.2 or more), 0.03–0.72 on the simulator's
@@ -131,10 +136,14 @@ def with_environment(meas: Measurements, time_s: np.ndarray, setting: str = "aut
     t, k = robust_statistics(meas)
     factor = variance_factor(np.asarray(time_s, float), t, k, carry=carry)
     if setting == "open":
-        return meas, classify(factor), factor
+        n = meas.mask.shape[0]
+        return replace(meas, model_sigma_m=meas.sigma_m, model_open=np.ones(n, bool)), classify(factor), factor
     env = classify(factor, setting)
     urban = env == "urban"
-    if not urban.any():
-        return meas, env, factor
-    sigma = np.where(urban[:, None], np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)), meas.sigma_m)
-    return replace(meas, sigma_m=np.where(meas.mask, sigma, meas.sigma_m)), env, factor
+    open_sky = env == "open"
+    if open_sky.all():  # the error model holds throughout: nothing to widen (the arrays stay the very same)
+        return replace(meas, model_sigma_m=meas.sigma_m, model_open=open_sky), env, factor
+    urban_sigma = np.where(meas.mask, np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)), meas.sigma_m)
+    sigma = np.where(urban[:, None], urban_sigma, meas.sigma_m) if urban.any() else meas.sigma_m
+    model = np.where(open_sky[:, None], meas.sigma_m, urban_sigma)  # unknown: the urban σ (no residual says open)
+    return replace(meas, sigma_m=sigma, model_sigma_m=model, model_open=open_sky), env, factor

@@ -12,7 +12,12 @@ from __future__ import annotations
 import numpy as np
 
 from tollcli.gnss.wls import Geometry
+from tollcli.gnss.sigma_models import urban_sigma_m
 from tollcli.integrity.sources import k_h
+
+#: σ (m) of the worst satellite a receiver can use under the nominal model (5° elevation, low latitude, single
+#: frequency): with no satellites reported, HDOP · this bounds σ_major (``tests/test_model_level.py`` derives it)
+NOMINAL_WORST_SIGMA_M = 27.5
 
 
 def sigma_major_m(geometry: Geometry, sigma_m: np.ndarray) -> np.ndarray:
@@ -28,3 +33,13 @@ def sigma_major_m(geometry: Geometry, sigma_m: np.ndarray) -> np.ndarray:
 def model_hpl_m(geometry: Geometry, sigma_m: np.ndarray, p_md: float) -> np.ndarray:
     """K_H(P_MD) · σ_major per epoch (m)."""
     return k_h(p_md) * sigma_major_m(geometry, sigma_m)
+
+
+def hdop_hpl_m(hdop: np.ndarray, p_md: float, open_sky: np.ndarray) -> np.ndarray:
+    """K_H(P_MD) · HDOP · σ_worst per epoch (m): the model bound of a fix whose satellites are not reported.
+
+    σ_major ≤ HDOP · max σᵢ (the covariance under equal σ's, scaled by the largest); σ_worst is
+    :data:`NOMINAL_WORST_SIGMA_M` where ``open_sky``, its urban σ elsewhere. NaN where there is no HDOP."""
+    worst = np.where(open_sky, NOMINAL_WORST_SIGMA_M, float(urban_sigma_m(NOMINAL_WORST_SIGMA_M)))
+    h = np.asarray(hdop, dtype=float)
+    return np.where(np.isfinite(h) & (h > 0) & (h < 99), k_h(p_md) * h * worst, np.nan)

@@ -8,7 +8,8 @@ Columns added to the epoch table (names as in the papers, units in the names):
 ``integrity_source`` (the source that decided it), ``residual_status``/``gbs_status``/``gst_status``
 (each source's own verdict, '' where it gave none), ``wls_shift_e_m``/``wls_shift_n_m`` (where the RAIM's own
 weighted solution lies from the reported position: pseudoranges solved with other weights, e.g. the urban σ), ``hpl_gbs_m``/``hpl_gst_m`` (the receiver's
-bounds; the satellite a GBS names as failed is the epoch table's ``gbs_failed_svid``), ``gst_rms_note`` (why a GST RMS was ignored), ``excluded_sv``, ``fde_shift_e_m``/``fde_shift_n_m`` (how far the
+bounds; the satellite a GBS names as failed is the epoch table's ``gbs_failed_svid``), ``hpl_model_m`` (the
+``model`` bound: geometry and error model, :mod:`tollcli.integrity.model_bound`), ``gst_rms_note`` (why a GST RMS was ignored), ``excluded_sv``, ``fde_shift_e_m``/``fde_shift_n_m`` (how far the
 position moves when the excluded measurement is dropped), ``hpl_sbas_m`` (paper 004's
 K_H·d_major from the per-satellite σ's: an accuracy bound, not a RAIM output).
 """
@@ -39,12 +40,21 @@ from tollcli.integrity.raim import (
     detect,
     status_names,
 )
-from tollcli.integrity.sources import LEVELS, NONE, RESIDUAL_SOURCES, combine, level_for, receiver_verdicts, strictest
+from tollcli.integrity.sources import (
+    LEVELS,
+    NONE,
+    RESIDUAL_SOURCES,
+    bound_verdict,
+    combine,
+    level_for,
+    receiver_verdicts,
+    strictest,
+)
 
 RAIM_COLUMNS = (
     "raim_mode", "n_used", "dof", "slope_max_m", "test_stat", "test_stat_source", "threshold", "lambda_det",
     "hpl_m", "hal_m", "p_fa", "p_md", "raim_status", "integrity_source", "residual_status", "gbs_status", "gst_status",
-    "hpl_gbs_m", "hpl_gst_m", "gst_rms_note", "excluded_sv", "fde_shift_e_m", "fde_shift_n_m", "wls_shift_e_m", "wls_shift_n_m",
+    "hpl_gbs_m", "hpl_gst_m", "hpl_model_m", "gst_rms_note", "excluded_sv", "fde_shift_e_m", "fde_shift_n_m", "wls_shift_e_m", "wls_shift_n_m",
     "hpl_sbas_m", "separation_ratio",
 )  # fmt: skip
 _STATUS_OR_NONE = np.array(STATUSES + ("",), dtype=object)  # index -1: no verdict
@@ -86,9 +96,12 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     status[probable_false_alarms(status, detection.test_stat, detection.dof, detection.p_fa, params.p_fa)] = PROBABLE_FALSE_ALARM
     if meas.satellites_reported is not None:  # a receiver that reports no satellites at all (GGA/RMC only): nothing
         status[~meas.satellites_reported & (geometry.n_meas == 0)] = STATUSES.index("unmonitored")  # to monitor, not "too few"
-    verdicts, extra = _source_verdicts(meas, status, source, detection.hal_m, params)
+    verdicts, extra = _source_verdicts(meas, status, source, detection.hal_m, params, geometry)
     undecided = np.where(np.isin(status, (INSUFFICIENT, UNMONITORED)), status, UNMONITORED)  # no allowed source decided
-    final, deciding = combine(verdicts, _allowed(meas, params), undecided)
+    allowed = _allowed(meas, params)
+    if "model" not in allowed:  # the weakest evidence denies nothing a stronger level vouches for
+        verdicts["model"] = np.full(n_epochs, NONE)
+    final, deciding = combine(verdicts, allowed, undecided)
     return pd.DataFrame(
         {
             "raim_mode": pd.array([params.mode] * n_epochs, dtype="string"),
@@ -124,24 +137,52 @@ def _names(verdict: np.ndarray):
     return pd.array(_STATUS_OR_NONE[verdict], dtype="string")
 
 
-def _source_verdicts(meas: Measurements, status: np.ndarray, source: np.ndarray, hal_m: np.ndarray, params: RaimParams):
-    """Each source's verdict codes (-1: none), in SOURCES order, and the receiver's columns."""
+def _source_verdicts(meas: Measurements, status: np.ndarray, source: np.ndarray, hal_m: np.ndarray, params: RaimParams,
+                     geometry: Geometry):  # fmt: skip
+    """Each source's verdict codes (-1: none), in SOURCES order, and the receiver's and the model's columns."""
     n = status.size
     decided = np.isin(status, (VALID, FAULT, EXCLUDED, UNAVAILABLE, PROBABLE_FALSE_ALARM))
     residual = np.where(decided & np.isin(source, RESIDUAL_SOURCES), status, NONE)
     name = "pseudorange" if np.any(source == "pseudorange") else "grs"
     verdicts = {name: residual}
+    hal = np.broadcast_to(hal_m, (n,))
+    hpl_model = model_hpl(meas, geometry, params.p_md)
     r = meas.receiver
     if r is None:
         verdicts["gbs"] = verdicts["gst"] = np.full(n, NONE)
+        verdicts["model"] = bound_verdict(hpl_model, hal)
         nan = np.full(n, np.nan)
-        return verdicts, {"hpl_gbs_m": nan, "hpl_gst_m": nan, "gst_rms_note": pd.array(np.full(n, "", object), dtype="string")}  # fmt: skip
-    own = receiver_verdicts(r, np.broadcast_to(hal_m, (n,)), params.p_md, params.p_fa)
+        return verdicts, {"hpl_gbs_m": nan, "hpl_gst_m": nan, "hpl_model_m": hpl_model,
+                          "gst_rms_note": pd.array(np.full(n, "", object), dtype="string")}  # fmt: skip
+    own = receiver_verdicts(r, hal, params.p_md, params.p_fa)
     gst_rms = np.where(decided & (source == "gst"), status, NONE)
     verdicts["gbs"] = own["gbs"]
     verdicts["gst"] = strictest(gst_rms, own["gst_bound"])
-    return verdicts, {"hpl_gbs_m": own["hpl_gbs_m"], "hpl_gst_m": own["hpl_gst_m"],
+    verdicts["model"] = bound_verdict(hpl_model, hal)
+    return verdicts, {"hpl_gbs_m": own["hpl_gbs_m"], "hpl_gst_m": own["hpl_gst_m"], "hpl_model_m": hpl_model,
                       "gst_rms_note": pd.array(np.asarray(GST_RMS_NOTES, dtype=object)[r.gst_rms_note], dtype="string")}  # fmt: skip
+
+
+def model_hpl(meas: Measurements, geometry: Geometry, p_md: float) -> np.ndarray:
+    """The ``model`` level's HPL per epoch (m): K_H·σ_major of the used satellites' geometry under the model σ
+    (:attr:`Measurements.model_sigma_m`; the urban σ where it is not set), else — where the receiver reports no
+    satellites at all — K_H·HDOP·σ_worst, else NaN (satellites reported, too few used: ``insufficient``)."""
+    from tollcli.gnss.sigma_models import urban_sigma_m
+    from tollcli.integrity.model_bound import hdop_hpl_m, model_hpl_m
+
+    if meas.model_sigma_m is not None:
+        sigma = meas.model_sigma_m
+        open_sky = meas.model_open if meas.model_open is not None else np.zeros(meas.mask.shape[0], bool)
+    else:
+        sigma = np.where(meas.mask, np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)), meas.sigma_m)
+        open_sky = np.zeros(meas.mask.shape[0], bool)
+    same = sigma is meas.sigma_m or np.array_equal(np.where(meas.mask, sigma, 0.0), np.where(meas.mask, meas.sigma_m, 0.0))
+    own = geometry if same else wls_geometry(meas.H, sigma, meas.mask)
+    hpl = model_hpl_m(own, sigma, p_md)
+    if meas.receiver is not None and meas.receiver.hdop is not None:
+        unreported = ~meas.satellites_reported if meas.satellites_reported is not None else np.ones(hpl.shape, bool)
+        hpl = np.where(np.isfinite(hpl) | ~unreported, hpl, hdop_hpl_m(meas.receiver.hdop, p_md, open_sky))
+    return hpl
 
 
 def _allowed(meas: Measurements, params: RaimParams) -> tuple[str, ...]:
@@ -156,7 +197,9 @@ def settle_sources(params: RaimParams, meas: Measurements) -> RaimParams:
     ``meas`` has a source yet; else the strictest level ``meas`` supports (call it chunk after chunk)."""
     if params.sources is not None:
         return params
-    level = level_of(meas)
+    level = level_of(meas, with_hdop=False)  # a GGA's HDOP at a log's first epoch, before its satellites: not yet
+    if level is None and meas.satellites_reported is not None and not meas.satellites_reported.any():
+        level = level_of(meas)  # no satellites in the whole chunk: a receiver that reports its HDOP only
     return params if level is None else replace(params, sources=LEVELS[level])
 
 
@@ -165,18 +208,28 @@ def level_name(sources: tuple[str, ...] | None) -> str | None:
     return next((name for name, s in LEVELS.items() if s == sources), None) if sources is not None else None
 
 
-def level_of(meas: Measurements) -> str | None:
-    """The strictest level the epochs of ``meas`` support, from the first epoch that has any source (None: none has)."""
+def level_of(meas: Measurements, with_hdop: bool = True) -> str | None:
+    """The strictest level the epochs of ``meas`` support, from the first epoch that has any source (None: none has).
+
+    ``with_hdop``: an HDOP alone (no satellites) counts as the ``model`` level's source."""
     n = meas.mask.shape[0]
-    residual = np.isin(meas.test_stat_source, RESIDUAL_SOURCES) if meas.test_stat_source is not None else np.zeros(n, bool)
+    if meas.test_stat_source is not None:
+        residual = np.isin(meas.test_stat_source, RESIDUAL_SOURCES)
+    else:  # residuals or pseudoranges given directly: a residual test wherever there are measurements
+        residual = np.full(n, meas.residual_m is not None or meas.dy_m is not None) & meas.mask.any(axis=1)
     r = meas.receiver
     gbs = (np.isfinite(r.gbs_sigma_major_m) | (r.gbs_failed_svid >= 0)) if r is not None else np.zeros(n, bool)
     gst = (np.isfinite(r.gst_sigma_major_m) | np.isfinite(r.gst_rms_m)) if r is not None else np.zeros(n, bool)
-    anything = np.flatnonzero(residual | gbs | gst)
+    model = meas.mask.sum(axis=1) >= 4  # a geometry to bound (or, below, an HDOP)
+    if with_hdop and r is not None and r.hdop is not None and meas.satellites_reported is not None:
+        model |= ~meas.satellites_reported & np.isfinite(r.hdop) & (r.hdop > 0) & (r.hdop < 99)
+    elif with_hdop and r is not None and r.hdop is not None:
+        model |= np.isfinite(r.hdop) & (r.hdop > 0) & (r.hdop < 99)
+    anything = np.flatnonzero(residual | gbs | gst | model)
     if not anything.size:
         return None
     i = int(anything[0])
-    return level_for(bool(residual[i]), bool(gbs[i]), bool(gst[i]))
+    return level_for(bool(residual[i]), bool(gbs[i]), bool(gst[i]), bool(model[i]))
 
 
 def probable_false_alarms(status: np.ndarray, test_stat: np.ndarray, dof: np.ndarray, epoch_p_fa: np.ndarray,

@@ -155,7 +155,6 @@ def _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry: Geometry, p
     sub = wls_geometry(np.repeat(H, n_k, axis=0), np.repeat(sigma_m, n_k, axis=0), sub_mask)
     A_k = sub.A.reshape(n_epochs, n_k, *sub.A.shape[1:])
     solvable = (~sub.singular & (sub.dof >= 0)).reshape(n_epochs, n_k)
-    enough = ~(present & ~solvable).any(axis=1) & (geometry.dof >= 1) & ~geometry.singular
     dA = A_k - geometry.A[:, None]
     sigma_0 = _major_sigma(geometry.A, var)  # (E,)
     sigma_k = _major_sigma(A_k, var[:, None, :])  # (E, K)
@@ -165,6 +164,11 @@ def _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry: Geometry, p
     # a mode whose prior is below what the budget leaves each mode needs no monitoring: its prior joins P_NM
     share = p_md / (2.0 * np.maximum(present.sum(axis=1), 1))[:, None]
     monitored = present & (prior > share)
+    # every monitored subset must have a position (an unmonitored one, e.g. a whole constellation left out at the
+    # default --p-const, need not: a constellation of three satellites cannot fix a position alone)
+    enough = ~(monitored & ~solvable).any(axis=1) & (geometry.dof >= 1) & ~geometry.singular
+    sigma_k = np.where(monitored, sigma_k, 1.0)
+    sigma_ss = np.where(monitored, sigma_ss, 0.0)
     n_modes = monitored.sum(axis=1)
     threshold = radius_factor(p_fa / np.maximum(n_modes, 1))[:, None] * sigma_ss
     p_singles = (prior * (kind != 2)).sum(axis=1)

@@ -13,6 +13,11 @@ Sources (``integrity_source``):
 ``gst``          the receiver's error ellipse (NMEA GST): HPL = K_H(P_MD)·σ_major, ``valid``
                  iff HPL ≤ HAL; and the residual test on its RMS field where that is a
                  plausible range RMS (:mod:`tollcli.gnss.receiver_outputs`); the stricter
+``model``        the used satellites' geometry and the error model (no fault detection, no receiver estimate):
+                 HPL = K_H(P_MD)·σ_major of the WLS covariance under the σ of the environment the residuals
+                 measured (urban σ where none did; ``--environment open`` declares open country), or
+                 K_H·HDOP·σ_worst where the receiver reports no satellites (:mod:`tollcli.integrity.model_bound`);
+                 ``valid`` iff HPL ≤ HAL
 ``none``         no source gave a verdict
 ===============  =========================================================================
 
@@ -27,6 +32,8 @@ Levels (``--integrity-sources``), the sources that may **validate** a position; 
 ``residual``    residual tests only (``grs``, ``pseudorange``)
 ``receiver``    and the receiver's own RAIM (``gbs``)
 ``covariance``  and covariance-only bounds (``gst``)
+``model``       and the geometry-and-error-model bound (``model``): what a receiver that reports only
+                its satellites (GSA + GSV), or only its HDOP, supports
 ``auto``        the strictest level the log supports, decided at its first epoch that
                 has any source (the default)
 ==============  ===================================================================
@@ -45,10 +52,10 @@ import numpy as np
 from tollcli.gnss.receiver_outputs import ReceiverOutputs
 from tollcli.integrity.raim import EXCLUDED, FAULT, PROBABLE_FALSE_ALARM, UNAVAILABLE, VALID
 
-SOURCES = ("grs", "pseudorange", "gbs", "gst", "none")
+SOURCES = ("grs", "pseudorange", "gbs", "gst", "model", "none")
 RESIDUAL_SOURCES = ("grs", "pseudorange")
 LEVELS = {"residual": RESIDUAL_SOURCES, "receiver": (*RESIDUAL_SOURCES, "gbs"),
-          "covariance": (*RESIDUAL_SOURCES, "gbs", "gst")}  # fmt: skip
+          "covariance": (*RESIDUAL_SOURCES, "gbs", "gst"), "model": (*RESIDUAL_SOURCES, "gbs", "gst", "model")}  # fmt: skip
 LEVEL_CHOICES = ("auto", *LEVELS)
 #: what a position vouched for by each source is worth (invoices and the audit quote these)
 SOURCE_MEANINGS = {
@@ -59,6 +66,11 @@ SOURCE_MEANINGS = {
     "gst": "the receiver's error ellipse (GST) bounds the position within the HAL at P_MD (HPL = √(−2 ln P_MD)·σ_major); "
     "a covariance-only bound: it holds for fault-free errors and detects no fault (the audit's P(false charge) bound "
     "counts such positions as possibly misleading)",
+    "model": "the geometry of the satellites the receiver used and an error model bound the position within the HAL at "
+    "P_MD (HPL = √(−2 ln P_MD)·σ_major; the urban σ unless the residuals measured open sky or --environment open "
+    "declared it); the lowest level: no fault detection and no estimate from the receiver — a covariance-only bound "
+    "that holds for fault-free errors of the assumed environment (the audit's P(false charge) bound counts such "
+    "positions as possibly misleading)",
 }
 #: sources that detect faults (a position they vouch for is misleading with probability ≤ P_MD even under a fault)
 FAULT_DETECTING = ("grs", "pseudorange", "gbs")
@@ -141,10 +153,12 @@ def combine(verdicts: dict[str, np.ndarray], allowed: tuple[str, ...], fallback:
     return status, source
 
 
-def level_for(has_residual: bool, has_gbs: bool, has_gst: bool) -> str:
+def level_for(has_residual: bool, has_gbs: bool, has_gst: bool, has_model: bool = False) -> str:
     """The strictest level a log supports, from what its first epoch with any source has."""
     if has_residual:
         return "residual"
     if has_gbs:
         return "receiver"
-    return "covariance" if has_gst else "residual"
+    if has_gst:
+        return "covariance"
+    return "model" if has_model else "residual"

@@ -126,20 +126,27 @@ def read_json(path: str, what: str):
 
 
 #: the input formats (``--format``): ``auto`` is :func:`sniff_format`
-INPUT_KINDS = ("auto", "nmea", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
+INPUT_KINDS = ("auto", "nmea", "ubx-nav", "gpsd-json", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
 #: a u-blox RXM-RAWX frame's first bytes (sync chars, class 0x02, id 0x15)
 UBX_RAWX = b"\xb5\x62\x02\x15"
+#: the first bytes of u-blox frames that carry the receiver's position (NAV-PVT, NAV-SOL, NAV-POSLLH, HNR-PVT)
+UBX_NAV_POSITIONS = (b"\xb5\x62\x01\x07", b"\xb5\x62\x01\x06", b"\xb5\x62\x01\x02", b"\xb5\x62\x28\x02")
 SNIFF_BYTES = 1 << 16
 
 
 def sniff_format(log: str) -> str:
-    """The log's kind from its first bytes (stdin: ``nmea``): ``gsdc-derived`` or ``device-gnss`` (their CSV
-    headers), ``rinex`` (the RINEX header), ``gnsslogger`` (a ``# Raw,`` header line), ``ubx`` (a u-blox
-    ``RXM-RAWX`` frame in the first 64 KiB: raw measurements; UBX without them stays with the NMEA reader,
-    which reads the NMEA sentences beside it), ``librsf`` (a ``pseudorange3``/``odom3``/``point3`` line first),
-    else ``nmea``."""
+    """The log's kind from its first bytes (stdin: the bytes a pipe has ready; gzip on stdin: ``nmea``):
+    ``gsdc-derived`` or ``device-gnss`` (their CSV headers), ``rinex`` (the RINEX header), ``gnsslogger`` (a
+    ``# Raw,`` header line), ``ubx`` (a u-blox ``RXM-RAWX`` frame in the first 64 KiB: raw measurements),
+    ``ubx-nav`` (a u-blox NAV-PVT, NAV-SOL, NAV-POSLLH or HNR-PVT frame, wherever it starts: after text,
+    comments or NMEA), ``librsf`` (a ``pseudorange3``/``odom3``/``point3`` line first), ``gpsd-json`` (a
+    gpsd report as the first line that is no comment, or a TPV line), else ``nmea``."""
     if log == "-":
-        return "nmea"
+        try:  # a pipe's first bytes, left for the reader (``gpspipe -w | tollcli integrity -``)
+            head = sys.stdin.buffer.peek(SNIFF_BYTES)[:SNIFF_BYTES]  # type: ignore[attr-defined]
+        except (AttributeError, OSError, ValueError):
+            return "nmea"
+        return "nmea" if head[:2] == GZIP_MAGIC else format_of_head(head)
     return format_of_head(read_head(log))
 
 
@@ -167,9 +174,22 @@ def format_of_head(head: bytes) -> str:
         return "gnsslogger"
     if UBX_RAWX in head:
         return "ubx"
+    if any(m in head for m in UBX_NAV_POSITIONS):
+        return "ubx-nav"
     if head.lstrip().startswith((b"pseudorange3 ", b"odom3 ", b"point3 ")):
         return "librsf"
+    if _first_line(head).startswith(b'{"class"') or b'\n{"class":"TPV"' in head:
+        return "gpsd-json"
     return "nmea"
+
+
+def _first_line(head: bytes) -> bytes:
+    """The first line of a log that is neither blank nor a ``#`` comment."""
+    for line in head.split(b"\n", 64)[:64]:
+        line = line.strip()
+        if line and not line.startswith(b"#"):
+            return line
+    return b""
 
 
 _NMEA_SENTENCE = re.compile(rb"[$!][A-Z]{2}[A-Z0-9]{2,4},")

@@ -36,7 +36,7 @@ EPOCH_COLUMNS: dict[str, str] = {
     "test_stat_source": "string", "threshold": "float64", "lambda_det": "float64", "hpl_m": "float64",
     "hal_m": "float64", "p_fa": "float64", "p_md": "float64", "raim_status": "string", "integrity_source": "string",
     "residual_status": "string", "gbs_status": "string", "gst_status": "string", "hpl_gbs_m": "float64",
-    "hpl_gst_m": "float64", "hpl_sbas_m": "float64", "separation_ratio": "float64", "gst_rms_note": "string", "excluded_sv": "string",
+    "hpl_gst_m": "float64", "hpl_model_m": "float64", "hpl_sbas_m": "float64", "separation_ratio": "float64", "gst_rms_note": "string", "excluded_sv": "string",
     "fde_shift_e_m": "float64", "fde_shift_n_m": "float64", "wls_shift_e_m": "float64", "wls_shift_n_m": "float64", "raim_lat_deg": "float64", "raim_lon_deg": "float64",
 }  # fmt: skip
 

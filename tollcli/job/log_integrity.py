@@ -16,7 +16,8 @@ from tollcli.gnss.sigma_models import NominalModel
 from tollcli.integrity.environment import EnvironmentCarry, with_environment
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim, settle_sources
-from tollcli.readers.nmea import ReadStats, iter_nmea_tables
+from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
+from tollcli.readers.nmea import ReadStats
 
 
 @dataclass
@@ -37,13 +38,14 @@ def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
 def iter_integrity(log: str, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
                    nominal: NominalModel | None = None, strict: bool = False, stats: ReadStats | None = None,
                    nav: str | None = None, date: dt.date | None = None, environment: str = "auto") -> Iterator[IntegrityChunk]:  # fmt: skip
-    """Integrity tables of ``log`` (``kind``: nmea or a pseudorange format); NMEA is streamed in chunks.
+    """Integrity tables of ``log`` (``kind``: a navigation kind — nmea, ubx-nav, gpsd-json — streamed in chunks, or a
+    pseudorange format).
 
     ``date``: the UTC date of the first epoch, for NMEA logs without RMC/ZDA dates. ``environment``: auto
     (each epoch's class from its residuals, :mod:`tollcli.integrity.environment`), open or urban.
     """
     nominal = nominal or NominalModel()
-    if kind != "nmea":
+    if kind not in NAVIGATION_KINDS:
         epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
         meas, env_columns = measured_environment(epochs, meas, environment)
         table = with_raim_position(pd.concat([epochs, env_columns, run_raim(meas, params)], axis=1))
@@ -53,7 +55,7 @@ def iter_integrity(log: str, kind: str, params: RaimParams, sigma_model: str = "
     if sigma_model == "input":
         raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")
     carry, env_carry = AngleCarry(), EnvironmentCarry()
-    for chunk in iter_nmea_tables(log, strict=strict, stats=stats if stats is not None else ReadStats(), date=date):
+    for chunk in iter_navigation_tables(log, kind, strict=strict, stats=stats if stats is not None else ReadStats(), date=date):
         meas = nmea_measurements(chunk.epochs, chunk.satellites, sigma_model, sigma_m, nominal, carry)
         params = settle_sources(params, meas)  # the level is the log's, from its first epoch with a source
         meas, env_columns = measured_environment(chunk.epochs, meas, environment, env_carry)

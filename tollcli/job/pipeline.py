@@ -34,7 +34,8 @@ from tollcli.io.sources import INPUT_KINDS, BLOCK_BYTES as SOURCE_BLOCK_BYTES
 from tollcli.io.sources import printable_path, sniff_format
 from tollcli.job.log_integrity import measured_environment
 from tollcli.job.streaming import TailCharger, choose_policy, has_speeds
-from tollcli.readers.nmea import ReadStats, iter_nmea_tables
+from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
+from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_usable
 
 
@@ -163,9 +164,9 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     nominal = NominalModel()
     epoch_raim = replace(params, fde=False)
     finding_settings = FindingSettings.for_class(settings.vehicle_class)
-    if kind == "nmea":
+    if kind in NAVIGATION_KINDS:
         charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
-        stats, params = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table)
+        stats, params = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table, kind)
         policy, table, details, found, period = charger.finish()
         positions, step_s = None, charger.step_s
     else:
@@ -241,8 +242,8 @@ STREAM_ROUNDS = True
 
 def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams,
                       nominal: NominalModel, charger: TailCharger,
-                      epoch_table: list | None = None) -> tuple[ReadStats, RaimParams]:  # fmt: skip
-    """Read an NMEA log chunk by chunk: each chunk's satellites, RAIM and geo-object pairs are done
+                      epoch_table: list | None = None, kind: str = "nmea") -> tuple[ReadStats, RaimParams]:  # fmt: skip
+    """Read a navigation log (NMEA, u-blox NAV, gpsd JSON: ``kind``) chunk by chunk: each chunk's satellites, RAIM and geo-object pairs are done
     before the next, and handed to ``charger`` with the few per-epoch columns it needs.
 
     Memory is the chunk's and the charger's tail, not the log's (``epoch_table``, a list for batch
@@ -255,7 +256,7 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
     carry, env_carry = AngleCarry(), EnvironmentCarry()
     table_parts = []
     offset = 0
-    for chunk in iter_nmea_tables(log, strict=settings.strict, date=date, stats=stats, chunk_epochs=CHUNK_EPOCHS,
+    for chunk in iter_navigation_tables(log, kind, strict=settings.strict, date=date, stats=stats, chunk_epochs=CHUNK_EPOCHS,
                                   block_bytes=BLOCK_BYTES):  # fmt: skip
         epochs = chunk.epochs
         if epochs.empty:

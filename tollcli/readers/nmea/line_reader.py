@@ -22,8 +22,9 @@ class ReadStats:
     """What happened to every line of a log."""
 
     source: str = ""
-    lines: int = 0
-    sentences: int = 0  # checksum-verified NMEA sentences
+    protocol: str = "NMEA sentences"  # what ``sentences`` counts (UBX messages, gpsd JSON reports)
+    lines: int = 0  # lines (UBX: frames)
+    sentences: int = 0  # checksum-verified NMEA sentences (UBX frames, JSON reports)
     decoded: int = 0  # of which decoded into epochs
     unused: int = 0  # valid sentences of types the reader does not use (proprietary, AIS, ...)
     comments: int = 0
@@ -49,7 +50,7 @@ class ReadStats:
         """One line for stderr."""
         parts = [
             f"{self.lines} lines",
-            f"{self.sentences} NMEA sentences",
+            f"{self.sentences} {self.protocol}",
             f"{self.epochs} epochs",
             f"{self.satellite_rows} satellite rows",
         ]

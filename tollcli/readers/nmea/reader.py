@@ -174,8 +174,12 @@ def check_usable(stats: ReadStats) -> None:
         raise DataError(f"{stats.source}: empty file")
     if stats.sentences == 0:
         hint = f"; first problem at {stats.first_problem}" if stats.first_problem else ""
+        if stats.protocol != "NMEA sentences":
+            raise DataError(f"{stats.source}: no {stats.protocol} in {stats.lines} lines or frames{hint}")
         raise DataError(f"{stats.source}: no NMEA sentences in {stats.lines} lines (not an NMEA log?){hint}")
     if stats.epochs == 0:
+        if stats.protocol != "NMEA sentences":
+            raise DataError(f"{stats.source}: {stats.sentences} {stats.protocol} but no epoch with a position")
         raise DataError(
             f"{stats.source}: {stats.sentences} NMEA sentences but no epoch: no GGA/RMC/GLL/GNS/ZDA gave a time of day"
         )

@@ -1,0 +1,91 @@
+"""The ``model`` evidence level: a receiver that reports only its satellites (GSA + GSV) or only its HDOP.
+
+HPL = K_H(P_MD)·σ_major of the used satellites' geometry under the σ of the environment — the urban σ unless the
+residuals measured open sky or ``--environment open`` declares it — valid iff HPL ≤ HAL; no fault detection, and
+the audit counts such positions as unprotected against a fault."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+from conftest import REPO, SAMPLES, run_cli
+
+from tollcli.gnss.sigma_models import NominalModel, sigma_for
+from tollcli.integrity.model_bound import NOMINAL_WORST_SIGMA_M
+from tollcli.integrity.raim import RaimParams
+from tollcli.job.log_integrity import iter_integrity
+
+GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
+TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
+RURAL = SAMPLES / "sim" / "rural-clean"
+
+
+def _satellites_only(tmp_path, name: str = "rural-clean") -> str:
+    """The simulator's drive as a receiver that writes GGA, RMC, GSA and GSV only (no GRS, GBS, GST)."""
+    lines = (SAMPLES / "sim" / name / "drive.nmea").read_text().splitlines()
+    log = tmp_path / f"{name}-gsa-gsv.nmea"
+    log.write_text("\n".join(line for line in lines if line[3:6] in ("GGA", "RMC", "GSA", "GSV")) + "\n")
+    return str(log)
+
+
+def test_the_hdop_bounds_sigma_is_the_nominal_models_worst_satellite():
+    elevations = np.array([5.0])
+    worst = max(float(sigma_for("nominal", elev_deg=elevations, cn0_dbhz=np.array([np.nan]), lon_deg=np.zeros(1),
+                                constellation=np.array([c], dtype=object), lat_deg=np.array([lat]), nominal=NominalModel())[0])
+                for lat in np.arange(-90.0, 91.0, 5.0) for c in ("GPS", "Galileo", "GLONASS", "BeiDou"))  # fmt: skip
+    assert worst <= NOMINAL_WORST_SIGMA_M < worst + 0.5
+
+
+def _table(log: str, environment: str) -> pd.DataFrame:
+    return pd.concat([c.table for c in iter_integrity(log, "nmea", RaimParams(), environment=environment)], ignore_index=True)
+
+
+def test_satellites_only_is_the_model_level_urban_unless_open_is_declared_and_it_bounds_the_truth(tmp_path):
+    log = _satellites_only(tmp_path)
+    auto = _table(log, "auto")
+    assert (auto["integrity_source"] == "model").all() and (auto["raim_status"] == "unavailable").all()
+    assert (auto["hpl_model_m"] > 100).all()  # urban σ: ≥ 25 m a satellite
+    opened = _table(log, "open")
+    assert (opened["integrity_source"] == "model").all() and (opened["raim_status"] == "valid").mean() > 0.9
+    truth = pd.read_csv(RURAL / "truth.csv")
+    from tollcli.geodesy import great_circle_distance_m
+
+    error = great_circle_distance_m(opened["lat_deg"].to_numpy(), opened["lon_deg"].to_numpy(), truth["lat_deg"].to_numpy(),
+                                    truth["lon_deg"].to_numpy())  # fmt: skip
+    valid = opened["raim_status"] == "valid"
+    assert (error[valid] <= opened.loc[valid, "hpl_model_m"]).all()  # no misleading information on the papers' errors
+
+
+def test_a_model_level_charge_says_what_it_is_worth_and_the_audit_counts_it_unprotected(tmp_path):
+    log = _satellites_only(tmp_path)
+    invoice_path = tmp_path / "inv.json"
+    proc = run_cli("process", log, "--geo", GEO, "--tariff", TARIFF, "--environment", "open", "-q", "-o", str(invoice_path))
+    assert proc.returncode == 0, proc.stderr.decode()
+    invoice = json.loads(invoice_path.read_text())
+    assert invoice["lines"] and all(set(line["vouched_by"]) == {"model"} for line in invoice["lines"])
+    assert invoice["parameters"]["integrity_sources_used"] == "model" and "no fault detection" in invoice["source_notes"]["model"]
+    report = tmp_path / "risk.json"
+    proc = run_cli("audit", str(invoice_path), "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(report))
+    assert proc.returncode == 0, proc.stderr.decode()
+    charges = json.loads(report.read_text())["charges"]
+    assert charges and all(c["n_vouched"] == 0 and c["p_false_bound"] == 1.0 for c in charges)
+    # the defaults (environment auto: no residuals, urban σ) charge nothing, and each passage says why in those words
+    proc = run_cli("process", log, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(invoice_path))
+    invoice = json.loads(invoice_path.read_text())
+    assert invoice["total"] == "0.00" and invoice["not_charged"]
+    assert all(p["why"].startswith("the receiver reports no integrity output") for p in invoice["not_charged"])
+
+
+def test_integrity_sources_model_and_below_it(tmp_path):
+    """``--integrity-sources covariance`` (or stricter) does not let the model bound validate: a satellites-only log is
+    then unmonitored; ``model`` (what ``auto`` settles on for it) does."""
+    log = _satellites_only(tmp_path)
+    out = tmp_path / "i.csv"
+    for level, expected in (("model", "valid"), ("auto", "valid"), ("covariance", "unmonitored"), ("residual", "unmonitored")):
+        proc = run_cli("integrity", log, "--integrity-sources", level, "--environment", "open", "-q", "-o", str(out))
+        assert proc.returncode == 0, proc.stderr.decode()
+        table = pd.read_csv(out)
+        assert (table["raim_status"] == expected).mean() > 0.9, (level, table["raim_status"].value_counts())
+        assert table["hpl_model_m"].notna().all()
