@@ -16,6 +16,11 @@ of ``../shared/data/gpsd/``, epoch by epoch, as :func:`real_patterns.drive` repl
 GBS (the receiver's RAIM, no failed satellite), no GRS; the share of the segments under the track that are
 charged, the parallel roads (300 m apart) charged, the findings, and the time ``pynmea2.parse`` alone needs
 for the file are printed beside.
+``--mix satellites-only``: the same 25 m/s drive with the sentences of a real SiRF IV receiver that writes GGA RMC GSA
+GSV only (``bu353s4.log``): the ``model`` level; with ``--environment open`` (open country declared) it is charged.
+``--mix ubx``: the drive as u-blox NAV-SAT (with prRes) + NAV-PVT frames replayed from the real OSNMA recording
+(``../shared/data/osnma/ublox/current_config.ubx``); ``--bias-m 60`` adds 60 m to one used satellite's prRes for 60
+epochs mid-drive and prints the verdicts there (the residual test must flag them).
 ``--memory-hours 1 10 100`` adds the peak RSS of ``process`` over those drive
 lengths (same network), with the ratio of the longest to the shortest.
 """
@@ -154,7 +159,7 @@ def main() -> None:
         t_build = time.perf_counter() - start
         geo_file = Path(tmp) / "geo.geojson"
         geo_file.write_text(json.dumps(geo))
-        print(f"drive: {n_epochs} epochs ({log.stat().st_size / 1e6:.0f} MB NMEA); network: {len(geo['features'])} geo-objects "
+        print(f"drive: {n_epochs} epochs ({log.stat().st_size / 1e6:.0f} MB {'UBX' if args.mix == 'ubx' else 'NMEA'}); network: {len(geo['features'])} geo-objects "
               f"(built in {t_build:.1f} s)")  # fmt: skip
         # as an installed package runs: with its modules' bytecode cached (pip compiles it at install; an
         # editable checkout under PYTHONDONTWRITEBYTECODE=1 would compile every module on every start, ~0.1 s)

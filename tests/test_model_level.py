@@ -89,3 +89,24 @@ def test_integrity_sources_model_and_below_it(tmp_path):
         table = pd.read_csv(out)
         assert (table["raim_status"] == expected).mean() > 0.9, (level, table["raim_status"].value_counts())
         assert table["hpl_model_m"].notna().all()
+
+
+def test_a_differential_fix_gets_the_corrected_ionospheres_sigma():
+    """GGA quality 2 (SBAS or ground corrections): paper 004's σ with the SBAS ionosphere, for the RAIM and the model
+    level alike; the same satellites in an autonomous fix keep the single-frequency σ."""
+    import io
+
+    from tollcli.gnss.nmea_measurements import nmea_measurements
+    from tollcli.readers.nmea import read_nmea
+    from tollcli.readers.nmea.compose import straight_drive
+
+    tables = read_nmea(io.BytesIO(("\n".join(straight_drive(3)) + "\n").encode()))
+    autonomous = nmea_measurements(tables.epochs, tables.satellites)
+    differential = nmea_measurements(tables.epochs.assign(fix_quality=np.int8(2)), tables.satellites)
+    expected = sigma_for("nominal", elev_deg=tables.satellites["elev_deg"].to_numpy(float)[:1],
+                         cn0_dbhz=tables.satellites["cn0_dbhz"].to_numpy(float)[:1], lon_deg=np.array([2.9]),
+                         constellation=tables.satellites["constellation"].to_numpy(object)[:1], lat_deg=np.array([42.7]),
+                         nominal=NominalModel(iono="sbas"))  # fmt: skip
+    mask = autonomous.mask
+    assert (differential.sigma_m[mask] < autonomous.sigma_m[mask]).all()
+    assert np.nanmin(differential.sigma_m) <= expected[0] + 5 and np.nanmax(differential.sigma_m) < 5.0

@@ -12,6 +12,9 @@
   neither, no residual test (``none``).
 * The receiver's own integrity outputs (GBS, the GST ellipse) ride along as
   :class:`~tollcli.gnss.receiver_outputs.ReceiverOutputs` for the integrity verdicts.
+* σ: the named model per used satellite; under the nominal model an epoch whose fix the receiver says is
+  differential (GGA quality 2, u-blox ``diffSoln``, gpsd status DGPS: SBAS or ground corrections) gets the
+  corrected ionosphere's σ (``iono="sbas"``, paper 004's σ_UIRE) — the RAIM's and the ``model`` level's σ alike.
 * Duplicated satellites in an epoch are counted once.
 """
 
@@ -181,6 +184,18 @@ def nmea_measurements(
         sigma_model, elev_deg=used["elev_deg"].to_numpy(float), cn0_dbhz=used["cn0_dbhz"].to_numpy(float),
         constellation=const, lat_deg=np.nan_to_num(lat), lon_deg=np.nan_to_num(lon), sigma_const_m=sigma_m, nominal=nominal,
     )  # fmt: skip
+    quality = epochs["fix_quality"].to_numpy()[row] if "fix_quality" in epochs else np.zeros(row.size, np.int64)
+    sbas = (quality == 2) & (sigma_model == "nominal")  # DGNSS/SBAS fix (GGA quality, u-blox diffSoln, gpsd status)
+    if sbas.any() and (nominal or NominalModel()).iono == "single":  # the corrected ionosphere: paper 004's σ_UIRE
+        from dataclasses import replace as _with
+
+        corrected = sigma_for(
+            sigma_model, elev_deg=used["elev_deg"].to_numpy(float)[sbas], cn0_dbhz=used["cn0_dbhz"].to_numpy(float)[sbas],
+            constellation=np.asarray(const)[sbas], lat_deg=np.nan_to_num(lat[sbas]), lon_deg=np.nan_to_num(lon[sbas]),
+            sigma_const_m=sigma_m, nominal=_with(nominal or NominalModel(), iono="sbas"),
+        )  # fmt: skip
+        sig = np.array(sig, dtype=float, copy=True)
+        sig[sbas] = corrected
     sigma = pad(sig, row, slot, shape, np.nan)
     residual = pad(used["residual_m"].to_numpy(float), row, slot, shape, np.nan)
     labels = pad(sv_labels(const, used["svid"].to_numpy()), row, slot, shape, "")
