@@ -42,8 +42,18 @@ def test_grs_residuals_give_the_exact_statistic():
     meas = nmea_measurements(tables.epochs, tables.satellites, sigma_model="constant", sigma_m=2.0)
     out = run_raim(meas, RaimParams("etc"))
     assert out["test_stat_source"].iloc[0] == "grs"
-    assert out["test_stat"].iloc[0] == pytest.approx(sum(r * r for r in residuals) / 4.0)
+    # the receiver's residuals are of its own solution: the RAIM's weighted solution moves by A·r and its residuals
+    # are (I − H·A)·r; the statistic is theirs (residuals that already are the RAIM's own give Σ r²/σ² exactly)
+    H = meas.H[0][meas.mask[0]]
+    A = np.linalg.solve(H.T @ H, H.T)  # equal σ: the weights cancel
+    r = np.asarray(residuals)
+    own = r - H @ (A @ r)
+    assert out["test_stat"].iloc[0] == pytest.approx(float(own @ own) / 4.0)
     assert out["n_used"].iloc[0] == 6 and out["dof"].iloc[0] == 2
+    again = _tables(_epoch_with_grs(100.0, [round(float(v), 2) for v in own]))
+    out = run_raim(nmea_measurements(again.epochs, again.satellites, sigma_model="constant", sigma_m=2.0), RaimParams("etc"))
+    assert out["test_stat"].iloc[0] == pytest.approx(float(own @ own) / 4.0, abs=0.005)  # GRS writes 0.01 m
+    assert abs(out["wls_shift_e_m"].iloc[0]) < 0.02 and abs(out["wls_shift_n_m"].iloc[0]) < 0.02
 
 
 def test_gsv_angles_carry_forward_within_their_age_and_across_chunks():

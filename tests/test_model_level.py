@@ -56,6 +56,8 @@ def test_satellites_only_is_the_model_level_urban_unless_open_is_declared_and_it
                                     truth["lon_deg"].to_numpy())  # fmt: skip
     valid = opened["raim_status"] == "valid"
     assert (error[valid] <= opened.loc[valid, "hpl_model_m"]).all()  # no misleading information on the papers' errors
+    proc = run_cli("integrity", log, "-o", str(tmp_path / "i.csv"))  # the summary says what the level is worth
+    assert proc.returncode == 0 and "model level: the satellites' geometry and an error model only, no fault detection" in proc.stderr.decode()
 
 
 def test_a_model_level_charge_says_what_it_is_worth_and_the_audit_counts_it_unprotected(tmp_path):

@@ -130,6 +130,9 @@ def integrity(
         text += "; decided by " + ", ".join(f"{s} {n}" for s, n in sources.items())
         if counts["skipped", "lines"]:
             text += f"; skipped {counts['skipped', 'lines']} malformed lines (--strict: an error)"
+        if sources.get("model"):
+            text += ("; model level: the satellites' geometry and an error model only, no fault detection"
+                     + (" (no residuals: the urban σ; --environment open declares open country)" if environment == "auto" else ""))
         if summary["environments"]:
             text += "; environment " + ", ".join(f"{n} {e or 'unknown'}" for e, n in summary["environments"].items())
         if ignored:

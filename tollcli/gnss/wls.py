@@ -116,12 +116,18 @@ def post_fit_residuals(H: np.ndarray, geometry: Geometry, mask: np.ndarray, dy_m
                        residual_m: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """The post-fit residuals (E, N) of a batch and the state correction (E, U) that goes with them: from
     pre-fit residuals ``dy_m`` when given (the correction from the linearisation point to this geometry's
-    weighted solution), else the receiver's own (``residual_m``, e.g. NMEA GRS; correction 0), else NaN."""
+    weighted solution), else from the receiver's own residuals at its reported position (``residual_m``: NMEA
+    GRS, u-blox/gpsd prRes), else NaN.
+
+    A receiver's residuals are those of its own solution (its weights, often a Kalman filter's): r = y − H·x_rx.
+    Under this geometry's weights the solution is x_rx + A·r and its residuals (I − H·A)·r — the same as solving
+    the pseudoranges afresh — so the test statistic is that of the position the RAIM vouches for, whatever the
+    receiver weighted (for residuals that already are this geometry's, the projection changes nothing)."""
     if dy_m is not None:
         return residuals_from_prefit(H, geometry, dy_m, mask)
     zero = np.zeros((mask.shape[0], H.shape[-1]))
     if residual_m is not None:
-        return residual_m, zero
+        return residuals_from_prefit(H, geometry, residual_m, mask)
     return np.full(mask.shape, np.nan), zero
 
 
