@@ -163,19 +163,24 @@ def _quality(fix_type: int, gnss_ok: bool, diff: bool, carrier: int) -> tuple[in
     return 0, 1, False, "N"
 
 
+def _utc_ms(year: int, month: int, day: int, hour: int, minute: int, sec: int, nano: int, valid: int) -> int | None:
+    """UTC ms since 1970 of a NAV-PVT / HNR-PVT date and time, None unless its ``valid`` flags say date and time."""
+    if valid & 0x03 != 0x03:
+        return None
+    try:
+        base = int(np.datetime64(f"{year:04d}-{month:02d}-{day:02d}", "ms").astype(np.int64))
+    except ValueError:
+        return None
+    return base + ((hour * 60 + minute) * 60 + sec) * 1000 + int(round(nano / 1e6))
+
+
 def _pvt(p: bytes, state: _State) -> tuple[int | None, dict]:
     itow, year, month, day, hour, minute, sec, valid = struct.unpack_from("<IHBBBBBB", p, 0)
     nano, fix_type, flags, _, num_sv, lon, lat, height, hmsl, hacc = struct.unpack_from("<iBBBBiiiiI", p, 16)
     gspeed, head = struct.unpack_from("<ii", p, 60)
     pdop = struct.unpack_from("<H", p, 76)[0]
     quality, mode, ok, letter = _quality(fix_type, bool(flags & 1), bool(flags & 2), (flags >> 6) & 3)
-    when = None
-    if valid & 0x03 == 0x03 and 1 <= month <= 12 and 1 <= day <= 31:
-        try:
-            base = np.datetime64(f"{year:04d}-{month:02d}-{day:02d}", "ms").astype(np.int64)
-            when = int(base) + ((hour * 60 + minute) * 60 + sec) * 1000 + int(round(nano / 1e6))
-        except ValueError:
-            when = None
+    when = _utc_ms(year, month, day, hour, minute, sec, nano, valid)
     if when is None:
         when = _utc_from_week(state, itow)
     fields = dict(lat_deg=lat * 1e-7, lon_deg=lon * 1e-7, alt_m=hmsl / 1000.0, geoid_sep_m=(height - hmsl) / 1000.0,
@@ -192,10 +197,7 @@ def _hnr(p: bytes, state: _State) -> tuple[int | None, dict]:
     lon, lat, height, hmsl, gspeed, _, head = struct.unpack_from("<iiiiiii", p, 20)
     hacc = struct.unpack_from("<I", p, 52)[0]
     quality, mode, ok, letter = _quality(fix, bool(flags & 1), bool(flags & 2), 0)
-    when = None
-    if valid & 0x03 == 0x03 and 1 <= month <= 12 and 1 <= day <= 31:
-        base = np.datetime64(f"{year:04d}-{month:02d}-{day:02d}", "ms").astype(np.int64)
-        when = int(base) + ((hour * 60 + minute) * 60 + sec) * 1000 + int(round(nano / 1e6))
+    when = _utc_ms(year, month, day, hour, minute, sec, nano, valid)
     fields = dict(lat_deg=lat * 1e-7, lon_deg=lon * 1e-7, alt_m=hmsl / 1000.0, geoid_sep_m=(height - hmsl) / 1000.0,
                   fix_quality=quality, fix_mode=mode, fix_valid=ok, mode_indicator=letter, speed_mps=gspeed / 1000.0,
                   course_deg=(head * 1e-5) % 360.0, sigma_major_m=hacc / 1000.0)  # fmt: skip
@@ -369,7 +371,3 @@ def _tables(stream: BinaryIO, name: str, stats: ReadStats, strict: bool, chunk_e
 def _known(value) -> bool:
     return not (isinstance(value, float) and math.isnan(value)) and value != -1
 
-
-def has_nav_positions(head: bytes) -> bool:
-    """Whether the first bytes of a log hold a u-blox NAV-PVT, NAV-SOL, NAV-POSLLH or HNR-PVT frame."""
-    return any(bytes((SYNC[0], SYNC[1], c, i)) in head for c, i in POSITION_MESSAGES)
