@@ -9,6 +9,7 @@ import pytest
 import shapely
 from conftest import run_cli
 
+from tollcli.charging.design_hal import DesignHal
 from tollcli.charging.geoobjects import build_geoobjects, check_geoobjects
 from tollcli.errors import DataError
 from tollcli.spatial import metric_crs, project
@@ -63,7 +64,7 @@ def test_far_roads_leave_hal_max_and_own_hal_is_respected(tmp_path):
         ({"id": "T2", "hal_m": 12}, [(0, 500), (1000, 500)]),
         ({"id": "R", "tolled": False}, [(0, 1000), (1000, 1000)]),
     ])  # fmt: skip
-    hal = {f["properties"]["id"]: f["properties"]["hal_m"] for f in build_geoobjects(str(path), hal_max_m=40)["features"]}
+    hal = {f["properties"]["id"]: f["properties"]["hal_m"] for f in build_geoobjects(str(path), DesignHal((40.0, 40.0)))["features"]}
     assert hal == {"T1": 40.0, "T2": 12.0}
 
 
@@ -73,7 +74,7 @@ def test_connected_roads_do_not_shrink_hal_and_ends_are_trimmed(tmp_path):
         ({"id": "M2"}, [(1000, 0), (2000, 0)]),  # the next motorway segment, at a junction
         ({"id": "RAMP", "tolled": False}, [(1000, 0), (1300, -150)]),  # leaves at the junction
     ])  # fmt: skip
-    doc = build_geoobjects(str(path), hal_max_m=25.0)
+    doc = build_geoobjects(str(path), DesignHal((25.0, 25.0)))
     props = {f["properties"]["id"]: f["properties"] for f in doc["features"]}
     assert props["M1"]["hal_m"] == props["M2"]["hal_m"] == 25.0
     # only the junction end is cut: by 2·HAL where the road met leaves at a right angle; along M2, as long as the

@@ -193,7 +193,7 @@ def _streets_around_the_drive(tmp_path, offset_m: float = 150.0) -> str:
     roads.write_text(json.dumps({"type": "FeatureCollection", "features": [
         street("DRIVEN", 0.0), street("LEFT", offset_m), street("RIGHT", -offset_m)]}))  # fmt: skip
     geo = tmp_path / "geo.geojson"
-    assert run_cli("geoobjects", "build", str(roads), "-o", str(geo), "--hal-max", "50", "-q").returncode == 0
+    assert run_cli("geoobjects", "build", str(roads), "-o", str(geo), "--hal", "50", "-q").returncode == 0
     return str(geo)
 
 

@@ -139,7 +139,7 @@ def test_match_restarts_exactly_at_any_row():
 @given(st.lists(st.tuples(st.integers(0, 3), st.integers(0, 400), st.booleans()), min_size=1, max_size=60))
 def test_charges_without_groupby_are_the_groupby_ones(rows):
     """The grouping of passages done in numpy equals pandas' groupby on random positions."""
-    geo = SimpleNamespace(ids=np.array(["A1", "A2", "B", "C"], dtype=object), tunnel_times_s=lambda: np.zeros(4))  # passages() needs the ids and tunnel times
+    geo = SimpleNamespace(ids=np.array(["A1", "A2", "B", "C"], dtype=object), gap_times_s=lambda: np.zeros(4))  # passages() needs the ids and tunnel/gap times
     obj = np.array([r[0] for r in rows])
     t_s = 1.7e9 + np.array([r[1] for r in rows], float)
     cols = {"epoch_row": np.arange(len(rows)), "obj": obj, "raim_status": np.full(len(rows), "valid", object),

@@ -78,7 +78,7 @@ def test_a_short_tunnel_does_not_explain_a_long_outage(outage_drive):
 
 
 def test_passages_allow_a_tunnels_time_without_a_fix():
-    geo = SimpleNamespace(ids=np.array(["open", "tunnel"], dtype=object), tunnel_times_s=lambda: np.array([0.0, 400.0 / TUNNEL_MIN_SPEED_MPS]))
+    geo = SimpleNamespace(ids=np.array(["open", "tunnel"], dtype=object), gap_times_s=lambda: np.array([0.0, 400.0 / TUNNEL_MIN_SPEED_MPS]))
     assert passage_gaps_s(geo).tolist() == [PASSAGE_GAP_S, PASSAGE_GAP_S + 200.0]
     t = np.array([0.0, 1.0, 300.0, 301.0] * 2)
     cols = {"obj": np.repeat([0, 1], 4), "t_s": t, "valid": np.ones(8, bool), "epoch_row": np.arange(8),

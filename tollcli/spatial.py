@@ -19,7 +19,11 @@ from tollcli.io.sources import read_json
 
 def read_features(path: str) -> list[dict]:
     """GeoJSON features of a file, with a clear error for anything else."""
-    doc = read_json(path, "a GeoJSON file")
+    return features_of(read_json(path, "a GeoJSON file"), path)
+
+
+def features_of(doc, path: str) -> list[dict]:
+    """The features of a parsed GeoJSON document read from ``path`` (DataError: not a WGS-84 FeatureCollection)."""
     if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection" or not isinstance(doc.get("features"), list):
         raise DataError(f"{path}: not a GeoJSON FeatureCollection")
     crs = (doc.get("crs") or {}).get("properties", {}).get("name", "")

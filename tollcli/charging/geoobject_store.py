@@ -31,7 +31,7 @@ from tollcli.spatial import feature_geometry, project, read_features
 
 #: the slowest traffic a tunnel's GNSS outage is allowed for (7.2 km/h, a congested tunnel), m/s
 TUNNEL_MIN_SPEED_MPS = 2.0
-CACHE_FORMAT = 4  # 2: compiled only after the file passed geoobjects check; 3: a metric frame per geo-object; 4: lengths, axes
+CACHE_FORMAT = 5  # 2: compiled only after the file passed geoobjects check; 3: a metric frame per geo-object; 4: lengths, axes; 5: gaps between parts
 
 
 @dataclass
@@ -56,6 +56,9 @@ class GeoObjects:
     #: per geo-object: its axis in its own metric frame when it is a carriageway told apart from the opposite one by the
     #: direction of travel (``carriageways.py``), else None
     axes: np.ndarray | None = None
+    #: per geo-object: the longest stretch of its section between two of its parts (``gap_m``; 0: one part), m — a
+    #: passage spans it without a fix inside
+    gap_m: np.ndarray | None = None
 
     def directed(self) -> np.ndarray:
         """Which geo-objects count a position only in their direction of travel."""
@@ -69,6 +72,12 @@ class GeoObjects:
     def tunnel_times_s(self) -> np.ndarray:
         """Per geo-object: how long its tunnels may keep GNSS away, s (their length at ``TUNNEL_MIN_SPEED_MPS``)."""
         return self.tunnel_lengths_m() / TUNNEL_MIN_SPEED_MPS
+
+    def gap_times_s(self) -> np.ndarray:
+        """Per geo-object: how long a passage may spend between two of its parts, s (tunnels and the longest gap
+        between parts at ``TUNNEL_MIN_SPEED_MPS``: a slow vehicle crossing the stretch cut out is one passage)."""
+        gaps = self.gap_m if self.gap_m is not None else np.zeros(len(self.ids))
+        return (self.tunnel_lengths_m() + gaps) / TUNNEL_MIN_SPEED_MPS
 
 
 def load_geoobjects(path: str) -> GeoObjects:
@@ -150,7 +159,8 @@ def _parse(path: str) -> GeoObjects:
     axes = _axes(props, frames, frame)
     return GeoObjects(np.array(ids, dtype=object), np.array([str(p.get("name", "")) for p in props], dtype=object),
                       np.array([str(p.get("road_class", "")) for p in props], dtype=object), hals, metric, crs,
-                      shapely.STRtree(search), frames, frame, None, section_lengths(props), tunnel_lengths(props), axes)  # fmt: skip
+                      shapely.STRtree(search), frames, frame, None, section_lengths(props), tunnel_lengths(props), axes,
+                      np.nan_to_num(np.array([_float(p.get("gap_m")) for p in props])))  # fmt: skip
 
 
 def _axes(props: list[dict], frames: tuple[str, ...], frame: np.ndarray) -> np.ndarray | None:
@@ -223,7 +233,7 @@ def _read_compiled(path: Path) -> GeoObjects:
         metric, search = _from_wkb(z["wkb"], z["wkb_ends"]), _from_wkb(z["wkb_search"], z["wkb_search_ends"])
         return GeoObjects(z["ids"].astype(object), z["names"].astype(object), z["road_class"].astype(object),
                           z["hal_m"], metric, str(z["crs"]), shapely.STRtree(search), tuple(z["frames"].astype(str).tolist()),
-                          z["frame"], None, z["length_m"], z["tunnel_m"], _axes_from(z))  # fmt: skip
+                          z["frame"], None, z["length_m"], z["tunnel_m"], _axes_from(z), z["gap_m"])  # fmt: skip
 
 
 def _axes_from(z) -> np.ndarray | None:
@@ -256,7 +266,7 @@ def _write_compiled(path: Path, geo: GeoObjects) -> None:
         with os.fdopen(fd, "wb") as fh:
             np.savez(fh, format=CACHE_FORMAT, ids=geo.ids.astype(str), names=geo.names.astype(str),
                      road_class=geo.road_class.astype(str), hal_m=geo.hal_m, crs=geo.crs, frames=np.array(geo.frames, dtype=str),
-                     frame=geo.frame, length_m=geo.length_m, tunnel_m=geo.tunnel_m, wkb=wkb, wkb_ends=wkb_ends, wkb_search=wkb_search, wkb_search_ends=wkb_search_ends, **extra)  # fmt: skip
+                     frame=geo.frame, length_m=geo.length_m, tunnel_m=geo.tunnel_m, gap_m=geo.gap_m if geo.gap_m is not None else np.zeros(len(geo.ids)), wkb=wkb, wkb_ends=wkb_ends, wkb_search=wkb_search, wkb_search_ends=wkb_search_ends, **extra)  # fmt: skip
         os.replace(tmp, path)
     except OSError:
         try:

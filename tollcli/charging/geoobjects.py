@@ -1,29 +1,34 @@
-"""Geo-objects: constant-HAL buffers around tolled road segments (paper 001 §II; thesis §3.4).
+"""Geo-objects: constant-HAL buffers around tolled road sections (paper 001 §II; thesis §3.4), built for a design HAL.
 
-A road network is a GeoJSON FeatureCollection of LineStrings (centre lines) with
-properties ``id``, ``name``, ``road_class``, optional ``hal_m``, optional
-``direction`` and ``tolled`` (default true). Non-tolled roads only bound HAL.
+A road network is a GeoJSON FeatureCollection (or a GeoPackage, Shapefile, FlatGeobuf: ``readers/road_files.py``)
+of LineStrings (centre lines) with properties ``id``, ``name``, ``road_class``, optional ``hal_m``, optional
+``direction`` and ``tolled`` (default true); or an OpenStreetMap map (``osm_network.py``). Non-tolled roads only
+bound HAL and cut geo-objects. A tolled road is first cut into sections at its junctions (``road_sections.py``;
+OpenStreetMap: at shared nodes).
 
-:func:`build_geoobjects` works, for every tolled segment, in a metric frame chosen for it
-(a transverse Mercator on the nearest whole-degree meridian, :func:`tollcli.spatial.local_frame`:
-ground distances to ≤ 0.05 % at any extent) and:
+:func:`build_from_roads` works, for every tolled section, in a metric frame chosen for it (a transverse Mercator on
+the nearest whole-degree meridian, :func:`tollcli.spatial.local_frame`: ground distances to ≤ 0.05 % at any extent)
+with its design HAL ``[low, high]`` (``design_hal.py``; default the papers' 25–50 m):
 
-1. HAL = min(HAL_max, its own ``hal_m`` if given, ½ · distance to the nearest road it
-   is not connected to, other than its opposite carriageway: ``carriageways.py``). "Connected" means touching within ``connect_tol_m`` on the same
-   level (``layer``, ``bridge``, ``tunnel``) — or, for a map with topology, sharing a node
-   (a junction); connected roads meet the segment by construction and would
-   otherwise force HAL to zero. A road that crosses without meeting (a bridge, a tunnel)
-   does not bound HAL: the segment is cut back around it instead (step 2).
-2. The parts of the centre line within ``trim_factor · HAL`` of a road it meets are
-   cut (at a right-angle junction: the end, by ``trim_factor · HAL``; at a shallow merge,
-   as far as the roads stay that close), so that the buffer does not reach into the roads
-   leaving the junction; the parts within ``trim_factor · HAL`` of a crossing road are
-   removed the same way.
-3. The geo-object is the centre line buffered by HAL (round caps): a position
-   inside it, valid with HPL = HAL, is within HAL of the tolled road.
+1. The roads it *meets* (a junction: a shared node, or for a vector file touching within ``connect_tol_m`` on its
+   level) are trimmed: the parts of the centre line within ``trim_factor · HAL`` of them are cut, so the buffer does
+   not reach into the roads leaving the junction (at a right angle: the end; at a shallow merge or a ramp running
+   alongside, as long as the two stay that close).
+2. Every other road (a ramp of another junction, a service road, a parallel street, a road crossing on another
+   level), except the opposite carriageway of the same road (``carriageways.py``), is kept clear of: one closer
+   than ``2 · low`` is cut around — the stretches of the centre line within ``2 · HAL`` of it are removed — and the
+   nearest one beyond bounds HAL = min(high, ½ · its distance). No position within HAL of another road can then
+   lie in the geo-object: a vehicle there, valid with HPL ≤ HAL, is never charged for this section.
+3. Where nothing of the section is left at ``low``, the build falls back to the largest HAL down to ``hal_min_m``
+   that leaves a stretch (listed in the build's report); below that the section is skipped (listed, with why).
+4. The geo-object is what is left buffered by HAL (round caps). A section cut around a road may keep several
+   stretches: its geo-object is then a MultiPolygon of ``parts`` (``[from_m, to_m]`` along the section, in the
+   polygons' order), charged once per passage through any of them (``gap_m``: the longest stretch between two
+   parts, which a passage spans) at the section's length (``section_length_m``, junction to junction).
 
-The output is GeoJSON in WGS-84 (RFC 7946) with the metric frame used recorded
-per feature (``crs_metric``), so recognition can project positions the same way.
+Every feature records its design (``design_hal_m``), what holds its HAL (``hal_bound``: the design, a road kept clear
+of — ``nearest_road``, ``nearest_road_m`` away — or a fallback below the design) and the roads cut around (``crossings``, ``cut_m``). The output is GeoJSON in WGS-84 (RFC 7946) with the metric
+frame used recorded per feature (``crs_metric``), so recognition can project positions the same way.
 """
 
 from __future__ import annotations
@@ -34,23 +39,12 @@ import numpy as np
 import shapely
 
 from tollcli.charging.carriageways import opposite_pairs
+from tollcli.charging.design_hal import HAL_FLOOR_M, DesignHal
 from tollcli.errors import DataError
-from tollcli.spatial import feature_geometry, local_frame, metric_crs, project, read_features
+from tollcli.spatial import feature_geometry, local_frame, project
 
-HAL_MAX_M = 50.0
 CONNECT_TOL_M = 1.0
 TRIM_FACTOR = 2.0
-
-
-@dataclass
-class Finding:
-    """One problem of a geo-object file, tied to a feature."""
-
-    feature: str  # id, or "#<index>" when the feature has none
-    problem: str
-
-    def __str__(self) -> str:
-        return f"{self.feature}: {self.problem}"
 
 
 def _feature_id(feature, index: int) -> str:
@@ -115,26 +109,45 @@ class Roads:
     junctions: set[tuple[int, int]] | None = None
 
 
-def build_geoobjects(path: str, hal_max_m: float = HAL_MAX_M, connect_tol_m: float = CONNECT_TOL_M,
-                     trim_factor: float = TRIM_FACTOR) -> dict:  # fmt: skip
-    """A roads file → a GeoJSON FeatureCollection of geo-objects (dict, WGS-84)."""
-    ids, props, lines = _roads(read_features(path), path)
-    doc, _ = build_from_roads(Roads(ids, props, lines), path, hal_max_m, connect_tol_m, trim_factor)
+def is_tolled(props: dict) -> bool:
+    """A road is tolled unless its ``tolled`` says otherwise (false, 0, "no", "false": as a Shapefile or GeoPackage
+    stores a boolean)."""
+    value = props.get("tolled", True)
+    return value is None or not (value is False or str(value).strip().lower() in ("0", "0.0", "no", "false", "n", "f"))
+
+
+def roads_of(path: str, connect_tol_m: float = CONNECT_TOL_M) -> Roads:
+    """The roads of a vector file (GeoJSON, GeoPackage, Shapefile, FlatGeobuf), tolled ones cut at their junctions."""
+    from tollcli.charging.road_sections import cut_at_junctions
+    from tollcli.readers.road_files import read_road_features
+
+    ids, props, lines = _roads(read_road_features(path), path)
+    roads = Roads(ids, props, lines)
+    tolled = np.array([is_tolled(p) for p in props])
+    return cut_at_junctions(roads, connect_tol_m, np.array([road_level(p) for p in props]), tolled)
+
+
+def build_geoobjects(path: str, design: DesignHal | None = None, connect_tol_m: float = CONNECT_TOL_M,
+                     trim_factor: float = TRIM_FACTOR, hal_min_m: float = HAL_FLOOR_M) -> dict:  # fmt: skip
+    """A roads file → a GeoJSON FeatureCollection of geo-objects (dict, WGS-84); DataError when none can be built."""
+    doc, skipped = build_from_roads(roads_of(path, connect_tol_m), path, design, connect_tol_m, trim_factor, hal_min_m)
+    if not doc["features"]:
+        raise DataError(f"{path}: no tolled section could be built ({len(skipped)} skipped: {skipped[0]['reason'] if skipped else ''})")
     return doc
 
 
-def build_from_roads(roads: Roads, path: str, hal_max_m: float = HAL_MAX_M, connect_tol_m: float = CONNECT_TOL_M,
-                     trim_factor: float = TRIM_FACTOR, hal_min_m: float | None = None) -> tuple[dict, list[dict]]:  # fmt: skip
+def build_from_roads(roads: Roads, path: str, design: DesignHal | None = None, connect_tol_m: float = CONNECT_TOL_M,
+                     trim_factor: float = TRIM_FACTOR, hal_min_m: float = HAL_FLOOR_M) -> tuple[dict, list[dict]]:  # fmt: skip
     """Geo-objects of the tolled roads, each built in its own metric frame (:func:`tollcli.spatial.local_frame`).
 
-    Roads that cross a tolled one without meeting it (another level, or no shared node) do not bound its HAL:
-    the tolled centre line is cut back within ``trim_factor`` · HAL of them, so no position on the crossing road can
-    count for it; the crossing road ids and the length cut are recorded per geo-object (``crossings``, ``cut_m``).
-    With ``hal_min_m`` (networks built from a map), a road that would push HAL below it is cut around the same way,
-    and a tolled road left with nothing to charge is skipped — returned as ``{"id", "reason"}`` — instead of an error.
+    Returns the FeatureCollection (with a foreign member ``tollcli``: the design, ``hal_min_m`` and the sections
+    skipped, which ``tollcli geoobjects info`` counts in the tolled length) and the sections skipped — ``{"id", "reason"}``: nothing of them can have a HAL of
+    ``hal_min_m`` — in id order. Sections built below their design HAL say so in their properties
+    (``hal_m`` < ``design_hal_m[0]``; :func:`fallbacks` lists them).
     """
+    design = design or DesignHal()
     props, lines = roads.props, roads.lines
-    tolled = np.array([p.get("tolled", True) is not False for p in props])
+    tolled = np.array([is_tolled(p) for p in props])
     if not tolled.any():
         raise DataError(f"{path}: no tolled road (every feature has tolled: false)")
     lines = np.asarray(lines, dtype=object)
@@ -145,23 +158,167 @@ def build_from_roads(roads: Roads, path: str, hal_max_m: float = HAL_MAX_M, conn
     skipped: list[dict] = []
     for frame in sorted(set(frames[tolled])):
         group = np.flatnonzero(tolled & (frames == frame))
-        built, gone = _build_in_frame(group, frame, roads, lines, levels, path, hal_max_m, connect_tol_m, trim_factor, hal_min_m)
+        built, gone = _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m)
         features.update(built)
         skipped += gone
-    order = sorted(features)
-    return {"type": "FeatureCollection", "features": [features[i] for i in order]}, sorted(skipped, key=lambda s: s["id"])
+    order = sorted(features, key=lambda i: roads.ids[i])  # by id: the same file whatever order the roads came in
+    skipped = sorted(skipped, key=lambda s: s["id"])
+    build = {"design_hal_m": design.describe(), "hal_min_m": hal_min_m, "skipped": skipped}  # for geoobjects info
+    return {"type": "FeatureCollection", "features": [features[i] for i in order], "tollcli": build}, skipped
+
+
+def fallbacks(doc: dict) -> list[dict]:
+    """The geo-objects built below their design HAL: ``{"id", "hal_m", "design_hal_m"}``."""
+    out = []
+    for f in doc["features"]:
+        p = f["properties"]
+        if p["hal_m"] < p["design_hal_m"][0]:
+            out.append({"id": p["id"], "hal_m": p["hal_m"], "design_hal_m": p["design_hal_m"]})
+    return out
 
 
 #: buffered geo-objects are densified to this vertex spacing (m) before going back to longitude/latitude, so that
 #: a straight edge in the metric frame stays within a millimetre of the edge between its vertices in any frame
 SEGMENT_M = 100.0
+#: the shortest stretch of centre line a geo-object is built on, m
+MIN_CORE_M = 1.0
+#: the fallback HAL is found to this resolution, m
+HAL_STEP_M = 0.01
+#: a buffer of quad_segs=16 is a polygon inscribed in the circle (its edges up to 1 − cos(π/64) = 0.12 % inside) and
+#: GEOS simplifies its offset curves (up to 1 % of the distance): the trims and cuts are buffered 1.2 % wider, and the
+#: HAL of what is left is then capped at half its exact distance to the roads cut around
+CIRCUMSCRIBE = 1.01 / np.cos(np.pi / 64)
 
 
-def _build_in_frame(group, frame, roads, lines, levels, path, hal_max_m, connect_tol_m, trim_factor, hal_min_m):
+def _clear_of(geom, radius_m: float):
+    """The area within ``radius_m`` of ``geom`` (a polygon that contains the whole disc around every point)."""
+    return shapely.buffer(geom, radius_m * CIRCUMSCRIBE, quad_segs=16)
+
+
+@dataclass
+class _Cut:
+    """One way of building a section: its HAL, the centre line left, the roads cut around and how much they took."""
+
+    hal: float
+    low: float  # the design's low end it was built for (roads closer than 2·low are cut around)
+    core: object
+    near: np.ndarray
+    cut_m: float
+    trimmed_away: bool  # nothing left after the junction trims alone
+    bound: int | None = None  # index into the roads kept clear of of the one that holds HAL below `high` (None: none)
+    bound_m: float = float("nan")  # its distance from the section (the centre line; a road cut around: what is left)
+
+    @property
+    def ok(self) -> bool:
+        return not self.core.is_empty and self.core.length >= MIN_CORE_M
+
+
+def _mm(value: float) -> float:
+    """Whole millimetres, rounded down (a HAL never above half a distance)."""
+    return float(np.floor(value * 1000.0 + 1e-6) / 1000.0)
+
+
+def _attempt(line, met_union, others, other_dist, metric, low, high, trim_factor) -> _Cut:
+    """The section built for [low, high]: trim at the roads met, cut around the others closer than 2·low."""
+    near = other_dist < 2 * low
+    far = np.flatnonzero(~near)
+    bound, bound_m, hal = None, float("nan"), float(high)
+    if far.size and other_dist[far].min() / 2.0 < high:
+        k = int(far[np.argmin(other_dist[far])])
+        bound, bound_m, hal = k, float(other_dist[k]), float(other_dist[k]) / 2.0
+    hal = _mm(hal)
+    core = line
+    if met_union is not None:
+        core = shapely.difference(core, _clear_of(met_union, trim_factor * hal))
+    trimmed_away = core.is_empty or core.length < MIN_CORE_M
+    cut_m = 0.0
+    if near.any() and not trimmed_away:
+        cut_around = metric[others[near]]
+        kept = shapely.difference(core, _clear_of(shapely.union_all(cut_around), 2 * hal))
+        cut_m = core.length - kept.length
+        core = kept
+        if not core.is_empty:  # exact: no point of a road cut around within 2 · HAL of what is left
+            d = shapely.distance(core, cut_around)
+            if _mm(d.min() / 2.0) < hal:
+                k = int(np.argmin(d))
+                bound, bound_m, hal = int(np.flatnonzero(near)[k]), float(d[k]), _mm(d.min() / 2.0)
+    return _Cut(hal, low, core, others[near], cut_m, trimmed_away, bound, bound_m)
+
+
+def _section(line, met_union, others, other_dist, metric, low, high, trim_factor, hal_min_m) -> _Cut | None:
+    """The section at its design HAL; else at the largest HAL ≥ ``hal_min_m`` that leaves a stretch; else None."""
+    cut = _attempt(line, met_union, others, other_dist, metric, low, high, trim_factor)
+    if cut.ok:
+        return cut
+    if hal_min_m > high:
+        return None
+    floor = _attempt(line, met_union, others, other_dist, metric, hal_min_m, hal_min_m, trim_factor)
+    if not floor.ok:
+        return None
+    good, bad = hal_min_m, high  # a stretch is left at `good`, none at `bad` (fewer roads cut, narrower cuts below)
+    best = floor
+    while bad - good > HAL_STEP_M:
+        mid = (good + bad) / 2.0
+        trial = _attempt(line, met_union, others, other_dist, metric, mid, mid, trim_factor)
+        good, bad, best = (mid, bad, trial) if trial.ok else (good, mid, best)
+    stepped = round(float(np.floor(good / HAL_STEP_M) * HAL_STEP_M), 2)
+    if stepped > hal_min_m:
+        trial = _attempt(line, met_union, others, other_dist, metric, stepped, stepped, trim_factor)
+        if trial.ok:
+            best = trial
+    return best
+
+
+def _skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, hal_min_m) -> str:
+    at_floor = _attempt(line, met_union, others, other_dist, metric, hal_min_m, hal_min_m, trim_factor)
+    if at_floor.trimmed_away:
+        return f"too short ({line.length:.1f} m) to trim {trim_factor:g} × HAL {hal_min_m:g} m at its junctions"
+    names = ", ".join(sorted(ids[j] for j in at_floor.near))
+    return f"no stretch can have HAL {hal_min_m:g} m: nothing left after cutting {at_floor.cut_m:.1f} m around the roads within {2 * hal_min_m:g} m ({names})"
+
+
+def _parts(line, core, hal: float, frame: str):
+    """The buffered stretches as polygons ordered along the section, with ``[from_m, to_m]`` of each (metric)."""
+    pieces = list(core.geoms) if hasattr(core, "geoms") else [core]
+    pieces = [p for p in pieces if not p.is_empty]
+    polygon = shapely.buffer(shapely.MultiLineString([list(p.coords) for p in pieces]) if len(pieces) > 1 else pieces[0],
+                             hal, quad_segs=16)  # fmt: skip
+    polys = list(polygon.geoms) if polygon.geom_type == "MultiPolygon" else [polygon]
+    if len(polys) == 1:
+        return polys, None
+    spans = []
+    for poly in polys:
+        inside = [p for p in pieces if poly.intersects(p)]
+        ends = [line.line_locate_point(shapely.Point(c)) for p in inside for c in (p.coords[0], p.coords[-1])]
+        spans.append((min(ends), max(ends)))
+    order = np.argsort([a for a, _ in spans], kind="stable")
+    return [polys[k] for k in order], [[round(spans[k][0], 1), round(spans[k][1], 1)] for k in order]
+
+
+def _hal_bound(cut: _Cut, others, other_ids: list[str], low: float) -> dict:
+    """What holds a section's HAL (``hal_bound``): ``design`` (its design's high end), ``road`` (a road kept clear of,
+    ``nearest_road``, at ``nearest_road_m`` = 2 · HAL from the section) or ``fallback`` (below the design's low end:
+    the junction trims and the roads cut around left nothing at a larger HAL; ``nearest_road``: the nearest road
+    kept clear of, from what is left)."""
+    if cut.hal < low:
+        out: dict = {"hal_bound": "fallback"}
+        if len(others):
+            d = shapely.distance(cut.core, others)
+            k = int(np.argmin(d))
+            out.update(nearest_road=other_ids[k], nearest_road_m=round(float(d[k]), 2))
+        return out
+    if cut.bound is None:
+        return {"hal_bound": "design"}
+    return {"hal_bound": "road", "nearest_road": other_ids[cut.bound], "nearest_road_m": round(cut.bound_m, 2)}
+
+
+def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m):
     ids, props = roads.ids, roads.props
     metric = project(lines, frame)
     tree = shapely.STRtree(metric)
-    left, right = tree.query(metric[group], predicate="dwithin", distance=2 * hal_max_m)
+    ranges = [design.for_road(props[i]) for i in group]
+    reach = 2 * max(high for _, high in ranges)
+    left, right = tree.query(metric[group], predicate="dwithin", distance=reach)
     left = group[left]
     other = left != right
     left, right = left[other], right[other]
@@ -170,46 +327,36 @@ def _build_in_frame(group, frame, roads, lines, levels, path, hal_max_m, connect
         meets = (dist <= connect_tol_m) & (levels[left] == levels[right])
     else:
         meets = np.array([(a, b) in roads.junctions or (b, a) in roads.junctions for a, b in zip(left.tolist(), right.tolist())], bool)
-    cut_within = connect_tol_m if hal_min_m is None else max(connect_tol_m, 2 * hal_min_m)
     opposite = opposite_pairs(left, right, metric, props, meets)  # carriageways of one road: told apart by direction
-    crossing = ~meets & ~opposite & (dist <= cut_within)
-    bounding = ~meets & ~crossing & ~opposite
-    own = np.array([float(p["hal_m"]) if p.get("hal_m") not in (None, "") else np.inf for p in props])
-    hal = np.minimum(np.full(len(metric), hal_max_m), own)
-    np.minimum.at(hal, left[bounding], dist[bounding] / 2.0)
+    kept_clear = ~meets & ~opposite
     built, skipped = {}, []
-    for i in group:
+    for i, (low, high) in zip(group.tolist(), ranges):
         line = metric[i]
-        touching = right[(left == i) & meets]
-        crossers = right[(left == i) & crossing]
-        why = ""
-        if hal_min_m is not None and hal[i] < hal_min_m:
-            why = f"HAL {hal[i]:.1f} m below the minimum {hal_min_m:g} m (another road {2 * hal[i]:.1f} m away)"
-        core, cut_m = line, 0.0
-        if not why and touching.size:  # the roads it meets: cut within trim·HAL of them (at a right angle: the end)
-            core = shapely.difference(line, shapely.buffer(shapely.union_all(metric[touching]), trim_factor * hal[i], quad_segs=16))
-            if core.is_empty or core.length < 1.0:
-                why = f"too short ({line.length:.1f} m) to trim {trim_factor:g} × HAL {hal[i]:.1f} m at its junctions"
-        if not why and crossers.size:  # the roads it crosses without meeting: cut around them the same way
-            kept = shapely.difference(core, shapely.buffer(shapely.union_all(metric[crossers]), trim_factor * hal[i], quad_segs=16))
-            cut_m = core.length - kept.length
-            core = kept
-            if core.is_empty or core.length < 1.0:
-                why = f"nothing left after cutting {cut_m:.1f} m around the roads crossing it ({', '.join(sorted(ids[j] for j in crossers))})"
-        if why:
-            if hal_min_m is None:
-                raise DataError(f"{path}: feature {ids[i]}: {why}")
-            skipped.append({"id": ids[i], "reason": why})
+        mine = left == i
+        met = right[mine & meets]
+        met_union = shapely.union_all(metric[met]) if met.size else None
+        others, other_dist = right[mine & kept_clear], dist[mine & kept_clear]
+        cut = _section(line, met_union, others, other_dist, metric, low, high, trim_factor, hal_min_m)
+        if cut is None:
+            skipped.append({"id": ids[i], "section_length_m": round(line.length, 1),
+                            "reason": _skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, hal_min_m)})  # fmt: skip
             continue
-        polygon = shapely.segmentize(shapely.buffer(core, hal[i], quad_segs=16), SEGMENT_M)
+        polys, spans = _parts(line, cut.core, cut.hal, frame)
+        polygon = polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys)
+        polygon = shapely.segmentize(polygon, SEGMENT_M)
         properties = {
             "id": ids[i], "name": props[i].get("name", ""), "road_class": props[i].get("road_class", ""),
-            "direction": props[i].get("direction"), "hal_m": round(float(hal[i]), 3), "crs_metric": frame,
-            "length_m": round(core.length, 1), "section_length_m": round(line.length, 1),
+            "direction": props[i].get("direction"), "hal_m": round(cut.hal, 3), "crs_metric": frame,
+            "length_m": round(cut.core.length, 1), "section_length_m": round(line.length, 1),
+            "design_hal_m": [low, high],
         }  # fmt: skip
-        if crossers.size:
-            properties.update(crossings=sorted(ids[j] for j in crossers), cut_m=round(cut_m, 1))
-        partners = right[(left == i) & opposite]
+        properties.update(_hal_bound(cut, metric[others], [ids[j] for j in others], low))
+        if cut.near.size:
+            properties.update(crossings=sorted(ids[j] for j in cut.near), cut_m=round(cut.cut_m, 1))
+        if spans is not None:
+            gaps = [b[0] - a[1] for a, b in zip(spans[:-1], spans[1:])]
+            properties.update(parts=spans, gap_m=round(max(0.0, *gaps), 1))
+        partners = right[mine & opposite]
         if partners.size:  # a carriageway: its positions count only in its direction of travel, along this axis
             axis = shapely.get_coordinates(project([line], frame, inverse=True)[0])
             properties.update(opposite=sorted(ids[j] for j in partners), axis=np.round(axis, 7).tolist())
@@ -225,87 +372,8 @@ def _build_in_frame(group, frame, roads, lines, levels, path, hal_max_m, connect
 PASSED_THROUGH = ("osm_way_ids", "ref", "oneway", "tunnel", "tunnel_m", "maxspeed")
 
 
-def _crs_problem(crs, seen: dict) -> str:
-    """Why a feature's ``crs_metric`` cannot be used ('' when absent or a known projected CRS in metres)."""
-    if crs is None:
-        return ""
-    if crs not in seen:
-        from pyproj import CRS
-        from pyproj.exceptions import CRSError
+def check_geoobjects(path: str, hal_min_m: float = 5.0):
+    """Problems of a geo-object file (:func:`tollcli.charging.geoobject_check.check_geoobjects`)."""
+    from tollcli.charging.geoobject_check import check_geoobjects as check
 
-        try:
-            parsed = CRS.from_user_input(crs)
-            metres = parsed.is_projected and all(a.unit_name in ("metre", "meter") for a in parsed.axis_info)
-            seen[crs] = "" if metres else f"crs_metric {crs!r} is not a projected CRS in metres"
-        except (CRSError, TypeError, ValueError):
-            seen[crs] = f"crs_metric {crs!r} is not a known coordinate reference system"
-    return seen[crs]
-
-
-def check_geoobjects(path: str, hal_min_m: float = 5.0) -> list[Finding]:
-    """Problems of a geo-object file, each tied to a feature id (empty list: the file is usable)."""
-    findings: list[Finding] = []
-    crs_seen: dict = {}
-    features = read_features(path)
-    ids: list[str] = []
-    partners: dict[str, set] = {}
-    polys = []
-    for i, feature in enumerate(features):
-        fid = _feature_id(feature, i)
-        props = feature.get("properties") if isinstance(feature, dict) and isinstance(feature.get("properties"), dict) else {}
-        if fid.startswith("#"):
-            findings.append(Finding(fid, "missing id"))
-        if fid in ids:
-            findings.append(Finding(fid, "duplicate id"))
-        ids.append(fid)
-        geom, why = feature_geometry(feature)
-        if geom is None:
-            findings.append(Finding(fid, why))
-            polys.append(None)
-            continue
-        if geom.is_empty or geom.geom_type not in ("Polygon", "MultiPolygon"):
-            findings.append(Finding(fid, f"geometry must be a non-empty Polygon, got {geom.geom_type}{' (empty)' if geom.is_empty else ''}"))
-            polys.append(None)
-            continue
-        bounds = np.asarray(geom.bounds)
-        if (np.abs(bounds[[0, 2]]) > 180).any() or (np.abs(bounds[[1, 3]]) > 90).any():
-            findings.append(Finding(fid, "coordinates are not WGS-84 longitude/latitude (wrong CRS?)"))
-            polys.append(None)
-            continue
-        if not geom.is_valid:
-            findings.append(Finding(fid, f"invalid geometry: {shapely.is_valid_reason(geom)}"))
-        partners[fid] = set(map(str, props.get("opposite") or ()))
-        if "axis" in props and not _is_axis(props["axis"]):
-            findings.append(Finding(fid, "axis must be a list of ≥ 2 [longitude, latitude] points (the direction of travel)"))
-        crs_problem = _crs_problem(props.get("crs_metric"), crs_seen)
-        if crs_problem:
-            findings.append(Finding(fid, crs_problem))
-        hal = props.get("hal_m")
-        try:
-            hal_value = float(hal)
-        except (TypeError, ValueError):
-            findings.append(Finding(fid, f"hal_m missing or not a number ({hal!r})"))
-        else:
-            if not hal_value >= hal_min_m:
-                findings.append(Finding(fid, f"hal_m {hal_value:g} m below the minimum {hal_min_m:g} m"))
-        polys.append(geom if geom.is_valid else None)
-    usable = [(fid, p) for fid, p in zip(ids, polys) if p is not None]
-    if len(usable) > 1:
-        crs = metric_crs([p for _, p in usable])
-        metric = project([p for _, p in usable], crs)
-        a, b = shapely.STRtree(metric).query(metric, predicate="intersects")
-        for i, j in zip(a, b):
-            if i < j and usable[j][0] not in partners.get(usable[i][0], ()):  # opposite carriageways may overlap
-                area = shapely.intersection(metric[i], metric[j]).area
-                if area > 1.0:
-                    findings.append(Finding(usable[i][0], f"overlaps {usable[j][0]} ({area:.0f} m²)"))
-    return findings
-
-
-def _is_axis(value) -> bool:
-    try:
-        xy = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        return False
-    return xy.ndim == 2 and xy.shape[0] >= 2 and xy.shape[1] == 2 and bool(np.isfinite(xy).all()) \
-        and bool((np.abs(xy[:, 0]) <= 180).all() and (np.abs(xy[:, 1]) <= 90).all())
+    return check(path, hal_min_m)

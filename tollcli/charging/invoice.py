@@ -13,6 +13,7 @@ import json
 from decimal import Decimal
 
 import pandas as pd
+import shapely
 
 from tollcli import __version__
 from tollcli.charging.canonical_json import canonical_json
@@ -59,6 +60,8 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
     carried_in = dict(continued or {})
     vehicle_attributes = {**(vehicle_attrs or {}), "vehicle_class": vehicle_class}
     columns = ("geoobject", "passage", "n_inside", "n_valid", "n_independent", "charged", "entry_utc")
+    n_parts = shapely.get_num_geometries(geo.polygons)
+    parts_seen = charges["parts_seen"].tolist() if "parts_seen" in charges else [()] * len(charges)
     for k, (gid, passage, n_inside, n_valid, n_indep, charged, entry_utc) in enumerate(zip(*(charges[c] for c in columns))):
         i = index[gid]
         base = {
@@ -67,6 +70,8 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
             "n_valid": int(n_valid), "n_valid_independent": int(n_indep),
             "statuses": statuses[(gid, passage)],
         }  # fmt: skip
+        if n_parts[i] > 1:  # a section cut around other roads: the parts (geo-objects) of it that saw the passage
+            base["parts_seen"] = list(parts_seen[k])
         if not charged:
             not_charged.append(base)
             continue

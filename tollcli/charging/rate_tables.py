@@ -28,6 +28,7 @@ from decimal import Decimal
 from zoneinfo import ZoneInfo
 
 from tollcli.charging.money import money, where
+from tollcli.charging.road_sections import road_of
 from tollcli.errors import DataError
 
 TABLE_KEYS = ("name", "valid_from", "valid_until", "rate")
@@ -56,8 +57,8 @@ class Rate:
         return 2 if self.geoobjects is not None else 1 if self.road_classes is not None else 0
 
     def selects(self, geoobject: str, road_class: str) -> bool:
-        if self.geoobjects is not None:
-            return geoobject in self.geoobjects
+        if self.geoobjects is not None:  # a section cut from a road at its junctions (ID/k) has the road's rates
+            return geoobject in self.geoobjects or road_of(geoobject) in self.geoobjects
         return self.road_classes is None or road_class in self.road_classes
 
 

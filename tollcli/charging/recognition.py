@@ -9,9 +9,10 @@ still be inside. On a geo-object that is one of two opposite carriageways the
 course must also agree with its direction of travel (``carriageways.py``).
 
 Positions inside one geo-object are grouped into passages (a new passage after
-``passage_gap_s`` without a fix inside; in a geo-object with a tunnel, after that plus
-the time its tunnel takes at ``geoobject_store.TUNNEL_MIN_SPEED_MPS``: no GNSS reaches a tunnel, and the
-fixes before and after it are one passage, charged once). In each passage the valid positions are
+``passage_gap_s`` without a fix inside; in a geo-object with a tunnel, or of several parts, after that plus
+the time its tunnel and the longest stretch between its parts take at ``geoobject_store.TUNNEL_MIN_SPEED_MPS``: no
+GNSS reaches a tunnel, no geo-object covers a stretch cut around another road, and the fixes before and after are
+one passage, charged once). In each passage the valid positions are
 thinned to independent ones, at least ``tc_s`` apart (greedy from the first:
 exact), and the geo-object is charged when N_valid,in ≥ ``n_th``.
 """
@@ -34,7 +35,7 @@ PASSAGE_GAP_S = 120.0
 
 def passage_gaps_s(geo, passage_gap_s: float = PASSAGE_GAP_S) -> np.ndarray:
     """Per geo-object: the longest time without a fix inside that still continues a passage, s."""
-    return passage_gap_s + geo.tunnel_times_s()
+    return passage_gap_s + geo.gap_times_s()
 
 
 from tollcli.charging.geoobject_store import GeoObjects, load_geoobjects  # noqa: E402,F401  (re-exported)
@@ -105,7 +106,8 @@ PAIR_COLUMNS = ("epoch_row", "obj", "raim_status", "test_stat", "threshold", "p_
                 "raim_valid")  # fmt: skip
 #: ``direction``: '' or why a carriageway does not count the position (wrong_direction, direction_unknown)
 #: ``hpl_m`` / ``separation_ratio``: the bound a position was declared against and its largest separation (NaN: none)
-OPTIONAL_PAIR_COLUMNS = ("direction", "hpl_m", "separation_ratio")
+#: ``part``: which polygon of a geo-object of several parts holds the position (0-based; 0 for one part)
+OPTIONAL_PAIR_COLUMNS = ("direction", "hpl_m", "separation_ratio", "part")
 
 
 def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams, row_offset: int = 0,
@@ -122,7 +124,7 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
                 "test_stat": np.zeros(0), "threshold": np.zeros(0), "p_fa": np.zeros(0), "hpl_m": np.zeros(0),
                 "separation_ratio": np.zeros(0),
                 "test_stat_source": np.zeros(0, object), "integrity_source": np.zeros(0, object),
-                "raim_valid": np.zeros(0, bool), "direction": np.zeros(0, object)}  # fmt: skip
+                "raim_valid": np.zeros(0, bool), "direction": np.zeros(0, object), "part": np.zeros(0, np.int64)}  # fmt: skip
     raim = run_raim(meas.take(rows), params, hal_m=geo.hal_m[obj],
                     geometry=take_epochs(geometry, rows) if geometry is not None else None)
     status = raim["raim_status"].to_numpy(dtype=object)
@@ -138,7 +140,19 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
             "test_stat_source": raim["test_stat_source"].to_numpy(dtype=object),
             "integrity_source": raim["integrity_source"].to_numpy(dtype=object),
             "raim_valid": np.isin(status, VALID_STATUSES) & shifted_inside,
-            "direction": _directions(epochs, geo, rows, obj, px, py)}  # fmt: skip
+            "direction": _directions(epochs, geo, rows, obj, px, py), "part": parts_of(geo, obj, px, py)}  # fmt: skip
+
+
+def parts_of(geo: GeoObjects, obj: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Per position inside a geo-object: the index of its part (polygon) that holds it, 0 for a one-part geo-object."""
+    out = np.zeros(obj.size, np.int64)
+    n_parts = shapely.get_num_geometries(geo.polygons[obj])
+    multi = np.flatnonzero(n_parts > 1)
+    for k in range(1, int(n_parts.max(initial=1))):  # a few parts at most: one vectorized test per part number
+        sel = multi[n_parts[multi] > k]
+        inside = shapely.contains_xy(shapely.get_geometry(geo.polygons[obj[sel]], k), px[sel], py[sel])
+        out[sel[inside]] = k
+    return out
 
 
 def _directions(epochs: pd.DataFrame, geo: GeoObjects, rows: np.ndarray, obj: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
@@ -231,6 +245,7 @@ def passages(cols: dict[str, np.ndarray], geo: GeoObjects, tc_s: float = 5.0, pa
         "test_stat_source": cols["test_stat_source"][by_obj], "integrity_source": cols["integrity_source"][by_obj],
         "valid": valid, "independent": independent,
         "verdict": cols["verdict"][by_obj],
+        **({"part": cols["part"][by_obj]} if "part" in cols else {}),
     })  # fmt: skip
 
 
@@ -270,6 +285,10 @@ def charges(positions: pd.DataFrame, n_th: int) -> pd.DataFrame:
         out = grouped.agg(entry_utc=("time_utc", "min"), exit_utc=("time_utc", "max"), n_inside=("valid", "size"),
                           n_valid=("valid", "sum"), n_independent=("independent", "sum")).reset_index()  # fmt: skip
     out["charged"] = out["n_independent"] >= n_th
+    if "part" in positions:  # which parts of a geo-object of several the passage went through (1-based)
+        seen = positions[["geoobject", "passage", "part"]].drop_duplicates()
+        by = seen.groupby(["geoobject", "passage"], sort=False)["part"].agg(lambda s: tuple(sorted(int(v) + 1 for v in s)))
+        out["parts_seen"] = [by.get((g, p), ()) for g, p in zip(out["geoobject"], out["passage"])]
     return out.sort_values(["entry_utc", "geoobject"], kind="stable").reset_index(drop=True)
 
 

@@ -54,6 +54,7 @@ from tollcli.charging.rate_tables import (
     parse_vehicle,
     table_in_force,
 )
+from tollcli.charging.road_sections import road_of
 from tollcli.errors import DataError, UsageError
 
 DAYS = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")
@@ -113,6 +114,7 @@ class Tariff:
         """DataError when the per-km tables name a geo-object or road class the geo-object file does not have:
         a misspelt id or class would otherwise leave its row unused and change fees silently."""
         ids, classes = set(map(str, geo_ids)), set(map(str, road_classes))
+        ids |= {road_of(i) for i in ids}  # a road cut into sections (ID/1, ID/2…) is named by its id
         unknown = sorted(set(self.length_km) - ids)
         if unknown:
             raise DataError(f"{self.source}: [length_km] names geo-object {unknown[0]!r}, which {geo_source} does not have "
@@ -136,7 +138,7 @@ class Tariff:
         """The flat fee for one charged geo-object and the band applied ('' for none)."""
         if self.tables:
             raise DataError(f"{self.source}: a per-km tariff prices a passage by its length: use price()")
-        table = self.geoobject.get(geoobject_id) or self.road_class.get(road_class)
+        table = self.geoobject.get(geoobject_id) or self.geoobject.get(road_of(geoobject_id)) or self.road_class.get(road_class)
         if table is None:
             raise DataError(f"{self.source}: no fee for geo-object {geoobject_id!r} or its road class {road_class!r}")
         if vehicle_class not in table:

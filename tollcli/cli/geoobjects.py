@@ -1,4 +1,4 @@
-"""``tollcli geoobjects build|check``: the geo-object database."""
+"""``tollcli geoobjects build|check|info``: the geo-object database."""
 
 from __future__ import annotations
 
@@ -7,67 +7,107 @@ from typing import Annotated, Optional
 
 import typer
 
-from tollcli.charging.geoobjects import CONNECT_TOL_M, HAL_MAX_M, TRIM_FACTOR, build_from_roads, build_geoobjects, check_geoobjects
+from tollcli.charging.design_hal import HAL_FLOOR_M
+from tollcli.charging.geoobjects import CONNECT_TOL_M, TRIM_FACTOR
 from tollcli.cli import options as opt
 from tollcli.cli.console import warn
 from tollcli.errors import DataError, UsageError
 from tollcli.io.writers import write_text_atomic
 
-app = typer.Typer(help="Build and check geo-objects: constant-HAL buffers around tolled roads.", no_args_is_help=True)
+app = typer.Typer(help="Build, check and inspect geo-objects: constant-HAL buffers around tolled roads.", no_args_is_help=True)
 
 
 @app.command("build")
 def build(
-    roads: Annotated[str, typer.Argument(metavar="ROADS", help="Road network: GeoJSON LineStrings with id, tolled, ...; or an OpenStreetMap file (.osm.pbf, .osm) with --tolled.")],
+    roads: Annotated[str, typer.Argument(metavar="ROADS", help="Road network: GeoJSON, GeoPackage (.gpkg), Shapefile (.shp) or FlatGeobuf (.fgb) LineStrings with id, tolled, ...; or an OpenStreetMap file (.osm.pbf, .osm) with --tolled.")],
     output: opt.GeoJsonOutput = "-",
     tolled: Annotated[Optional[list[str]], typer.Option("--tolled", help="OpenStreetMap: the tolled ways, e.g. 'highway=motorway,trunk', 'toll=yes', 'way:ID,ID', 'ref:E18' (repeat: any matches).")] = None,
-    hal_max: Annotated[float, typer.Option("--hal-max", help="Largest HAL, m.", min=0.1)] = HAL_MAX_M,
-    hal_min: Annotated[float, typer.Option("--hal-min", help="OpenStreetMap: sections whose HAL would fall below this are cut around the near road, or skipped (listed), m.", min=0.0)] = 5.0,
+    hal: Annotated[Optional[list[str]], typer.Option("--hal", help="Design HAL, m: 25 (exactly), 25-50 (the largest the roads kept clear of allow) or CLASS=VALUE for one road class (repeat). Default 25-50, the papers' range.")] = None,
+    hal_max: Annotated[Optional[float], typer.Option("--hal-max", hidden=True, help="Before the design HAL: the largest HAL (now --hal 25-M).", min=0.1)] = None,
+    hal_min: Annotated[float, typer.Option("--hal-min", help="Where no stretch of a section can have its design HAL: the smallest HAL to fall back to (listed); below it the section is skipped (listed), m.", min=0.0)] = HAL_FLOOR_M,
     trim_factor: Annotated[float, typer.Option("--trim-factor", help="Junction ends are cut by this × HAL.", min=0.0)] = TRIM_FACTOR,
-    connect_tol: Annotated[float, typer.Option("--connect-tol", help="Roads closer than this touch (a junction), m.", min=0.0)] = CONNECT_TOL_M,
-    as_json: Annotated[bool, typer.Option("--json", help="Summary (counts, skipped sections and why) as JSON on stdout; needs -o FILE.")] = False,
+    connect_tol: Annotated[float, typer.Option("--connect-tol", help="Roads closer than this on one level meet (a junction), m.", min=0.0)] = CONNECT_TOL_M,
+    as_json: Annotated[bool, typer.Option("--json", help="Summary (counts, coverage, sections below their design HAL, skipped sections and why) as JSON on stdout; needs -o FILE.")] = False,
     quiet: opt.Quiet = False,
 ) -> None:
-    """Buffer each tolled road by HAL = min(HAL_max, half the distance to the nearest road it does not meet).
+    """Build geo-objects for a design HAL: along each tolled section, keep the stretches clear of every road it does not
+    meet by 2 × HAL and buffer them by HAL; cut around the rest.
 
-    From OpenStreetMap, tolled ways are merged into sections between junctions; roads meet only at a shared
-    node, so a road crossing on a bridge or in a tunnel is cut around, never connected."""
+    Tolled roads are cut into sections at junctions (OpenStreetMap: shared nodes; other files: roads meeting on one
+    level). A section cut around a near road keeps several parts, charged once per passage at its whole length. Where
+    no stretch can have the design HAL, the largest HAL down to --hal-min is used and listed. Nothing is written that
+    'geoobjects check' or 'process' would refuse."""
+    from tollcli.charging.design_hal import parse_design_hal
+    from tollcli.charging.geoobject_check import check_features
+    from tollcli.charging.geoobjects import build_from_roads, fallbacks, roads_of
     from tollcli.readers.osm import is_osm
 
     if output != "-" and not output.lower().endswith((".geojson", ".json")):
         raise UsageError(f"{output}: geo-objects are written as GeoJSON (.geojson)")
     if as_json and output == "-":
         raise UsageError("--json writes the summary on stdout: give -o FILE for the geo-objects")
-    skipped: list[dict] = []
+    if hal_max is not None:  # the option of earlier versions: the papers' range, capped at it
+        hal = [*(hal or []), f"{min(25.0, hal_max):g}-{hal_max:g}"] if not any("=" not in h for h in hal or []) else hal
+    design = parse_design_hal(hal)
     if is_osm(roads):
         from tollcli.charging.osm_network import osm_roads
         from tollcli.readers.osm import read_osm_roads
 
-        doc, skipped = build_from_roads(osm_roads(read_osm_roads(roads), tolled or []), roads, hal_max, connect_tol,
-                                        trim_factor, hal_min_m=hal_min)  # fmt: skip
-        if not doc["features"]:
-            raise DataError(f"{roads}: no tolled section could be built ({len(skipped)} skipped: {skipped[0]['reason'] if skipped else ''})")
+        network = osm_roads(read_osm_roads(roads), tolled or [])
     elif tolled:
         raise UsageError("--tolled selects ways of an OpenStreetMap file; a GeoJSON network says tolled per feature")
     else:
-        doc = build_geoobjects(roads, hal_max, connect_tol, trim_factor)
+        network = roads_of(roads, connect_tol)
+    doc, skipped = build_from_roads(network, roads, design, connect_tol, trim_factor, hal_min)
+    if not doc["features"]:
+        raise DataError(f"{roads}: no tolled section could be built ({len(skipped)} skipped: {skipped[0]['id']}: {skipped[0]['reason'] if skipped else ''})")
+    refused = check_features(doc["features"], hal_min)
+    if refused:  # what check and process would say of the file, said before it is written
+        more = f" and {len(refused) - 1} more" if len(refused) > 1 else ""
+        raise DataError(f"{roads}: not writing geo-objects that check and process would refuse: {refused[0]}{more}")
     write_text_atomic(output, json.dumps(doc, separators=(",", ":"), sort_keys=True) + "\n")
-    hals = [f["properties"]["hal_m"] for f in doc["features"]]
-    frames = sorted({f["properties"]["crs_metric"] for f in doc["features"]})
-    more = f", {len(skipped)} sections skipped (too short or a road too near: --json lists them)" if skipped else ""
-    warn(f"{roads}: {len(hals)} geo-objects, HAL {min(hals):g}–{max(hals):g} m, {len(frames)} metric frame{'s' if len(frames) > 1 else ''}{more}", quiet)
+    below = fallbacks(doc)
+    _tell(roads, doc, below, skipped, design.describe(), quiet)
     if as_json:
+        hals = [f["properties"]["hal_m"] for f in doc["features"]]
+        frames = sorted({f["properties"]["crs_metric"] for f in doc["features"]})
         typer.echo(json.dumps({"input": roads, "output": output, "geoobjects": len(hals), "hal_min_m": min(hals), "hal_max_m": max(hals),
-                               "frames": frames, "skipped": skipped}, sort_keys=True))  # fmt: skip
+                               "design_hal_m": design.describe(), "frames": frames, "below_design_hal": below, "skipped": skipped},
+                              sort_keys=True))  # fmt: skip
+
+
+def _tell(roads: str, doc: dict, below: list[dict], skipped: list[dict], design: str, quiet: bool) -> None:
+    """The build's summary line, then each section below its design HAL and each section skipped (stderr)."""
+    props = [f["properties"] for f in doc["features"]]
+    hals = [p["hal_m"] for p in props]
+    frames = {p["crs_metric"] for p in props}
+    covered = sum(p["length_m"] for p in props)
+    tolled = sum(p["section_length_m"] for p in props) + sum(s["section_length_m"] for s in skipped)
+    more = f", {len(below)} below their design HAL" if below else ""
+    more += f", {len(skipped)} sections skipped" if skipped else ""
+    warn(f"{roads}: {len(hals)} geo-objects, HAL {min(hals):g}–{max(hals):g} m (design {design}), covering "
+         f"{covered / 1000:.3f} of {tolled / 1000:.3f} tolled km ({100 * covered / tolled:.1f} %), {len(frames)} metric "
+         f"frame{'s' if len(frames) > 1 else ''}{more}", quiet)  # fmt: skip
+    by_id = {p["id"]: p for p in props}
+    for b in below:
+        p = by_id[b["id"]]
+        near = f" (cut around {', '.join(p['crossings'])})" if p.get("crossings") else ""
+        warn(f"{roads}: {b['id']}: HAL {b['hal_m']:g} m, below its design {b['design_hal_m'][0]:g} m: no stretch of it is "
+             f"clear of other roads by {2 * b['design_hal_m'][0]:g} m{near}", quiet)  # fmt: skip
+    for s in skipped:
+        warn(f"{roads}: {s['id']}: skipped: {s['reason']}", quiet)
 
 
 @app.command("check")
 def check(
     path: Annotated[str, typer.Argument(metavar="FILE", help="Geo-object file (GeoJSON polygons with id and hal_m).")],
+    hal_max: Annotated[Optional[float], typer.Option("--hal-max", hidden=True, help="Before the design HAL: the largest HAL (now --hal 25-M).", min=0.1)] = None,
     hal_min: Annotated[float, typer.Option("--hal-min", help="Smallest acceptable HAL, m.", min=0.0)] = 5.0,
     as_json: Annotated[bool, typer.Option("--json", help="Findings as JSON on stdout.")] = False,
 ) -> None:
     """Report invalid geometry, missing or duplicate ids, overlaps, HAL below a minimum, wrong CRS (exit 1 if any)."""
+    from tollcli.charging.geoobject_check import check_geoobjects
+
     findings = check_geoobjects(path, hal_min)
     if as_json:
         typer.echo(json.dumps([{"feature": f.feature, "problem": f.problem} for f in findings]))
@@ -76,3 +116,38 @@ def check(
             typer.echo(f"{path}: {finding}")
     if findings:
         raise DataError(f"{path}: {len(findings)} problem{'s' if len(findings) > 1 else ''} found")
+
+
+@app.command("info")
+def info(
+    path: Annotated[str, typer.Argument(metavar="FILE", help="Geo-object file (from 'tollcli geoobjects build').")],
+    min_hal: Annotated[float, typer.Option("--min-hal", help="Also give the tolled length covered by geo-objects of at least this HAL, m.", min=0.0)] = 25.0,
+    as_json: Annotated[bool, typer.Option("--json", help="Everything as JSON on stdout.")] = False,
+) -> None:
+    """What a geo-object file holds: counts, HAL histogram, the share of the tolled length covered, and for each
+    geo-object its HAL, design, parts, what holds its HAL and the nearest road kept clear of (and how far away it is)."""
+    from tollcli.charging.geoobject_info import geoobject_info
+
+    summary = geoobject_info(path, min_hal)
+    if as_json:
+        typer.echo(json.dumps(summary, sort_keys=True))
+        return
+    h = summary["hal_m"]
+    lines = [f"{path}: {summary['geoobjects']} geo-objects, {summary['sections_skipped']} tolled sections skipped at build",
+             f"HAL: {h['min']:g}–{h['max']:g} m, median {h['median']:g} m; below their design HAL: {len(summary['below_design_hal'])}"]
+    for b in summary["hal_histogram"]:
+        if b["count"]:
+            upper = f"{b['to_m']:g}" if b["to_m"] is not None else "…"
+            lines.append(f"  HAL {b['from_m']:g}–{upper} m: {b['count']}")
+    tolled = summary["tolled_length_m"]
+    if tolled:
+        lines.append(f"covered: {summary['covered_length_m'] / 1000:.3f} of {tolled / 1000:.3f} tolled km ({100 * summary['covered_share']:.1f} %); "
+                     f"by HAL ≥ {min_hal:g} m: {summary['covered_at_min_hal_m'] / 1000:.3f} km ({100 * summary['covered_share_at_min_hal']:.1f} %)")  # fmt: skip
+    lines.append("id\thal_m\tdesign_m\tlength_m\tsection_m\tparts\thal_bound\tnearest_road\tnearest_road_m")
+    for r in summary["features"]:
+        design = r["design_hal_m"]
+        design = (f"{design[0]:g}" if design[0] == design[1] else f"{design[0]:g}-{design[1]:g}") if isinstance(design, list) else ""
+        distance = f"{r['nearest_road_m']:g}" if r["nearest_road_m"] is not None else ""
+        lines.append(f"{r['id']}\t{r['hal_m']:g}\t{design}\t{r['length_m']:g}\t{r['section_length_m']:g}\t{r['parts']}\t"
+                     f"{r['hal_bound'] or ''}\t{r['nearest_road'] or ''}\t{distance}")
+    typer.echo("\n".join(lines))

@@ -62,7 +62,11 @@ EXAMPLES = {
     "tollcli-plot": ["tollcli plot invoice.json --truth samples/sim/urban-fault/truth.csv -o figures/"],
     "tollcli-report": ["tollcli report invoice.json --truth samples/sim/urban-fault/truth.csv -o report.html"],
     "tollcli-geoobjects": ["tollcli geoobjects build geoobjects/example-roads.geojson -o geo.geojson"],
-    "tollcli-geoobjects-build": ["tollcli geoobjects build geoobjects/example-roads.geojson -o geo.geojson"],
+    "tollcli-geoobjects-build": ["tollcli geoobjects build geoobjects/example-roads.geojson -o geo.geojson",
+                                 "tollcli geoobjects build map.osm.pbf --tolled highway=motorway,trunk --hal motorway=40-50 --hal 25 -o geo.geojson",
+                                 "tollcli geoobjects build roads.gpkg --hal 25 --json -o geo.geojson"],
+    "tollcli-geoobjects-info": ["tollcli geoobjects info geoobjects/example-geoobjects.geojson",
+                                "tollcli geoobjects info geo.geojson --min-hal 25 --json"],
     "tollcli-geoobjects-check": ["tollcli geoobjects check geoobjects/example-geoobjects.geojson --json"],
 }  # fmt: skip
 
@@ -93,7 +97,7 @@ def _page(name: str, cmd, summary: str, subcommands: list[tuple[str, str]] | Non
         out.append(".SH COMMANDS")
         for sub, text in subcommands:
             out += [".TP", f"\\fB{_esc(sub)}\\fR", _esc(text)]
-    params = [p for p in cmd.params if getattr(p, "name", "") not in ("install_completion", "show_completion")]
+    params = [p for p in cmd.params if getattr(p, "name", "") not in ("install_completion", "show_completion") and not getattr(p, "hidden", False)]
     if params:
         out.append(".SH OPTIONS")
         out += [_param(p).rstrip("\n") for p in params]

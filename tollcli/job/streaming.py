@@ -260,7 +260,7 @@ class TailCharger:
                 valid, verdict = pair_verdicts(pairs, self.geo, why, matched, row_offset=self.start)
                 rows = pairs["epoch_row"] - self.start
                 times = epochs["time_utc"].array[rows]
-                cols = {**{k: pairs[k] for k in (*PAIR_COLUMNS, "hpl_m", "separation_ratio") if k in pairs}, "valid": valid, "verdict": verdict,
+                cols = {**{k: pairs[k] for k in (*PAIR_COLUMNS, "hpl_m", "separation_ratio", "part") if k in pairs}, "valid": valid, "verdict": verdict,
                         "t_s": utc_seconds_or_nan(times), "time_utc": times}  # fmt: skip
         if final:
             self.passages.add(cols, None)

@@ -1,0 +1,122 @@
+"""``tollcli geoobjects check``: what makes a geo-object file unusable, each problem tied to its feature.
+
+Run on every file before it is compiled for charging (``geoobject_store.py``: a file check rejects is never
+charged) and on what ``tollcli geoobjects build`` is about to write (a build never writes what check would reject):
+one list of problems, in the same words everywhere.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from tollcli.spatial import feature_geometry, metric_crs, project, read_features
+
+
+@dataclass
+class Finding:
+    """One problem of a geo-object file, tied to a feature."""
+
+    feature: str  # id, or "#<index>" when the feature has none
+    problem: str
+
+    def __str__(self) -> str:
+        return f"{self.feature}: {self.problem}"
+
+
+def _feature_id(feature, index: int) -> str:
+    props = feature.get("properties") if isinstance(feature, dict) else None
+    fid = props.get("id") if isinstance(props, dict) else None
+    return str(fid) if fid not in (None, "") else f"#{index}"
+
+
+def _crs_problem(crs, seen: dict) -> str:
+    """Why a feature's ``crs_metric`` cannot be used ('' when absent or a known projected CRS in metres)."""
+    if crs is None:
+        return ""
+    if crs not in seen:
+        from pyproj import CRS
+        from pyproj.exceptions import CRSError
+
+        try:
+            parsed = CRS.from_user_input(crs)
+            metres = parsed.is_projected and all(a.unit_name in ("metre", "meter") for a in parsed.axis_info)
+            seen[crs] = "" if metres else f"crs_metric {crs!r} is not a projected CRS in metres"
+        except (CRSError, TypeError, ValueError):
+            seen[crs] = f"crs_metric {crs!r} is not a known coordinate reference system"
+    return seen[crs]
+
+
+def check_geoobjects(path: str, hal_min_m: float = 5.0) -> list[Finding]:
+    """Problems of a geo-object file, each tied to a feature id (empty list: the file is usable)."""
+    return check_features(read_features(path), hal_min_m)
+
+
+def check_features(features: list, hal_min_m: float = 5.0) -> list[Finding]:
+    """Problems of geo-object features (GeoJSON dicts), each tied to a feature id (empty list: usable)."""
+    findings: list[Finding] = []
+    crs_seen: dict = {}
+    ids: list[str] = []
+    partners: dict[str, set] = {}
+    polys = []
+    for i, feature in enumerate(features):
+        fid = _feature_id(feature, i)
+        props = feature.get("properties") if isinstance(feature, dict) and isinstance(feature.get("properties"), dict) else {}
+        if fid.startswith("#"):
+            findings.append(Finding(fid, "missing id"))
+        if fid in ids:
+            findings.append(Finding(fid, "duplicate id"))
+        ids.append(fid)
+        geom, why = feature_geometry(feature)
+        if geom is None:
+            findings.append(Finding(fid, why))
+            polys.append(None)
+            continue
+        if geom.is_empty or geom.geom_type not in ("Polygon", "MultiPolygon"):
+            findings.append(Finding(fid, f"geometry must be a non-empty Polygon, got {geom.geom_type}{' (empty)' if geom.is_empty else ''}"))
+            polys.append(None)
+            continue
+        bounds = np.asarray(geom.bounds)
+        if (np.abs(bounds[[0, 2]]) > 180).any() or (np.abs(bounds[[1, 3]]) > 90).any():
+            findings.append(Finding(fid, "coordinates are not WGS-84 longitude/latitude (wrong CRS?)"))
+            polys.append(None)
+            continue
+        if not geom.is_valid:
+            findings.append(Finding(fid, f"invalid geometry: {shapely.is_valid_reason(geom)}"))
+        partners[fid] = set(map(str, props.get("opposite") or ()))
+        if "axis" in props and not _is_axis(props["axis"]):
+            findings.append(Finding(fid, "axis must be a list of ≥ 2 [longitude, latitude] points (the direction of travel)"))
+        crs_problem = _crs_problem(props.get("crs_metric"), crs_seen)
+        if crs_problem:
+            findings.append(Finding(fid, crs_problem))
+        hal = props.get("hal_m")
+        try:
+            hal_value = float(hal)
+        except (TypeError, ValueError):
+            findings.append(Finding(fid, f"hal_m missing or not a number ({hal!r})"))
+        else:
+            if not hal_value >= hal_min_m:
+                findings.append(Finding(fid, f"hal_m {hal_value:g} m below the minimum {hal_min_m:g} m"))
+        polys.append(geom if geom.is_valid else None)
+    usable = [(fid, p) for fid, p in zip(ids, polys) if p is not None]
+    if len(usable) > 1:
+        crs = metric_crs([p for _, p in usable])
+        metric = project([p for _, p in usable], crs)
+        a, b = shapely.STRtree(metric).query(metric, predicate="intersects")
+        for i, j in zip(a, b):
+            if i < j and usable[j][0] not in partners.get(usable[i][0], ()):  # opposite carriageways may overlap
+                area = shapely.intersection(metric[i], metric[j]).area
+                if area > 1.0:
+                    findings.append(Finding(usable[i][0], f"overlaps {usable[j][0]} ({area:.0f} m²)"))
+    return findings
+
+
+def _is_axis(value) -> bool:
+    try:
+        xy = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return xy.ndim == 2 and xy.shape[0] >= 2 and xy.shape[1] == 2 and bool(np.isfinite(xy).all()) \
+        and bool((np.abs(xy[:, 0]) <= 180).all() and (np.abs(xy[:, 1]) <= 90).all())
