@@ -160,6 +160,24 @@ def test_a_road_crossing_on_another_level_does_not_cut_it_into_sections(tmp_path
     assert len(only["properties"]["parts"]) == 2 and only["properties"]["gap_m"] > 0
 
 
+def test_a_passage_spans_the_stretch_between_parts(tmp_path):
+    """The stretch cut out between two parts is driven without a fix inside: a slow vehicle crossing it (2 m/s) is
+    still one passage, charged once."""
+    from tollcli.charging.geoobject_store import TUNNEL_MIN_SPEED_MPS, load_geoobjects
+    from tollcli.charging.recognition import PASSAGE_GAP_S, passage_gaps_s
+
+    roads = _write(tmp_path / "roads.geojson", [
+        ({"id": "A"}, [(0, 0), (2000, 0), (4000, 0)]),
+        ({"id": "UNDER", "tolled": False, "tunnel": "yes"}, [(1500, -800), (2000, 0), (2500, 800)]),
+    ])  # fmt: skip
+    geo = tmp_path / "g.geojson"
+    geo.write_text(json.dumps(build_geoobjects(str(roads))))
+    loaded = load_geoobjects(str(geo))
+    gap = json.loads(geo.read_text())["features"][0]["properties"]["gap_m"]
+    assert gap > 200 and loaded.gap_m.tolist() == [gap]
+    assert passage_gaps_s(loaded).tolist() == pytest.approx([PASSAGE_GAP_S + gap / TUNNEL_MIN_SPEED_MPS])
+
+
 @pytest.mark.parametrize("driver, suffix, crs", [("GPKG", ".gpkg", "EPSG:4326"), ("ESRI Shapefile", ".shp", "EPSG:4326"),
                                                  ("GPKG", ".gpkg", "EPSG:3857"), ("FlatGeobuf", ".fgb", "EPSG:3857")],
                          ids=["gpkg", "shp", "gpkg-3857", "fgb-3857"])  # fmt: skip
@@ -258,3 +276,11 @@ def test_build_from_roads_keeps_the_design_of_each_class(tmp_path):
     doc, skipped = build_from_roads(roads_of(str(roads)), str(roads), parse_design_hal(["motorway=45", "primary=25-30"]))
     hal = {f["properties"]["id"]: f["properties"]["hal_m"] for f in doc["features"]}
     assert hal == {"FAST": 45.0, "SLOW": 30.0} and skipped == []
+
+
+def test_info_tells_what_a_geoobject_file_holds():
+    r = run_cli("geoobjects", "info", str(REPO / "geoobjects" / "example-geoobjects.geojson"))
+    out = r.stdout.decode()
+    assert r.returncode == 0 and "2 geo-objects" in out and "HAL 40–50 m: 2" in out
+    assert "by HAL ≥ 25 m: 3.040 km (94.9 %)" in out
+    assert any(line.startswith("A9-N1\t40.023\t25-50\t") and line.endswith("\troad\tD900\t80.05") for line in out.splitlines())
