@@ -45,7 +45,8 @@ JUNCTIONS_M = [0.0, 4000.0, 8000.0, 12000.0]
 def motorway(tmp_path):
     """Three 4 km motorway sections; at each junction an exit ramp leaving from the junction and an entry ramp joining
     at it, each running 15 m beside the carriageway for 300 m, then off to a local road that crosses the motorway on a
-    bridge; another bridge in the middle of the second section, with no junction; a frontage road 60 m away along
+    bridge, and a slip road 15 m beside it for 300 m that never meets it (before the design HAL: HAL 7.5 m on every
+    section, which single-frequency RAIM cannot protect); another bridge in the middle of the second section, with no junction; a frontage road 60 m away along
     the whole motorway."""
     roads = []
     for k in range(3):
@@ -55,6 +56,8 @@ def motorway(tmp_path):
                       [(x, 0), (x + 20, -15), (x + 320, -15), (x + 420, -120)]))  # fmt: skip
         roads.append(({"id": f"ENTRY{j}", "road_class": "motorway_link", "tolled": False},
                       [(x - 420, 120), (x - 320, 15), (x - 20, 15), (x, 0)]))  # fmt: skip
+        roads.append(({"id": f"SLIP{j}", "road_class": "motorway_link", "tolled": False},  # meets a road, not this one
+                      [(x + 40, 15), (x + 340, 15), (x + 440, 120)]))  # fmt: skip
         roads.append(({"id": f"LOCAL{j}", "road_class": "secondary", "tolled": False, "layer": 1},
                       [(x + 150, -600), (x + 150, 600)]))  # fmt: skip
     roads.append(({"id": "BRIDGE", "road_class": "residential", "tolled": False, "bridge": "yes"}, [(6000, -500), (6000, 500)]))
@@ -82,6 +85,9 @@ def test_a_motorway_with_ramps_beside_it_keeps_its_design_hal(tmp_path):
         assert p["hal_m"] == pytest.approx(30.0, rel=0.01) and p["hal_bound"] == "road" and p["nearest_road"] == "FRONTAGE"
         assert p["length_m"] >= 0.70 * p["section_length_m"] and p["section_length_m"] == pytest.approx(SECTION_M, rel=2e-3)
     assert "BRIDGE" in props["M2"]["crossings"] and len(props["M2"]["parts"]) == 2  # cut around the bridge: two parts
+    # the rule before the design HAL (cut around only what comes within 2 · 5 m): the slip roads hold HAL at 7.5 m
+    before = build_geoobjects(str(tmp_path / "motorway.geojson"), parse_design_hal(["5-50"]))
+    assert [f["properties"]["hal_m"] for f in before["features"]] == pytest.approx([7.45] * 3, abs=0.05)
     assert "parts" not in props["M1"] and "parts" not in props["M3"]
     # no point of a road it does not meet lies inside any geo-object (exactly: within HAL of the polygon's edge)
     roads = json.loads((tmp_path / "motorway.geojson").read_text())["features"]
@@ -114,7 +120,7 @@ def test_drives_on_the_carriageway_charge_each_section_once_ramps_and_frontage_n
     assert [line["geoobject"] for line in invoice["lines"]] == ["M1", "M2", "M3"]  # once each, M2 across its two parts
     m2 = invoice["lines"][1]
     assert m2["parts_seen"] == [1, 2] and "parts_seen" not in invoice["lines"][0]
-    for via in ("FRONTAGE", "EXIT1", "ENTRY2"):
+    for via in ("FRONTAGE", "EXIT1", "ENTRY2", "SLIP1"):
         for raim in ("etc", "ss"):
             assert _charged(tmp_path, roads, geo, via, f"{via}-{raim}", "--raim", raim)["lines"] == [], (via, raim)
 

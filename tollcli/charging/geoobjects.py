@@ -40,6 +40,7 @@ import shapely
 
 from tollcli.charging.carriageways import opposite_pairs
 from tollcli.charging.design_hal import HAL_FLOOR_M, DesignHal
+from tollcli.charging.section_cut import cut_section, hal_bound, section_parts, skip_reason
 from tollcli.errors import DataError
 from tollcli.spatial import feature_geometry, local_frame, project
 
@@ -180,138 +181,6 @@ def fallbacks(doc: dict) -> list[dict]:
 #: buffered geo-objects are densified to this vertex spacing (m) before going back to longitude/latitude, so that
 #: a straight edge in the metric frame stays within a millimetre of the edge between its vertices in any frame
 SEGMENT_M = 100.0
-#: the shortest stretch of centre line a geo-object is built on, m
-MIN_CORE_M = 1.0
-#: the fallback HAL is found to this resolution, m
-HAL_STEP_M = 0.01
-#: a buffer of quad_segs=16 is a polygon inscribed in the circle (its edges up to 1 − cos(π/64) = 0.12 % inside) and
-#: GEOS simplifies its offset curves (up to 1 % of the distance): the trims and cuts are buffered 1.2 % wider, and the
-#: HAL of what is left is then capped at half its exact distance to the roads cut around
-CIRCUMSCRIBE = 1.01 / np.cos(np.pi / 64)
-
-
-def _clear_of(geom, radius_m: float):
-    """The area within ``radius_m`` of ``geom`` (a polygon that contains the whole disc around every point)."""
-    return shapely.buffer(geom, radius_m * CIRCUMSCRIBE, quad_segs=16)
-
-
-@dataclass
-class _Cut:
-    """One way of building a section: its HAL, the centre line left, the roads cut around and how much they took."""
-
-    hal: float
-    low: float  # the design's low end it was built for (roads closer than 2·low are cut around)
-    core: object
-    near: np.ndarray
-    cut_m: float
-    trimmed_away: bool  # nothing left after the junction trims alone
-    bound: int | None = None  # index into the roads kept clear of of the one that holds HAL below `high` (None: none)
-    bound_m: float = float("nan")  # its distance from the section (the centre line; a road cut around: what is left)
-
-    @property
-    def ok(self) -> bool:
-        return not self.core.is_empty and self.core.length >= MIN_CORE_M
-
-
-def _mm(value: float) -> float:
-    """Whole millimetres, rounded down (a HAL never above half a distance)."""
-    return float(np.floor(value * 1000.0 + 1e-6) / 1000.0)
-
-
-def _attempt(line, met_union, others, other_dist, metric, low, high, trim_factor) -> _Cut:
-    """The section built for [low, high]: trim at the roads met, cut around the others closer than 2·low."""
-    near = other_dist < 2 * low
-    far = np.flatnonzero(~near)
-    bound, bound_m, hal = None, float("nan"), float(high)
-    if far.size and other_dist[far].min() / 2.0 < high:
-        k = int(far[np.argmin(other_dist[far])])
-        bound, bound_m, hal = k, float(other_dist[k]), float(other_dist[k]) / 2.0
-    hal = _mm(hal)
-    core = line
-    if met_union is not None:
-        core = shapely.difference(core, _clear_of(met_union, trim_factor * hal))
-    trimmed_away = core.is_empty or core.length < MIN_CORE_M
-    cut_m = 0.0
-    if near.any() and not trimmed_away:
-        cut_around = metric[others[near]]
-        kept = shapely.difference(core, _clear_of(shapely.union_all(cut_around), 2 * hal))
-        cut_m = core.length - kept.length
-        core = kept
-        if not core.is_empty:  # exact: no point of a road cut around within 2 · HAL of what is left
-            d = shapely.distance(core, cut_around)
-            if _mm(d.min() / 2.0) < hal:
-                k = int(np.argmin(d))
-                bound, bound_m, hal = int(np.flatnonzero(near)[k]), float(d[k]), _mm(d.min() / 2.0)
-    return _Cut(hal, low, core, others[near], cut_m, trimmed_away, bound, bound_m)
-
-
-def _section(line, met_union, others, other_dist, metric, low, high, trim_factor, hal_min_m) -> _Cut | None:
-    """The section at its design HAL; else at the largest HAL ≥ ``hal_min_m`` that leaves a stretch; else None."""
-    cut = _attempt(line, met_union, others, other_dist, metric, low, high, trim_factor)
-    if cut.ok:
-        return cut
-    if hal_min_m > high:
-        return None
-    floor = _attempt(line, met_union, others, other_dist, metric, hal_min_m, hal_min_m, trim_factor)
-    if not floor.ok:
-        return None
-    good, bad = hal_min_m, high  # a stretch is left at `good`, none at `bad` (fewer roads cut, narrower cuts below)
-    best = floor
-    while bad - good > HAL_STEP_M:
-        mid = (good + bad) / 2.0
-        trial = _attempt(line, met_union, others, other_dist, metric, mid, mid, trim_factor)
-        good, bad, best = (mid, bad, trial) if trial.ok else (good, mid, best)
-    stepped = round(float(np.floor(good / HAL_STEP_M) * HAL_STEP_M), 2)
-    if stepped > hal_min_m:
-        trial = _attempt(line, met_union, others, other_dist, metric, stepped, stepped, trim_factor)
-        if trial.ok:
-            best = trial
-    return best
-
-
-def _skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, hal_min_m) -> str:
-    at_floor = _attempt(line, met_union, others, other_dist, metric, hal_min_m, hal_min_m, trim_factor)
-    if at_floor.trimmed_away:
-        return f"too short ({line.length:.1f} m) to trim {trim_factor:g} × HAL {hal_min_m:g} m at its junctions"
-    names = ", ".join(sorted(ids[j] for j in at_floor.near))
-    return f"no stretch can have HAL {hal_min_m:g} m: nothing left after cutting {at_floor.cut_m:.1f} m around the roads within {2 * hal_min_m:g} m ({names})"
-
-
-def _parts(line, core, hal: float, frame: str):
-    """The buffered stretches as polygons ordered along the section, with ``[from_m, to_m]`` of each (metric)."""
-    pieces = list(core.geoms) if hasattr(core, "geoms") else [core]
-    pieces = [p for p in pieces if not p.is_empty]
-    polygon = shapely.buffer(shapely.MultiLineString([list(p.coords) for p in pieces]) if len(pieces) > 1 else pieces[0],
-                             hal, quad_segs=16)  # fmt: skip
-    polys = list(polygon.geoms) if polygon.geom_type == "MultiPolygon" else [polygon]
-    if len(polys) == 1:
-        return polys, None
-    spans = []
-    for poly in polys:
-        inside = [p for p in pieces if poly.intersects(p)]
-        ends = [line.line_locate_point(shapely.Point(c)) for p in inside for c in (p.coords[0], p.coords[-1])]
-        spans.append((min(ends), max(ends)))
-    order = np.argsort([a for a, _ in spans], kind="stable")
-    return [polys[k] for k in order], [[round(spans[k][0], 1), round(spans[k][1], 1)] for k in order]
-
-
-def _hal_bound(cut: _Cut, others, other_ids: list[str], low: float) -> dict:
-    """What holds a section's HAL (``hal_bound``): ``design`` (its design's high end), ``road`` (a road kept clear of,
-    ``nearest_road``, at ``nearest_road_m`` = 2 · HAL from the section) or ``fallback`` (below the design's low end:
-    the junction trims and the roads cut around left nothing at a larger HAL; ``nearest_road``: the nearest road
-    kept clear of, from what is left)."""
-    if cut.hal < low:
-        out: dict = {"hal_bound": "fallback"}
-        if len(others):
-            d = shapely.distance(cut.core, others)
-            k = int(np.argmin(d))
-            out.update(nearest_road=other_ids[k], nearest_road_m=round(float(d[k]), 2))
-        return out
-    if cut.bound is None:
-        return {"hal_bound": "design"}
-    return {"hal_bound": "road", "nearest_road": other_ids[cut.bound], "nearest_road_m": round(cut.bound_m, 2)}
-
-
 def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m):
     ids, props = roads.ids, roads.props
     metric = project(lines, frame)
@@ -336,12 +205,12 @@ def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, t
         met = right[mine & meets]
         met_union = shapely.union_all(metric[met]) if met.size else None
         others, other_dist = right[mine & kept_clear], dist[mine & kept_clear]
-        cut = _section(line, met_union, others, other_dist, metric, low, high, trim_factor, hal_min_m)
+        cut = cut_section(line, met_union, others, other_dist, metric, low, high, trim_factor, hal_min_m)
         if cut is None:
             skipped.append({"id": ids[i], "section_length_m": round(line.length, 1),
-                            "reason": _skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, hal_min_m)})  # fmt: skip
+                            "reason": skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, hal_min_m)})  # fmt: skip
             continue
-        polys, spans = _parts(line, cut.core, cut.hal, frame)
+        polys, spans = section_parts(line, cut.core, cut.hal, frame)
         polygon = polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys)
         polygon = shapely.segmentize(polygon, SEGMENT_M)
         properties = {
@@ -350,7 +219,7 @@ def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, t
             "length_m": round(cut.core.length, 1), "section_length_m": round(line.length, 1),
             "design_hal_m": [low, high],
         }  # fmt: skip
-        properties.update(_hal_bound(cut, metric[others], [ids[j] for j in others], low))
+        properties.update(hal_bound(cut, metric[others], [ids[j] for j in others], low))
         if cut.near.size:
             properties.update(crossings=sorted(ids[j] for j in cut.near), cut_m=round(cut.cut_m, 1))
         if spans is not None:
