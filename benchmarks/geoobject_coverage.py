@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from tollcli.charging.design_hal import parse_design_hal
+from tollcli.charging.geoobject_info import covered_lengths_m
 from tollcli.charging.geoobjects import build_from_roads, fallbacks
 from tollcli.charging.osm_network import osm_roads
 from tollcli.readers.osm import read_osm_roads
@@ -43,9 +44,7 @@ def main() -> None:
         doc, skipped = build_from_roads(roads, args.map, parse_design_hal([design]))
         elapsed = time.perf_counter() - t
         props = [f["properties"] for f in doc["features"]]
-        tolled = sum(p["section_length_m"] for p in props) + sum(s["section_length_m"] for s in skipped)
-        covered = sum(p["length_m"] for p in props)
-        at_min = sum(p["length_m"] for p in props if p["hal_m"] >= args.min_hal)
+        tolled, covered, at_min = covered_lengths_m(props, skipped, args.min_hal)
         below = len(fallbacks(doc)) if design != BASELINE else 0
         name = f"{design} (before)" if design == BASELINE else design
         print(f"| {name} | {len(props)} | {len(skipped)} | {below} | {np.median([p['hal_m'] for p in props]):.1f} | "

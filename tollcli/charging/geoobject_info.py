@@ -19,15 +19,25 @@ def _number(value, default=float("nan")) -> float:
         return default
 
 
+def covered_lengths_m(props: list[dict], skipped: list[dict], min_hal_m: float = 0.0) -> tuple[float, float, float]:
+    """(tolled length, length covered, length covered by geo-objects of HAL ≥ ``min_hal_m``), m, from geo-objects'
+    properties (``section_length_m``, else ``length_m``) and the sections a build skipped."""
+    hal = np.array([_number(p.get("hal_m")) for p in props])
+    length = np.nan_to_num(np.array([_number(p.get("length_m")) for p in props]))
+    section = np.nan_to_num(np.array([_number(p.get("section_length_m", p.get("length_m"))) for p in props]))
+    tolled = float(section.sum() + sum(_number(s.get("section_length_m"), 0.0) for s in skipped))
+    return tolled, float(length.sum()), float(length[hal >= min_hal_m].sum())
+
+
 def geoobject_info(path: str, min_hal_m: float = 25.0) -> dict:
     """The summary of a geo-object file as a JSON-ready dict (lengths in metres)."""
     doc = read_json(path, "a GeoJSON file")
     doc_features = features_of(doc, path)
     build = doc.get("tollcli") if isinstance(doc.get("tollcli"), dict) else {}
     skipped = build.get("skipped") or []
+    props = [f.get("properties") or {} for f in doc_features]
     rows = []
-    for f in doc_features:
-        p = f.get("properties") or {}
+    for p in props:
         parts = p.get("parts")
         rows.append({
             "id": str(p.get("id")), "road_class": p.get("road_class", ""), "hal_m": _number(p.get("hal_m")),
@@ -37,9 +47,7 @@ def geoobject_info(path: str, min_hal_m: float = 25.0) -> dict:
             "nearest_road": p.get("nearest_road"), "nearest_road_m": p.get("nearest_road_m"), "cut_around": p.get("crossings", []),
         })  # fmt: skip
     hal = np.array([r["hal_m"] for r in rows])
-    length = np.nan_to_num(np.array([r["length_m"] for r in rows]))
-    section = np.nan_to_num(np.array([r["section_length_m"] for r in rows]))
-    tolled_m = float(section.sum() + sum(_number(s.get("section_length_m"), 0.0) for s in skipped))
+    tolled_m, covered_m, at_min_m = covered_lengths_m(props, skipped, min_hal_m)
     counts, _ = np.histogram(hal[np.isfinite(hal)], bins=HAL_BINS_M)
     below = [r["id"] for r in rows if isinstance(r["design_hal_m"], list) and r["hal_m"] < float(r["design_hal_m"][0])]
     return {
@@ -48,9 +56,9 @@ def geoobject_info(path: str, min_hal_m: float = 25.0) -> dict:
                   "max": float(np.nanmax(hal)) if len(hal) else None},
         "hal_histogram": [{"from_m": lo, "to_m": (hi if np.isfinite(hi) else None), "count": int(n)}
                           for lo, hi, n in zip(HAL_BINS_M[:-1], HAL_BINS_M[1:], counts)],
-        "tolled_length_m": round(tolled_m, 1), "covered_length_m": round(float(length.sum()), 1),
-        "covered_share": round(float(length.sum()) / tolled_m, 4) if tolled_m > 0 else None,
-        "min_hal_m": min_hal_m, "covered_at_min_hal_m": round(float(length[hal >= min_hal_m].sum()), 1),
-        "covered_share_at_min_hal": round(float(length[hal >= min_hal_m].sum()) / tolled_m, 4) if tolled_m > 0 else None,
+        "tolled_length_m": round(tolled_m, 1), "covered_length_m": round(covered_m, 1),
+        "covered_share": round(covered_m / tolled_m, 4) if tolled_m > 0 else None,
+        "min_hal_m": min_hal_m, "covered_at_min_hal_m": round(at_min_m, 1),
+        "covered_share_at_min_hal": round(at_min_m / tolled_m, 4) if tolled_m > 0 else None,
         "below_design_hal": below, "skipped": skipped, "features": rows,
     }  # fmt: skip

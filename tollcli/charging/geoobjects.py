@@ -40,6 +40,7 @@ import shapely
 
 from tollcli.charging.carriageways import opposite_pairs
 from tollcli.charging.design_hal import HAL_FLOOR_M, DesignHal
+from tollcli.charging.geoobject_check import check_geoobjects  # noqa: F401  (re-exported)
 from tollcli.charging.section_cut import cut_section, hal_bound, section_parts, skip_reason
 from tollcli.errors import DataError
 from tollcli.spatial import feature_geometry, local_frame, project
@@ -239,10 +240,3 @@ def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, t
 
 #: road properties a geo-object keeps (OpenStreetMap ways, reference, travel direction, tunnel flag)
 PASSED_THROUGH = ("osm_way_ids", "ref", "oneway", "tunnel", "tunnel_m", "maxspeed")
-
-
-def check_geoobjects(path: str, hal_min_m: float = 5.0):
-    """Problems of a geo-object file (:func:`tollcli.charging.geoobject_check.check_geoobjects`)."""
-    from tollcli.charging.geoobject_check import check_geoobjects as check
-
-    return check(path, hal_min_m)

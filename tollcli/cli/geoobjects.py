@@ -46,8 +46,9 @@ def build(
         raise UsageError(f"{output}: geo-objects are written as GeoJSON (.geojson)")
     if as_json and output == "-":
         raise UsageError("--json writes the summary on stdout: give -o FILE for the geo-objects")
-    if hal_max is not None:  # the option of earlier versions: the papers' range, capped at it
-        hal = [*(hal or []), f"{min(25.0, hal_max):g}-{hal_max:g}"] if not any("=" not in h for h in hal or []) else hal
+    gives_default = any("=" not in h for h in hal or [])
+    if hal_max is not None and not gives_default:  # the option of earlier versions: the papers' range, capped at it
+        hal = [*(hal or []), f"{min(25.0, hal_max):g}-{hal_max:g}"]
     design = parse_design_hal(hal)
     if is_osm(roads):
         from tollcli.charging.osm_network import osm_roads
@@ -78,11 +79,12 @@ def build(
 
 def _tell(roads: str, doc: dict, below: list[dict], skipped: list[dict], design: str, quiet: bool) -> None:
     """The build's summary line, then each section below its design HAL and each section skipped (stderr)."""
+    from tollcli.charging.geoobject_info import covered_lengths_m
+
     props = [f["properties"] for f in doc["features"]]
     hals = [p["hal_m"] for p in props]
     frames = {p["crs_metric"] for p in props}
-    covered = sum(p["length_m"] for p in props)
-    tolled = sum(p["section_length_m"] for p in props) + sum(s["section_length_m"] for s in skipped)
+    tolled, covered, _ = covered_lengths_m(props, skipped)
     more = f", {len(below)} below their design HAL" if below else ""
     more += f", {len(skipped)} sections skipped" if skipped else ""
     warn(f"{roads}: {len(hals)} geo-objects, HAL {min(hals):g}–{max(hals):g} m (design {design}), covering "
