@@ -50,10 +50,14 @@ def test_formats_round_trip(tmp_path):
     for path in outs.values():
         assert run_cli("epochs", SAMPLE, "-o", str(path), "-q").returncode == 0
     csv = pd.read_csv(outs["csv"], dtype={"lat_deg": str})
-    csv["lat_deg"] = csv["lat_deg"].map(float)  # Python's float() parses the shortest repr exactly
+    assert csv["lat_deg"].iloc[0] == "42.6987"  # the log's 4241.9220000, as written: no 42.698699999999995
+    csv["lat_deg"] = csv["lat_deg"].map(float)
     parquet = pd.read_parquet(outs["parquet"])
+    assert parquet["lat_deg"].iloc[0] != 42.6987  # the double (42 + 41.922/60) is a bit off; Parquet keeps it
     assert str(parquet["time_utc"].dtype) == "datetime64[ms, UTC]"
-    pd.testing.assert_series_equal(csv["lat_deg"], parquet["lat_deg"], check_exact=True)
+    # CSV: 15 significant digits, the double's decimal (every decimal of ≤ 15 digits comes back as written)
+    pd.testing.assert_series_equal(csv["lat_deg"], parquet["lat_deg"].map(lambda v: float(f"{v:.15g}")), check_exact=True)
+    assert (csv["lat_deg"] - parquet["lat_deg"]).abs().max() <= 1e-14 * 90
     geo = json.loads(outs["geojson"].read_text())
     assert geo["type"] == "FeatureCollection" and len(geo["features"]) == 180
     first = geo["features"][0]

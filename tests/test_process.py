@@ -130,7 +130,16 @@ def test_invoice_is_byte_identical_and_totals_add_up(tmp_path):
     assert all(line["evidence"] and all(e["raim_status"] in ("valid", "excluded_valid") for e in line["evidence"]) for line in inv["lines"])
     assert len(inv["inputs"]["log_sha256"]) == 64 and inv["parameters"]["tc_s"] == 5.0
     csv = run_cli("process", SAMPLE, "--geo", GEO, "--tariff", TARIFF, "-o", str(tmp_path / "inv.csv"), "-q")
-    assert csv.returncode == 0 and (tmp_path / "inv.csv").read_text().splitlines()[-1].endswith("EUR,1.90")
+    assert csv.returncode == 0
+    import csv as csvlib
+
+    rows = list(csvlib.DictReader((tmp_path / "inv.csv").open(newline="")))
+    # one row per invoice line, each naming its vehicle and log; the total is no row (a sum of the fee column)
+    assert [r["geoobject"] for r in rows] == [line["geoobject"] for line in inv["lines"]]
+    assert all(r["vehicle"] == inv["vehicle"] and r["log"] == SAMPLE and r["currency"] == "EUR" for r in rows)
+    assert sum(Decimal(r["fee"]) for r in rows) == Decimal(inv["total"]) and "TOTAL" not in (tmp_path / "inv.csv").read_text()
+    piped = run_cli("process", SAMPLE, "--geo", GEO, "--tariff", TARIFF, "-f", "csv", "-o", "-", "-q")
+    assert piped.returncode == 0 and piped.stdout.decode() == (tmp_path / "inv.csv").read_text()
 
 
 def test_truck_in_the_morning_peak_pays_the_band(tmp_path):

@@ -159,7 +159,7 @@ def _figure_of(monkeypatch, draw, run_data):
     from tollcli.report import plots
 
     kept = {}
-    monkeypatch.setattr(plots, "_save", lambda fig, outdir, name: kept.setdefault("fig", fig))
+    monkeypatch.setattr(plots, "_save", lambda fig, outdir, name, fmt="png": kept.setdefault("fig", fig))
     draw(run_data, "unused")
     return kept["fig"]
 

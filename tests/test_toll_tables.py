@@ -234,8 +234,8 @@ def test_a_drive_across_the_validity_date_is_charged_by_the_right_tables(midnigh
     assert run_cli("process", str(midnight_drive / "drive.nmea"), "--geo", str(GEO), "--tariff", str(TRUCK), *ATTRS,
                    "-o", str(csv), "-q").returncode == 0  # fmt: skip
     header, first, *_ = csv.read_text().splitlines()
-    assert header.split(",")[6:11] == ["band", "tariff_table", "length_km", "rate_per_km", "rate_per_passage"]
-    assert first.split(",")[7:9] == ["2024-H1", "1.471"]
+    assert header.split(",")[8:13] == ["band", "tariff_table", "length_km", "rate_per_km", "rate_per_passage"]
+    assert first.split(",")[9:11] == ["2024-H1", "1.471"]
     page = tmp_path / "report.html"
     assert run_cli("report", str(inv), "-o", str(page)).returncode == 0
     assert "<th>rate per km</th>" in page.read_text() and "<td>2024-H1</td><td>1.471</td><td>0.344</td><td>0.51</td>" in page.read_text()

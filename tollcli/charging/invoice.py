@@ -277,13 +277,22 @@ def seal(invoice: dict) -> SealedInvoice:
 
 
 def invoice_csv(invoice: dict) -> str:
-    """The invoice lines as CSV (one row per charged passage) with the total last."""
-    cols = ["geoobject", "name", "road_class", "entry_utc", "exit_utc", "n_valid_independent", "band", "fee"]
+    """The invoice lines as CSV: one row per charged passage, each with its vehicle, log and currency.
+
+    A table of passages only — no total row among them (the total is the invoice's, in its JSON and on stderr):
+    CSVs of many invoices concatenate into one table, and a spreadsheet's sum of ``fee`` is the total.
+    """
+    import csv
+    import io
+
+    cols = ["vehicle", "log", "geoobject", "name", "road_class", "entry_utc", "exit_utc", "n_valid_independent", "band", "fee", "currency"]
     if any("tariff_table" in line for line in invoice["lines"]):  # per-km tables: what each fee was charged for
-        cols[-1:-1] = ["tariff_table", "length_km", "rate_per_km", "rate_per_passage"]
-    rows = [",".join(cols)]
+        cols[-2:-2] = ["tariff_table", "length_km", "rate_per_km", "rate_per_passage"]
+    common = {"vehicle": invoice.get("vehicle"), "log": (invoice.get("inputs") or {}).get("log"), "currency": invoice.get("currency")}
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(cols)
     for line in invoice["lines"]:
-        cells = ["" if line.get(c) is None else line.get(c) for c in cols]
-        rows.append(",".join(json.dumps(v) if isinstance(v, str) and "," in v else str(v) for v in cells))
-    rows.append(",".join(["TOTAL", *[""] * (len(cols) - 3), invoice["currency"], invoice["total"]]))
-    return "\n".join(rows) + "\n"
+        row = {**line, **common}
+        writer.writerow(["" if row.get(c) is None else row.get(c) for c in cols])
+    return buf.getvalue()

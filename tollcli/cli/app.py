@@ -16,7 +16,8 @@ COMMANDS = {
     "simulate": ("tollcli.cli.simulate", "simulate"), "locate": ("tollcli.cli.enforcement", "locate"),
     "findings": ("tollcli.cli.enforcement", "findings"), "enforce": ("tollcli.cli.enforcement", "enforce"),
     "plot": ("tollcli.cli.report", "plot"), "report": ("tollcli.cli.report", "report"),
-    "batch": ("tollcli.cli.batch", "batch"), "geoobjects": ("tollcli.cli.geoobjects", "app"),
+    "batch": ("tollcli.cli.batch", "batch"), "info": ("tollcli.cli.info", "info"),
+    "geoobjects": ("tollcli.cli.geoobjects", "app"),
 }  # fmt: skip
 
 EPILOG = (

@@ -100,10 +100,12 @@ def audit(
     tariff: Annotated[Optional[str], typer.Option("--tariff", help="Tariff to price the passages driven (default: the one each invoice records, where it names it or beside it, checked by its SHA-256).")] = None,
     vehicle_class: Annotated[Optional[str], typer.Option("--vehicle-class", help="Vehicle class to price passages at (default: each invoice's).")] = None,
     vehicle_attr: opt.VehicleAttr = None,
-    invoice_error: Annotated[float, typer.Option("--invoice-error", help="M_e: an invoice is right when within this %% of the true total.", min=0.0)] = 1.0,
+    invoice_error: Annotated[float, typer.Option("--invoice-error", help="M_e: an invoice is right when within this percentage of the true total.", min=0.0)] = 1.0,
     epochs: Annotated[Optional[str], typer.Option("--epochs", help="An integrity epoch table ('tollcli integrity -o', CSV/Parquet): with a --truth trajectory, count positioning failures and those the RAIM missed.")] = None,
     output: opt.JsonOutput = "-",
+    out_fmt: opt.out_format("json", "json") = None,
     quiet: opt.Quiet = False,
+    as_json: opt.JsonSummary = False,
 ) -> None:
     """Count undercharges (driven, not charged) and overcharges (charged, not driven) with rates and 95 % intervals.
 
@@ -112,6 +114,10 @@ def audit(
     """
     if not runs and not epochs:
         raise UsageError("give invoices (RUN...) and/or --epochs with --truth")
+    if out_fmt is not None and out_fmt.lower() != "json":
+        raise UsageError(f"-f {out_fmt}: the audit report is JSON")
+    if as_json and output == "-":
+        raise UsageError("--json prints the summary on stdout: give the report a file with -o")
     integrity = None
     if epochs:
         if not truth or is_id_list(truth):
@@ -121,7 +127,7 @@ def audit(
         report = {"mode": "integrity", "integrity": integrity}
         summary = (f"{integrity['with_position']} positions: {integrity['positioning_failures']} positioning failures, "
                    f"{integrity['undetected']} undetected (rate {integrity['undetected_rate']:.2e}, P_MD {integrity['p_md']:g})")  # fmt: skip
-        _emit(report, summary, output, quiet)
+        _emit(report, summary, output, quiet, as_json)
         return
     found = _expand(runs)
     paths = [p for p, _ in found]
@@ -156,10 +162,10 @@ def audit(
     if integrity is not None:
         report["integrity"] = integrity
         summary += f"; {integrity['positioning_failures']} positioning failures, {integrity['undetected']} undetected"
-    _emit(report, summary, output, quiet)
+    _emit(report, summary, output, quiet, as_json)
 
 
-def _emit(report: dict, summary: str, output: str, quiet: bool) -> None:
+def _emit(report: dict, summary: str, output: str, quiet: bool, as_json: bool = False) -> None:
     opt.require_json(output)
     text = json.dumps(report, indent=2, sort_keys=True, default=str) + "\n"
     to_stdout = output == "-" and sys.stdout.isatty()
@@ -168,7 +174,16 @@ def _emit(report: dict, summary: str, output: str, quiet: bool) -> None:
         typer.echo(summary)
     else:
         write_text_atomic(output, text)
-    warn(summary, quiet)
+    if as_json:
+        typer.echo(json.dumps({"output": output, "mode": report["mode"], "summary": summary,
+                               **{k: report[k] for k in AUDIT_SUMMARY_KEYS if k in report}}, sort_keys=True, default=str))
+    else:
+        warn(summary, quiet)
+
+
+#: the report's figures ``--json`` repeats on stdout
+AUDIT_SUMMARY_KEYS = ("runs", "passages_driven", "missed_recognitions", "false_recognitions", "share_within",
+                      "money_at_risk", "money_at_risk_complete")
 
 
 

@@ -10,7 +10,8 @@ import typer
 
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
-from tollcli.errors import DataError, SomeFailedError, UsageError
+from tollcli.cli.settings_file import Config
+from tollcli.errors import DataError, PartialError, SomeFailedError, UsageError
 from tollcli.job.batch import run_batch
 from tollcli.job.log_files import expand_inputs
 from tollcli.job.pipeline import ChargeSettings
@@ -25,10 +26,11 @@ def batch(
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Address of a Dask distributed scheduler to run on instead (tcp://host:8786).")] = None,
     force: Annotated[bool, typer.Option("--force", help="Process logs again even when their invoice is up to date.")] = False,
     vehicle_class: opt.TariffVehicleClass = "car",
+    vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id of every log (a vehicle's logs of a day; default: each log's own, else its file name).")] = None,
     vehicle_attr: opt.VehicleAttr = None,
     fleet: Annotated[Optional[str], typer.Option("--fleet", help="Fleet CSV: vehicle,vehicle_class,<attribute>… per vehicle id; each log is charged as its vehicle (one not listed fails).")] = None,
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network for map-matching integrity.")] = None,
-    fmt: opt.InputFormat = "auto",
+    input_format: opt.InputFormat = "auto",
     nav: opt.Nav = None,
     policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all.")] = None,
     integrity_sources: opt.IntegritySources = "auto",
@@ -43,8 +45,13 @@ def batch(
     sigma: opt.Sigma = 5.0,
     tc: opt.Tc = 5.0,
     n_th: opt.NTh = 1,
+    strict: opt.Strict = False,
+    date: opt.DateOpt = None,
+    max_bad: opt.MaxBad = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
     quiet: opt.Quiet = False,
+    fmt: Annotated[Optional[str], typer.Option("--format", hidden=True)] = None,
+    config: Config = None,
 ) -> None:
     """Charge many logs: one invoice and one epoch table per log, a Parquet dataset partitioned by date and vehicle, a summary.
 
@@ -60,16 +67,18 @@ def batch(
     """
     if fleet is not None and vehicle_attr:
         raise UsageError("--fleet gives every vehicle its attributes: leave out --vehicle-attr")
+    _, input_format = opt.split_format(fmt, input_format)  # --format: the input's, as before --input-format
     passed_over: list[str] = []
     logs = expand_inputs(inputs, passed_over)
     if passed_over:
         warn(f"  passed over {len(passed_over)} files that are not receiver logs: {', '.join(passed_over[:5])}"
              + (" …" if len(passed_over) > 5 else ""), quiet)  # fmt: skip
-    settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), raim=raim, p_md=p_md, p_fa=p_fa, policy=policy,
+    settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), vehicle=vehicle, raim=raim, p_md=p_md, p_fa=p_fa, policy=policy,
                               environment=environment, p_sat=p_sat, p_const=p_const,
-                              fde=fde, sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th,
-                              integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip
-    with progress(f"batch of {len(logs)} logs", quiet) as advance:
+                              fde=fde, sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
+                              date=date.date().isoformat() if date else None,
+                              integrity_sources=integrity_sources, input_format=input_format)  # fmt: skip
+    with progress(f"batch of {len(logs)} logs", quiet, total=len(logs), unit="logs") as advance:
         summary = run_batch(logs, geo, tariff, settings, output, workers=workers, scheduler=scheduler, force=force,
                             roads=roads, nav=nav, progress=advance, fleet=fleet)  # fmt: skip
     line = (f"{output}: {summary['logs']} logs: {summary['done']} done, {summary['skipped']} up to date, {summary['failed']} failed; "
@@ -88,3 +97,7 @@ def batch(
         message = (f"{summary['failed']} of {summary['logs']} logs failed (see {os.path.join(output, 'failed')}); "
                    f"first: {first}")  # fmt: skip
         raise (DataError if summary["failed"] == summary["logs"] else SomeFailedError)(message)
+    over = [o for o in summary["outcomes"] if max_bad is not None and o.get("skipped_lines", 0) > max_bad]
+    if over:
+        raise PartialError(f"{len(over)} logs skipped more lines than --max-bad {max_bad} (first: {over[0]['log']}, "
+                           f"{over[0]['skipped_lines']} lines); outputs were written")

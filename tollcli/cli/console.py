@@ -18,21 +18,65 @@ def warn(message: str, quiet: bool = False) -> None:
 
 
 @contextmanager
-def progress(description: str, quiet: bool):
-    """Yield ``advance(n_epochs)``; draws a rich spinner only on an interactive stderr."""
-    if quiet or not sys.stderr.isatty():
-        yield lambda n: None
-        return
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+def progress(description: str, quiet: bool, log: str | None = None, total: int | None = None, unit: str = "epochs"):
+    """Yield ``advance(n, line=None)``: ``n`` more ``unit`` done (``line``: the log's line reached); a rich bar only on an
+    interactive stderr.
 
-    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TextColumn("{task.completed} epochs"),
-                  TimeElapsedColumn(), console=err, transient=True) as bar:
-        task = bar.add_task(description, total=None)
-        yield lambda n: bar.advance(task, n)
+    With a percentage when the size is known: ``total`` units, or a plain (uncompressed) ``log`` file whose lines are
+    counted first (a byte scan, done only when the bar is drawn); else a spinner and the count."""
+    if quiet or not sys.stderr.isatty():
+        yield lambda n, line=None: None
+        return
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TaskProgressColumn, TextColumn, TimeElapsedColumn
+
+    lines = _line_count(log) if total is None and log is not None else None
+    known = total if total is not None else lines
+    columns = [SpinnerColumn(), TextColumn("{task.description}")]
+    if known:
+        columns += [BarColumn(bar_width=24), TaskProgressColumn()]
+    columns += [TextColumn("{task.fields[done]} " + unit), TimeElapsedColumn()]
+    with Progress(*columns, console=err, transient=True) as bar:
+        task = bar.add_task(description, total=known or None, done=0)
+        done = 0
+
+        def advance(n: int, line: int | None = None) -> None:
+            nonlocal done
+            done += n
+            if lines and line is not None:
+                bar.update(task, completed=min(line, lines), done=done)
+            elif total is not None:
+                bar.update(task, completed=done, done=done)
+            else:
+                bar.update(task, done=done)
+
+        yield advance
+
+
+def _line_count(log: str) -> int | None:
+    """The number of lines of a plain log file (None for stdin, compressed or unreadable files)."""
+    if log == "-" or log.lower().endswith(".gz") or not os.path.isfile(log):
+        return None
+    try:
+        with open(log, "rb") as fh:
+            n = sum(block.count(b"\n") for block in iter(lambda: fh.read(1 << 22), b""))
+    except OSError:
+        return None
+    return max(n, 1)
 
 
 STATUS_STYLES = {"valid": "green", "excluded_valid": "green", "fault_detected": "red", "probable_false_alarm": "magenta", "unavailable": "yellow",
                  "unmonitored": "dim", "insufficient": "dim"}  # fmt: skip
+
+
+#: an ISO time as the tables write it (2024-05-06T08:00:00.000Z)
+TIME_WIDTH = 24
+
+
+def _column(table, name: str, **kwargs) -> None:
+    """A table column; one of times is never cut nor wrapped (other columns give way on a narrow terminal)."""
+    if "(UTC)" in name:
+        kwargs.update(no_wrap=True, min_width=TIME_WIDTH)
+    table.add_column(name, **kwargs)
 
 
 def invoice_tables(invoice: dict):
@@ -43,7 +87,7 @@ def invoice_tables(invoice: dict):
     per_km = any("tariff_table" in line for line in invoice["lines"])  # per-km tables: the length and rate charged
     extra = ("table", "km", "rate/km") if per_km else ()
     for col in ("geo-object", "entry (UTC)", "exit (UTC)", "positions", "band", *extra, f"fee {invoice['currency']}"):
-        table.add_column(col, justify="right" if col.startswith(("positions", "fee", "km", "rate")) else "left")
+        _column(table, col, justify="right" if col.startswith(("positions", "fee", "km", "rate")) else "left")
     for line in invoice["lines"]:
         more = tuple(str(line.get(k) or "") for k in ("tariff_table", "length_km", "rate_per_km")) if per_km else ()
         table.add_row(line["geoobject"], line["entry_utc"], line["exit_utc"], str(line["n_valid_independent"]), line["band"], *more, line["fee"])
@@ -72,7 +116,7 @@ def invoice_tables(invoice: dict):
     if items:
         found = Table(title="Findings")
         for col in ("kind", "category", "start (UTC)", "end (UTC)"):
-            found.add_column(col)
+            _column(found, col)
         for f in items:
             found.add_row(f"[yellow]{f['kind']}[/yellow]", f["category"], f["start_utc"], f["end_utc"])
         out.append(found)
@@ -106,7 +150,7 @@ def audit_tables(report: dict):
     elif report.get("mode") == "risk":
         t = Table(title=f"Revenue at risk ({report['runs']} runs): {report['money_at_risk']} not charged")
         for col in ("vehicle", "geo-object", "entry (UTC)", "inside", "valid", "why", "fee"):
-            t.add_column(col)
+            _column(t, col)
         for r in report["revenue_at_risk"]:
             t.add_row(r["vehicle"], r["geoobject"], r["entry_utc"], str(r["n_inside"]), str(r["n_valid"]),
                       ", ".join(f"{k} {v}" for k, v in r["why"].items()), r["fee"] or "")  # fmt: skip
@@ -124,7 +168,7 @@ def audit_tables(report: dict):
     if report.get("findings"):
         f = Table(title="Findings")
         for col in ("vehicle", "kind", "category", "start (UTC)", "end (UTC)"):
-            f.add_column(col)
+            _column(f, col)
         for item in report["findings"]:
             f.add_row(item["vehicle"], f"[yellow]{item['kind']}[/yellow]", item["category"], item["start_utc"], item["end_utc"])
         out.append(f)

@@ -63,7 +63,8 @@ def locate(
     at: Annotated[Optional[dt.datetime], typer.Option("--at", formats=["%Y-%m-%dT%H:%M:%S", "%Y-%m-%dT%H:%M:%SZ", "%Y-%m-%dT%H:%M:%S.%fZ", "%Y-%m-%dT%H:%M:%S.%f", "%Y-%m-%d %H:%M:%S"], help="Where was it at this UTC time (the last position at or before it), as the outputs write it (2026-03-02T08:00:00.000Z) or without fraction and Z.")] = None,
     hal: opt.Hal = 50.0,
     output: opt.Output = "-",
-    as_json: Annotated[bool, typer.Option("--json", help="Write JSON records instead of a table (same as -o FILE.json).")] = False,
+    out_fmt: opt.TableFormat = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Write JSON records instead of a table (same as -f json).")] = False,
     strict: opt.Strict = False,
     date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
@@ -95,11 +96,12 @@ def locate(
     rows = [row for log, vid, found in zip(logs, vehicles, per_log) if found is not None for row in located_rows(vid, log, found)]
     rows = latest_per_vehicle(rows)
     frame = pd.DataFrame(rows, columns=list(COLUMNS))
-    if as_json or output.endswith(".json"):
+    kind = "json" if as_json else format_for(output, fmt=out_fmt)
+    if kind == "json":
         records = [{k: (v.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z" if isinstance(v, pd.Timestamp) else v) for k, v in r.items()} for r in rows]
         write_text_atomic(output, json.dumps(records, indent=1) + "\n")
     else:
-        with TableWriter(output, format_for(output)) as writer:
+        with TableWriter(output, kind) as writer:
             writer.write(frame)
             writer.commit()
     trusted = sum(r["which"] == "last_trusted" for r in rows)
@@ -114,17 +116,20 @@ def findings(
     gap_min: Annotated[float, typer.Option("--gap-min", help="A gap lasts at least this long, s.", min=1.0)] = 60.0,
     gap_min_distance: Annotated[float, typer.Option("--gap-min-distance", help="…and ends at least this far away, m.", min=0.0)] = 500.0,
     hal: opt.Hal = 50.0,
-    output: opt.JsonOutput = "-",
+    output: opt.FindingsOutput = "-",
+    out_fmt: opt.FindingsFormat = None,
     strict: opt.Strict = False,
     date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
+    as_json: opt.JsonSummary = False,
 ) -> None:
     """Tamper and evasion findings of one trip (gaps, jamming signs, spoofing signs), with times, positions and evidence.
 
     Writes JSON: the settings used and one record per finding (kind, category,
-    start_utc, end_utc, lat_deg, lon_deg, end_lat_deg, end_lon_deg, evidence).
+    start_utc, end_utc, lat_deg, lon_deg, end_lat_deg, end_lon_deg, evidence);
+    with -f csv, geojson or geojsonseq one row or point per finding (evidence as JSON text).
     """
-    opt.require_json(output)
+    kind = _findings_format(output, out_fmt, as_json)
     overrides = {"gap_min_s": gap_min, "gap_min_m": gap_min_distance}
     if max_speed is not None:  # the given top speed serves any class name
         overrides["max_speed_mps"] = max_speed
@@ -132,9 +137,8 @@ def findings(
     table, sats = _trip(log, hal, strict, date)
     items = trip_findings(table, sats, table, load_geoobjects(geo) if geo else None, settings) if not table.empty else []
     doc = {"log": log, "settings": settings.__dict__, "findings": items}
-    write_text_atomic(output, json.dumps(doc, indent=1, sort_keys=True) + "\n")
-    kinds = Counter(f["kind"] for f in items)
-    warn(f"{log}: {len(items)} findings" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)
+    _write_findings(output, kind, doc)
+    _findings_summary(log, output, items, "findings", quiet, as_json)
 
 
 def enforce(
@@ -145,18 +149,48 @@ def enforce(
     time_tol: Annotated[float, typer.Option("--time-tol", help="A read and a fix match within this many seconds.", min=0.0)] = 30.0,
     distance_tol: Annotated[float, typer.Option("--distance-tol", help="A read this far from the trip is a finding, m.", min=0.0)] = 1000.0,
     pass_dist: Annotated[float, typer.Option("--pass-dist", help="The trip passes a gantry within this distance, m.", min=0.0)] = 50.0,
-    output: opt.JsonOutput = "-",
+    output: opt.FindingsOutput = "-",
+    out_fmt: opt.FindingsFormat = None,
     strict: opt.Strict = False,
     date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
+    as_json: opt.JsonSummary = False,
 ) -> None:
     """Cross-check RFID/DSRC gantry reads with the GNSS trip: reads where the trip was elsewhere or silent, gantries passed without a read."""
-    opt.require_json(output)
+    kind = _findings_format(output, out_fmt, as_json)
     table, _ = _trip(log, 50.0, strict, date)
     ids, geoms, crs = read_gantries(gantries)
     items = cross_check(table, read_reads(reads), ids, geoms, crs, tag, RoadsideSettings(time_tol, distance_tol, pass_dist))
     doc = {"log": log, "tag": tag, "settings": {"time_tol_s": time_tol, "distance_tol_m": distance_tol, "pass_dist_m": pass_dist},
            "findings": items}  # fmt: skip
-    write_text_atomic(output, json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    _write_findings(output, kind, doc)
+    _findings_summary(log, output, items, "roadside findings", quiet, as_json)
+
+
+def _findings_format(output: str, fmt: str | None, as_json: bool) -> str:
+    """The findings' format (JSON, or a table of them); --json needs the findings in a file."""
+    if as_json and output == "-":
+        raise UsageError("--json prints the summary on stdout: give the findings a file with -o")
+    return format_for(output, "json", fmt, ("json", "csv", "geojson", "geojsonseq"))
+
+
+def _write_findings(output: str, kind: str, doc: dict) -> None:
+    """The findings document as JSON, or its findings one per row or point (evidence as JSON text)."""
+    if kind == "json":
+        write_text_atomic(output, json.dumps(doc, indent=1, sort_keys=True) + "\n")
+        return
+    rows = [{k: (json.dumps(v, sort_keys=True) if isinstance(v, (dict, list)) else v) for k, v in f.items()} for f in doc["findings"]]
+    first = ["kind", "category", "start_utc", "end_utc", "lat_deg", "lon_deg", "end_lat_deg", "end_lon_deg"]
+    columns = first + sorted({k for r in rows for k in r} - set(first))
+    with TableWriter(output, kind) as writer:
+        writer.write(pd.DataFrame(rows, columns=columns))
+        writer.commit()
+
+
+def _findings_summary(log: str, output: str, items: list, what: str, quiet: bool, as_json: bool) -> None:
+    """The closing line on stderr, or with --json the counts on stdout."""
     kinds = Counter(f["kind"] for f in items)
-    warn(f"{log}: {len(items)} roadside findings" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)
+    if as_json:
+        typer.echo(json.dumps({"log": log, "output": output, "findings": len(items), "kinds": dict(sorted(kinds.items()))}, sort_keys=True))
+        return
+    warn(f"{log}: {len(items)} {what}" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)

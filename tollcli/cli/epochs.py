@@ -12,7 +12,7 @@ from tollcli.cli.console import progress, warn
 from tollcli.errors import UsageError
 from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for
-from tollcli.readers.navigation import iter_navigation_tables
+from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats, iter_nmea_tables
 from tollcli.readers.nmea.reader import check_partial, check_usable
 
@@ -20,9 +20,10 @@ from tollcli.readers.nmea.reader import check_partial, check_usable
 def epochs(
     log: opt.LogArg,
     output: opt.Output = "-",
+    out_fmt: opt.TableFormat = None,
     satellites: Annotated[
         Optional[str],
-        typer.Option("--satellites", help="Also write the satellite table (one row per satellite and epoch) here."),
+        typer.Option("--satellites", help="Also write the satellite table (one row per satellite and epoch) here (its format: its extension, else -f)."),
     ] = None,
     strict: opt.Strict = False,
     date: opt.DateOpt = None,
@@ -48,13 +49,13 @@ def epochs(
     if satellites == "-" and output == "-":
         raise UsageError("only one table can go to stdout: give --satellites or -o a file")
     stats = ReadStats()
-    epoch_writer = TableWriter(output, format_for(output))
-    sat_writer = TableWriter(satellites, format_for(satellites)) if satellites else None
+    epoch_writer = TableWriter(output, format_for(output, fmt=out_fmt))
+    sat_writer = TableWriter(satellites, _sat_format(satellites, out_fmt)) if satellites else None
     with epoch_writer, (sat_writer or _Null()):
-        with progress(f"reading {log}", quiet) as advance:
+        with progress(f"reading {log}", quiet, log=log) as advance:
             day = date.date() if date else None
             kind = sniff_format(log)
-            if kind not in ("ubx-nav", "gpsd-json"):  # NMEA (and what is nothing else: its errors say why)
+            if kind not in NAVIGATION_KINDS or kind == "nmea":  # NMEA (and what is nothing else: its errors say why)
                 chunks = iter_nmea_tables(log, strict=strict, date=day, stats=stats, engine=reader)
             else:
                 chunks = iter_navigation_tables(log, kind, strict=strict, stats=stats)
@@ -62,7 +63,7 @@ def epochs(
                 epoch_writer.write(chunk.epochs)
                 if sat_writer is not None:
                     sat_writer.write(chunk.satellites)
-                advance(len(chunk.epochs))
+                advance(len(chunk.epochs), int(chunk.epochs["line"].max()) if len(chunk.epochs) else None)
         check_usable(stats)
         if stats.epochs == 0:
             from tollcli.readers.nmea.tables import epoch_frame, satellite_frame
@@ -78,6 +79,16 @@ def epochs(
     else:
         warn(stats.summary(), quiet)
     check_partial(stats, max_bad)
+
+
+def _sat_format(path: str, fmt: str | None) -> str:
+    """The satellite table's format: its own extension, else -f, else CSV."""
+    try:
+        return format_for(path)
+    except UsageError:
+        if fmt:
+            return format_for(path, fmt=fmt)
+        raise
 
 
 class _Null:

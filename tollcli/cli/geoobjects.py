@@ -12,7 +12,7 @@ from tollcli.charging.geoobjects import CONNECT_TOL_M, TRIM_FACTOR
 from tollcli.cli import options as opt
 from tollcli.cli.console import warn
 from tollcli.errors import DataError, UsageError
-from tollcli.io.writers import write_text_atomic
+from tollcli.io.writers import is_stream, write_text_atomic
 
 app = typer.Typer(help="Build, check and inspect geo-objects: constant-HAL buffers around tolled roads.", no_args_is_help=True)
 
@@ -21,6 +21,7 @@ app = typer.Typer(help="Build, check and inspect geo-objects: constant-HAL buffe
 def build(
     roads: Annotated[str, typer.Argument(metavar="ROADS", help="Road network: GeoJSON, GeoPackage (.gpkg), Shapefile (.shp) or FlatGeobuf (.fgb) LineStrings with id, tolled, ...; or an OpenStreetMap file (.osm.pbf, .osm) with --tolled.")],
     output: opt.GeoJsonOutput = "-",
+    out_fmt: opt.out_format("geojson", "geojson") = None,
     tolled: Annotated[Optional[list[str]], typer.Option("--tolled", help="OpenStreetMap: the tolled ways, e.g. 'highway=motorway,trunk', 'toll=yes', 'way:ID,ID', 'ref:E18' (repeat: any matches).")] = None,
     hal: Annotated[Optional[list[str]], typer.Option("--hal", help="Design HAL, m: 25 (exactly), 25-50 (the largest the roads kept clear of allow) or CLASS=VALUE for one road class (repeat). Default 25-50, the papers' range.")] = None,
     hal_max: Annotated[Optional[float], typer.Option("--hal-max", hidden=True, help="Before the design HAL: the largest HAL (now --hal 25-M).", min=0.1)] = None,
@@ -42,7 +43,9 @@ def build(
     from tollcli.charging.geoobjects import build_from_roads, fallbacks, roads_of
     from tollcli.readers.osm import is_osm
 
-    if output != "-" and not output.lower().endswith((".geojson", ".json")):
+    if out_fmt is not None and out_fmt.lower() != "geojson":
+        raise UsageError(f"-f {out_fmt}: geo-objects are written as GeoJSON (what check, info and process read)")
+    if not is_stream(output) and not output.lower().endswith((".geojson", ".json")):
         raise UsageError(f"{output}: geo-objects are written as GeoJSON (.geojson)")
     if as_json and output == "-":
         raise UsageError("--json writes the summary on stdout: give -o FILE for the geo-objects")

@@ -12,6 +12,7 @@ import typer
 
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
+from tollcli.cli.settings_file import Config
 from tollcli.errors import UsageError
 from tollcli.gnss.sigma_models import SIGMA_MODELS, NominalModel
 from tollcli.integrity.environment import ENVIRONMENTS
@@ -28,7 +29,8 @@ from tollcli.readers.nmea.reader import check_partial, check_usable
 def integrity(
     log: opt.LogArg,
     output: opt.Output = "-",
-    fmt: opt.InputFormat = "auto",
+    out_fmt: opt.TableFormat = None,
+    input_format: opt.InputFormat = "auto",
     nav: opt.Nav = None,
     integrity_sources: opt.IntegritySources = "auto",
     raim: opt.RaimMode = "ss",
@@ -49,6 +51,7 @@ def integrity(
     max_bad: opt.MaxBad = None,
     checks: Annotated[bool, typer.Option("--checks", help="Add the speed check, the Kalman HIT and (with --roads) map matching and its fuzzy integrity; reads the whole log first.")] = False,
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings) to match onto; implies --checks.")] = None,
+    config: Config = None,
 ) -> None:
     """Check every epoch with every integrity source the log has and write the epoch table with its verdict.
 
@@ -75,7 +78,7 @@ def integrity(
     log), insufficient (fewer than unknowns + 1 measurements). docs/integrity.md
     measures every setting against the truth of real drives.
     """
-    opt.check_input_format(fmt)
+    out_fmt, fmt = opt.split_format(out_fmt, input_format)
     if sigma_model not in SIGMA_MODELS:
         raise UsageError(f"--sigma-model {sigma_model}: use one of {', '.join(SIGMA_MODELS)}")
     if iono not in ("single", "sbas", "iono-free"):
@@ -95,7 +98,7 @@ def integrity(
     kind = sniff_format(log) if fmt == "auto" else fmt
     day = date.date() if date else None
     counts: Counter[str] = Counter()
-    writer = TableWriter(output, format_for(output))
+    writer = TableWriter(output, format_for(output, fmt=out_fmt))
     stats = ReadStats()
     with writer:
         if checks or roads:
@@ -175,12 +178,12 @@ def with_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
 
 def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto",
           kind="nmea") -> None:
-    with progress(f"checking {log}", quiet) as advance:
+    with progress(f"checking {log}", quiet, log=log) as advance:
         for chunk in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, date=day,
                                     environment=environment):
             writer.write(chunk.table)
             _tally(chunk.table, counts)
-            advance(len(chunk.table))
+            advance(len(chunk.table), int(chunk.table["line"].max()) if len(chunk.table) and "line" in chunk.table else None)
     check_usable(stats)
     warn(stats.summary(), quiet)
 

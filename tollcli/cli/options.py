@@ -13,7 +13,7 @@ LogArg = Annotated[
 ]
 Output = Annotated[
     str,
-    typer.Option("-o", "--output", help="Output file; the format follows the extension (.csv, .parquet, .geojson, .json); - is stdout (CSV)."),
+    typer.Option("-o", "--output", help="Output file; the format follows -f or the extension (.csv, .parquet, .geojson, .geojsonl, .json); - is stdout (CSV unless -f)."),
 ]
 JsonOutput = Annotated[
     str,
@@ -21,7 +21,12 @@ JsonOutput = Annotated[
 ]
 InvoiceOutput = Annotated[
     str,
-    typer.Option("-o", "--output", help="Invoice file: .json (the sealed invoice) or .csv (its lines); - is stdout (JSON)."),
+    typer.Option("-o", "--output", help="Invoice file: .json (the sealed invoice) or .csv (its lines, one row each); - is stdout (JSON unless -f csv)."),
+]
+
+FindingsOutput = Annotated[
+    str,
+    typer.Option("-o", "--output", help="Findings file: .json (the document), .csv, .geojson or .geojsonl (one per finding); - is stdout (JSON unless -f)."),
 ]
 GeoJsonOutput = Annotated[
     str,
@@ -32,22 +37,51 @@ GeoJsonOutput = Annotated[
 def require_json(output: str) -> str:
     """UsageError unless ``output`` is ``-`` or a .json file (commands that write one JSON document)."""
     from tollcli.errors import UsageError
+    from tollcli.io.writers import is_stream
 
-    if output != "-" and not output.lower().endswith(".json"):
+    if not is_stream(output) and not output.lower().endswith(".json"):
         raise UsageError(f"{output}: this command writes JSON: name the file .json (or - for stdout)")
     return output
-InputFormat = Annotated[str, typer.Option("--format", help="Input: auto, nmea, ubx-nav (u-blox NAV-PVT/SOL/POSLLH, NAV-SAT/SVINFO with prRes, NAV-DOP, NAV-PL, HNR-PVT), gpsd-json (gpspipe -w, gpsdecode: TPV, SKY, GST), gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX), librsf (libRSF text: smartLoc pseudorange3/odom3).")]
+InputFormat = Annotated[str, typer.Option("--input-format", help="Input: auto, nmea, ubx-nav (u-blox NAV-PVT/SOL/POSLLH, NAV-SAT/SVINFO with prRes, NAV-DOP, NAV-PL, HNR-PVT), gpsd-json (gpspipe -w, gpsdecode: TPV, SKY, GST), rtklib-pos (RTKLIB .pos solutions: Q, sdn/sde/sdne), gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX), librsf (libRSF text: smartLoc pseudorange3/odom3).")]
 Nav = Annotated[Optional[str], typer.Option("--nav", help="Navigation file, RINEX 2 or 3 (GPS, Galileo): the orbits for rinex and gnsslogger input; replaces the file's own satellites for device-gnss and ubx.")]
 
 
 def check_input_format(fmt: str) -> str:
-    """UsageError for a --format that is not one of INPUT_FORMATS."""
+    """UsageError for an --input-format that is not one of INPUT_KINDS."""
     from tollcli.errors import UsageError
     from tollcli.io.sources import INPUT_KINDS
 
     if fmt not in INPUT_KINDS:
-        raise UsageError(f"--format {fmt}: use one of {', '.join(INPUT_KINDS)}")
+        raise UsageError(f"--input-format {fmt}: use one of {', '.join(INPUT_KINDS)}")
     return fmt
+
+
+def out_format(formats: str, default: str) -> object:
+    """The ``-f/--format`` option of a command writing ``formats`` (``default`` when neither -f nor -o's extension says)."""
+    return Annotated[Optional[str], typer.Option(
+        "-f", "--format", metavar="FORMAT", show_default=False,
+        help=f"Output format: {formats} (GDAL's driver names too); default: -o's extension, else {default}.")]
+
+
+TableFormat = out_format("csv, parquet, geojson, geojsonseq or json", "csv")
+InvoiceFormat = out_format("json or csv", "json")
+FindingsFormat = out_format("json (the document), csv, geojson or geojsonseq (one record per finding)", "json")
+
+
+def split_format(fmt: str | None, input_format: str) -> tuple[str | None, str]:
+    """(output format, input format) from ``-f/--format`` and ``--input-format``.
+
+    ``--format`` named the input before it named the output (as in ogr2ogr and rio): an input kind given there
+    (``--format nmea``) is still read as the input; the two value sets are disjoint.
+    """
+    from tollcli.errors import UsageError
+    from tollcli.io.sources import INPUT_KINDS
+
+    if fmt is not None and fmt in INPUT_KINDS and fmt != "auto":
+        if input_format not in ("auto", fmt):
+            raise UsageError(f"--format {fmt} and --input-format {input_format}: give the input's format once, with --input-format")
+        return None, fmt
+    return fmt, check_input_format(input_format)
 
 
 Strict = Annotated[

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sys
 from typing import Annotated, Optional
 
@@ -10,8 +11,9 @@ import typer
 from tollcli.charging.invoice import invoice_csv, invoice_json
 from tollcli.cli import options as opt
 from tollcli.cli.console import invoice_tables, show, warn
+from tollcli.cli.settings_file import Config
 from tollcli.errors import UsageError
-from tollcli.io.writers import write_text_atomic
+from tollcli.io.writers import format_for, write_text_atomic
 from tollcli.job.pipeline import ChargeSettings, charge_log
 from tollcli.readers.nmea.reader import check_partial
 
@@ -24,7 +26,8 @@ def process(
     vehicle_attr: opt.VehicleAttr = None,
     vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id (default: the log's file name).")] = None,
     output: opt.InvoiceOutput = "-",
-    fmt: opt.InputFormat = "auto",
+    out_fmt: opt.InvoiceFormat = None,
+    input_format: opt.InputFormat = "auto",
     nav: opt.Nav = None,
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings, tolled and free) for map-matching integrity.")] = None,
     policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")] = None,
@@ -44,6 +47,8 @@ def process(
     date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
     max_bad: opt.MaxBad = None,
+    as_json: opt.JsonSummary = False,
+    config: Config = None,
 ) -> None:
     """Charge a trip: valid, independent positions inside geo-objects → invoice lines with evidence.
 
@@ -54,23 +59,38 @@ def process(
     files and their SHA-256, every parameter used, and the SHA-256 of its own
     content; 'tollcli verify' re-runs it.
     """
-    if output != "-" and not output.lower().endswith((".json", ".csv")):
-        raise UsageError(f"{output}: invoices are written as .json or .csv")
+    out_fmt, fmt = opt.split_format(out_fmt, input_format)
+    kind = format_for(output, "json", out_fmt, ("json", "csv"))
+    if as_json and output == "-":
+        raise UsageError("--json prints the summary on stdout: give the invoice a file with -o")
     settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), vehicle=vehicle, raim=raim, p_md=p_md, p_fa=p_fa, fde=fde,
                               environment=environment, p_sat=p_sat, p_const=p_const,
                               sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
                               date=date.date().isoformat() if date else None, policy=policy,
                               integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip
     invoice, stats = charge_log(log, geo, tariff, settings, nav, roads)
-    if output == "-" and sys.stdout.isatty():
+    if output == "-" and out_fmt is None and sys.stdout.isatty():
         show(lambda: invoice_tables(invoice), False, to_stdout=True)
     else:
-        write_text_atomic(output, invoice_csv(invoice) if output.lower().endswith(".csv") else invoice_json(invoice))
-        show(lambda: invoice_tables(invoice), quiet)
-    warn(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged{_why_not(invoice)}, "
-         f"total {invoice['total']} {invoice['currency']}", quiet)  # fmt: skip
+        write_text_atomic(output, invoice_csv(invoice) if kind == "csv" else invoice_json(invoice))
+        show(lambda: invoice_tables(invoice), quiet or as_json)
+    if as_json:
+        typer.echo(json.dumps(invoice_summary(invoice, output, stats), sort_keys=True))
+    else:
+        warn(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged{_why_not(invoice)}, "
+             f"total {invoice['total']} {invoice['currency']}", quiet)  # fmt: skip
     if stats is not None:
         check_partial(stats, max_bad)
+
+
+def invoice_summary(invoice: dict, output: str, stats=None) -> dict:
+    """What ``--json`` prints: the invoice's totals and where it went (the invoice itself is in the file)."""
+    return {"output": output, "vehicle": invoice["vehicle"], "log": invoice["inputs"].get("log"),
+            "charged": len(invoice["lines"]), "not_charged": len(invoice["not_charged"]),
+            "total": invoice["total"], "currency": invoice["currency"], "content_sha256": invoice["content_sha256"],
+            "integrity_sources_used": invoice["parameters"].get("integrity_sources_used"),
+            "policy_used": invoice["parameters"].get("policy_used"), "findings": len(invoice.get("findings") or []),
+            "skipped_lines": int(stats.skipped) if stats is not None else 0}
 
 
 def _why_not(invoice: dict) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from typing import Annotated, Optional
 
 import typer
@@ -17,24 +18,36 @@ Truth = Annotated[Optional[str], typer.Option("--truth", help="Truth trajectory 
 
 def plot(
     run: Run,
-    output: Annotated[str, typer.Option("-o", "--output", help="Folder for the PNG figures (created if needed).")],
+    output: Annotated[str, typer.Option("-o", "--output", help="Folder for the figures (created if needed).")],
+    out_fmt: opt.out_format("png, svg or pdf", "png") = None,
     truth: Truth = None,
     quiet: opt.Quiet = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the figures written as JSON on stdout.")] = False,
 ) -> None:
-    """PNG figures of a run: trajectory over the geo-objects by RAIM status; HPL/HAL and P_FA over time; valid independent positions per passage against N_Th; with --truth, the Stanford diagram."""
+    """Figures of a run (PNG, or -f svg|pdf): trajectory over the geo-objects by RAIM status; HPL/HAL and P_FA over time; valid independent positions per passage against N_Th; with --truth, the Stanford diagram."""
     from tollcli.report.plots import write_plots
     from tollcli.report.run_data import load_run
 
-    paths = write_plots(load_run(run, truth), output)
-    warn(f"{run}: " + ", ".join(paths), quiet)
+    from tollcli.report.plots import PLOT_FORMATS
+
+    fmt = (out_fmt or "png").lower()
+    if fmt not in PLOT_FORMATS:
+        raise UsageError(f"-f {out_fmt}: figures are png, svg or pdf")
+    paths = write_plots(load_run(run, truth), output, fmt)
+    if as_json:
+        typer.echo(json.dumps({"run": run, "output": output, "format": fmt, "figures": paths}, sort_keys=True))
+    else:
+        warn(f"{run}: " + ", ".join(paths), quiet)
 
 
 def report(
     run: Run,
     output: Annotated[str, typer.Option("-o", "--output", help="The HTML file to write (- for stdout).")] = "report.html",
+    out_fmt: opt.out_format("html", "html") = None,
     truth: Truth = None,
     tiles: Annotated[Optional[str], typer.Option("--tiles", help="A tile URL template for a background map (the page then fetches tiles: no longer offline).")] = None,
     quiet: opt.Quiet = False,
+    as_json: opt.JsonSummary = False,
 ) -> None:
     """One self-contained HTML page for auditing a trip: a Leaflet map (geo-objects, positions by status, charged segments), the invoice, findings and the per-epoch table. Opens offline."""
     from tollcli.report.html import report_html
@@ -42,5 +55,14 @@ def report(
 
     if tiles is not None and "{z}" not in tiles:
         raise UsageError("--tiles: a URL template with {z}, {x} and {y}")
-    write_text_atomic(output, report_html(load_run(run, truth), tiles))
-    warn(f"{run}: report written to {output}", quiet)
+    if out_fmt is not None and out_fmt.lower() != "html":
+        raise UsageError(f"-f {out_fmt}: the report is one HTML page (figures: 'tollcli plot -f png|svg|pdf')")
+    if as_json and output == "-":
+        raise UsageError("--json prints the summary on stdout: give the page a file with -o")
+    data = load_run(run, truth)
+    write_text_atomic(output, report_html(data, tiles))
+    if as_json:
+        typer.echo(json.dumps({"run": run, "output": output, "epochs": int(len(data.epochs)), "truth": truth,
+                               "tiles": tiles}, sort_keys=True))
+    else:
+        warn(f"{run}: report written to {output}", quiet)

@@ -126,7 +126,7 @@ def read_json(path: str, what: str):
 
 
 #: the input formats (``--format``): ``auto`` is :func:`sniff_format`
-INPUT_KINDS = ("auto", "nmea", "ubx-nav", "gpsd-json", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
+INPUT_KINDS = ("auto", "nmea", "ubx-nav", "gpsd-json", "rtklib-pos", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
 #: a u-blox RXM-RAWX frame's first bytes (sync chars, class 0x02, id 0x15)
 UBX_RAWX = b"\xb5\x62\x02\x15"
 #: the first bytes of u-blox frames that carry the receiver's position (NAV-PVT, NAV-SOL, NAV-POSLLH, HNR-PVT)
@@ -139,7 +139,7 @@ def sniff_format(log: str) -> str:
     ``gsdc-derived`` or ``device-gnss`` (their CSV headers), ``rinex`` (the RINEX header), ``gnsslogger`` (a
     ``# Raw,`` header line), ``ubx`` (a u-blox ``RXM-RAWX`` frame in the first 64 KiB: raw measurements),
     ``ubx-nav`` (a u-blox NAV-PVT, NAV-SOL, NAV-POSLLH or HNR-PVT frame, wherever it starts: after text,
-    comments or NMEA), ``librsf`` (a ``pseudorange3``/``odom3``/``point3`` line first), ``gpsd-json`` (a
+    comments or NMEA), ``rtklib-pos`` (an RTKLIB solution file's ``%`` header), ``librsf`` (a ``pseudorange3``/``odom3``/``point3`` line first), ``gpsd-json`` (a
     gpsd report as the first line that is no comment, or a TPV line), else ``nmea``."""
     if log == "-":
         try:  # a pipe's first bytes, left for the reader (``gpspipe -w | tollcli integrity -``)
@@ -170,6 +170,8 @@ def format_of_head(head: bytes) -> str:
         return "device-gnss"
     if b"RINEX VERSION" in first:
         return "rinex"
+    if head.startswith(b"% program") or head.startswith((b"%  GPST ", b"%  UTC ", b"%  JST ")):
+        return "rtklib-pos"
     if b"\n# Raw," in head or head.startswith(b"# Raw,"):
         return "gnsslogger"
     if UBX_RAWX in head:

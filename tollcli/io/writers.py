@@ -12,7 +12,17 @@ Formats, by the output's extension:
 * ``.parquet``: one row group per chunk, column types kept;
 * ``.geojson``: a FeatureCollection of points (``lon_deg``, ``lat_deg``; rows
   without a position get ``"geometry": null``), other columns as properties;
+* ``.geojsonl`` / ``.geojsons`` (GDAL's GeoJSONSeq): one point Feature per line — a stream;
 * ``.json``: an array of row objects.
+
+``-f/--format`` names the format whatever the name (``csv``, ``parquet``, ``geojson``, ``geojsonseq``,
+``json``; GDAL's driver names ``CSV``, ``Parquet``, ``GeoJSON``, ``GeoJSONSeq`` too). A path that is not a
+regular file (``/dev/null``, ``/dev/stdout``, a named pipe) is written to directly: nothing to rename.
+Why this file is long: the five formats share one writer's life cycle (temporary file, commit, discard,
+signals held while a temporary file is named), which is the part that must not be duplicated.
+
+Floats in CSV are written with 15 significant digits: every number a log wrote comes back as written
+(``42.6987``, not ``42.698699999999995``); Parquet keeps the doubles.
 """
 
 from __future__ import annotations
@@ -22,6 +32,7 @@ import json
 import math
 import os
 import signal
+import stat
 import sys
 import tempfile
 import threading
@@ -32,8 +43,11 @@ import pandas as pd
 
 from tollcli.errors import UsageError
 
-FORMATS = ("csv", "parquet", "geojson", "json")
-_EXTENSIONS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".geojson": "geojson", ".json": "json"}
+FORMATS = ("csv", "parquet", "geojson", "geojsonseq", "json")
+_EXTENSIONS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".geojson": "geojson", ".json": "json",
+               ".geojsonl": "geojsonseq", ".geojsons": "geojsonseq", ".geojsonseq": "geojsonseq"}
+#: what a CSV float is written as: 15 significant digits, the most any decimal keeps through a double
+CSV_FLOAT = "%.15g"
 
 
 def _umask_mode() -> int:
@@ -43,14 +57,31 @@ def _umask_mode() -> int:
     return 0o666 & ~mask
 
 
-def format_for(path: str, default: str = "csv") -> str:
-    """The table format an output path asks for by its extension (``-``: ``default``)."""
+def is_stream(path: str) -> bool:
+    """``-``, or a path that is no regular file (``/dev/null``, ``/dev/stdout``, a FIFO): written to directly."""
     if path == "-":
+        return True
+    try:
+        return not stat.S_ISREG(os.stat(path).st_mode) and not os.path.isdir(path)
+    except OSError:
+        return False
+
+
+def format_for(path: str, default: str = "csv", fmt: str | None = None, allowed: tuple[str, ...] = FORMATS) -> str:
+    """The format of an output: ``fmt`` (``-f``) when given, else the path's extension (``-`` or a device without
+    one: ``default``); a UsageError for a format not in ``allowed``."""
+    if fmt:
+        name = fmt.lower()
+        if name not in allowed:
+            raise UsageError(f"-f {fmt}: this output can be {', '.join(allowed)}")
+        return name
+    ext = os.path.splitext(path)[1].lower() if path != "-" else ""
+    if ext in _EXTENSIONS and _EXTENSIONS[ext] in allowed:
+        return _EXTENSIONS[ext]
+    if is_stream(path) and not ext:
         return default
-    ext = os.path.splitext(path)[1].lower()
-    if ext not in _EXTENSIONS:
-        raise UsageError(f"{path}: unknown output format {ext or '(no extension)'!r}; use .csv, .parquet, .geojson or .json")
-    return _EXTENSIONS[ext]
+    exts = ", ".join(e for e, f in _EXTENSIONS.items() if f in allowed and e not in (".pq", ".geojsons", ".geojsonseq"))
+    raise UsageError(f"{path}: unknown output format {ext or '(no extension)'!r}; use {exts}, or name it with -f")
 
 
 def iso_utc(values: pd.Series) -> np.ndarray:
@@ -79,6 +110,14 @@ def _json_ready(df: pd.DataFrame) -> list[dict]:
     return [dict(zip(names, row)) for row in zip(*out.values())]
 
 
+def _point_features(df: pd.DataFrame):
+    """Each row as a GeoJSON point Feature (``lon_deg``, ``lat_deg``; null geometry without a position)."""
+    for row in _json_ready(df):
+        lon, lat = row.get("lon_deg"), row.get("lat_deg")
+        geometry = {"type": "Point", "coordinates": [lon, lat]} if lon is not None and lat is not None else None
+        yield {"type": "Feature", "geometry": geometry, "properties": row}
+
+
 class TableWriter:
     """Stream a table to ``path`` in ``fmt``; call :meth:`commit` when complete.
 
@@ -101,7 +140,8 @@ class TableWriter:
         self._columns: list[str] | None = None
         self._started = False  # header / opening bracket written
         self._records = 0  # JSON/GeoJSON records written (for separators)
-        if path != "-":
+        self._stream = is_stream(path)
+        if not self._stream:
             folder = os.path.dirname(os.path.abspath(path))
             if not os.path.isdir(folder):
                 raise UsageError(f"{path}: folder {folder} does not exist")
@@ -122,6 +162,8 @@ class TableWriter:
         binary = self.fmt == "parquet"
         if self.path == "-":
             self._fh = sys.stdout.buffer if binary else sys.stdout
+        elif self._stream:  # a device or a pipe: nothing to rename
+            self._fh = open(self.path, "wb" if binary else "w", encoding=None if binary else "utf-8", newline=None if binary else "")
         else:
             folder = os.path.dirname(os.path.abspath(self.path))
             with signals_held():  # inside the writer's with-block: discard() removes it from here on
@@ -148,6 +190,8 @@ class TableWriter:
             fh.close()
             os.replace(self._tmp, self.path)
             self._tmp = None
+        elif self._stream and self.path != "-":
+            fh.close()
         self._committed = True
         return self._rows
 
@@ -174,7 +218,7 @@ class TableWriter:
         for name in out.columns:
             if isinstance(out[name].dtype, pd.DatetimeTZDtype):
                 out[name] = iso_utc(out[name])
-        out.to_csv(fh, index=False, header=not self._started, lineterminator="\n")
+        out.to_csv(fh, index=False, header=not self._started, lineterminator="\n", float_format=CSV_FLOAT)
         self._started = True
 
     def _close_csv(self, fh: IO) -> None:
@@ -203,16 +247,21 @@ class TableWriter:
         if not self._started:
             fh.write('{"type": "FeatureCollection", "features": [\n')
             self._started = True
-        for row in _json_ready(df):
-            lon, lat = row.get("lon_deg"), row.get("lat_deg")
-            geometry = {"type": "Point", "coordinates": [lon, lat]} if lon is not None and lat is not None else None
-            feature = {"type": "Feature", "geometry": geometry, "properties": row}
+        for feature in _point_features(df):
             self._record(fh, feature)
 
     def _close_geojson(self, fh: IO) -> None:
         if not self._started:
             fh.write('{"type": "FeatureCollection", "features": [\n')
         fh.write("\n]}\n")
+
+    # -------------------------------------------------------------- GeoJSON sequence
+    def _write_geojsonseq(self, fh: IO, df: pd.DataFrame) -> None:
+        for feature in _point_features(df):
+            fh.write(json.dumps(feature, separators=(",", ":")) + "\n")
+
+    def _close_geojsonseq(self, fh: IO) -> None:
+        pass
 
     # -------------------------------------------------------------- JSON
     def _write_json(self, fh: IO, df: pd.DataFrame) -> None:
@@ -303,6 +352,10 @@ def write_text_atomic(path: str, text: str) -> None:
     """Write a whole document: to stdout for ``-``, else to a temporary file renamed into place."""
     if path == "-":
         sys.stdout.write(text)
+        return
+    if is_stream(path):  # /dev/null, a pipe: nothing to rename
+        with open(path, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
         return
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):

@@ -8,10 +8,10 @@ import os
 from tollcli.errors import UsageError
 from tollcli.io.sources import looks_like_log
 
-LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv", ".ubx", ".obs", ".rnx")
+LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv", ".ubx", ".obs", ".rnx", ".pos")
 #: suffixes only a receiver log has: a folder's file with one is always taken (a broken one fails, said);
 #: a .txt, .log, .csv or .gz is taken when its first bytes are a log's (``looks_like_log``)
-LOG_ONLY_SUFFIXES = (".nmea", ".nmea.gz", ".ubx", ".obs", ".rnx")
+LOG_ONLY_SUFFIXES = (".nmea", ".nmea.gz", ".ubx", ".obs", ".rnx", ".pos")
 
 
 def log_name(log: str) -> str:

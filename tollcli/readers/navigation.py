@@ -16,9 +16,10 @@ from tollcli.readers.nmea import NmeaTables, ReadStats, iter_nmea_tables
 from tollcli.readers.nmea.reader import CHUNK_EPOCHS
 
 #: the input kinds read as a receiver's own solution (the others are pseudorange logs the tool solves itself)
-NAVIGATION_KINDS = ("nmea", "ubx-nav", "gpsd-json")
+NAVIGATION_KINDS = ("nmea", "ubx-nav", "gpsd-json", "rtklib-pos")
 #: what each kind's messages are called in summaries
-PROTOCOL_NAMES = {"nmea": "NMEA sentences", "ubx-nav": "UBX messages", "gpsd-json": "gpsd JSON reports"}
+PROTOCOL_NAMES = {"nmea": "NMEA sentences", "ubx-nav": "UBX messages", "gpsd-json": "gpsd JSON reports",
+                  "rtklib-pos": "RTKLIB solutions"}
 
 
 def iter_navigation_tables(source: str | os.PathLike | BinaryIO, kind: str = "nmea", *, strict: bool = False,
@@ -38,6 +39,10 @@ def iter_navigation_tables(source: str | os.PathLike | BinaryIO, kind: str = "nm
         from tollcli.readers.gpsd_json import iter_gpsd_json_tables
 
         return iter_gpsd_json_tables(source, strict=strict, stats=stats, chunk_epochs=chunk_epochs)
+    if kind == "rtklib-pos":
+        from tollcli.readers.rtklib_pos import iter_rtklib_pos_tables
+
+        return iter_rtklib_pos_tables(source, strict=strict, stats=stats, chunk_epochs=chunk_epochs)
     if kind != "nmea":
         raise ValueError(f"{kind} is not a navigation kind ({', '.join(NAVIGATION_KINDS)})")
     return iter_nmea_tables(source, strict=strict, date=date, stats=stats, chunk_epochs=chunk_epochs, block_bytes=block_bytes)

@@ -107,6 +107,7 @@ th, td {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; max-width:
 th {{ background: #eee; }}
 .legend {{ background: white; padding: 6px 8px; font-size: 12px; line-height: 1.5; }}
 .legend i {{ display: inline-block; width: 10px; height: 10px; border-radius: 5px; margin-right: 5px; }}
+.legend b.line {{ display: inline-block; width: 14px; height: 2px; vertical-align: middle; margin-right: 3px; }}
 </style></head><body>
 <h1>{html.escape(title)}</h1>
 <p>Vehicle class {html.escape(str(inv.get('vehicle_class', '')))}; period {html.escape(str((inv.get('period') or {}).get('start_utc', '')))} –
@@ -153,6 +154,7 @@ Epoch statuses (HAL {run.hal_m:g} m): {html.escape(', '.join(f'{k} {v}' for k, v
   legend.onAdd = function () {{
     var div = L.DomUtil.create('div', 'legend');
     Object.keys(d.colours).forEach(function (k) {{ div.innerHTML += '<i style="background:' + d.colours[k] + '"></i>' + k + '<br>'; }});
+    if (d.truth) div.innerHTML += '<b class="line" style="background:#000000"></b>truth<br>';
     return div;
   }};
   legend.addTo(map);

@@ -1,7 +1,8 @@
-"""PNG figures of a run (matplotlib, no screen needed).
+"""Figures of a run (matplotlib, no screen needed): PNG, or SVG or PDF (``fmt``).
 
 * ``trajectory.png``: geo-objects (charged ones filled) and the positions coloured by RAIM status;
-* ``protection.png``: HPL (or HAL, ETC RAIM) and P_FA over time, statuses along the bottom;
+* ``protection.png``: HPL and HAL and P_FA over time, statuses along the bottom (ETC RAIM, whose HPL is HAL:
+  the classic HPL of the same geometry, what the position could be bounded by);
 * ``valid_positions.png``: valid independent positions per geo-object passage against N_Th;
 * ``stanford.png`` (with a truth trajectory): horizontal error against HPL, the regions counted.
 
@@ -34,19 +35,27 @@ def _plt():
     return plt
 
 
-def write_plots(run: RunData, outdir: str) -> list[str]:
-    """Write the figures into ``outdir``; returns their paths."""
+PLOT_FORMATS = ("png", "svg", "pdf")
+
+
+def write_plots(run: RunData, outdir: str, fmt: str = "png") -> list[str]:
+    """Write the figures into ``outdir`` as ``fmt`` (png, svg or pdf); returns their paths."""
     output_folder(outdir, "figures")
-    paths = [_trajectory(run, outdir), _protection(run, outdir), _valid_positions(run, outdir)]
+    paths = [_trajectory(run, outdir, fmt), _protection(run, outdir, fmt), _valid_positions(run, outdir, fmt)]
     if run.truth is not None and "horiz_error_m" in run.epochs:
-        paths.append(_stanford(run, outdir))
+        paths.append(_stanford(run, outdir, fmt))
     return paths
 
 
-def _save(fig, outdir: str, name: str) -> str:
-    path = os.path.join(outdir, name)
-    tmp = path + ".tmp.png"
-    fig.savefig(tmp, dpi=110, metadata={"Software": None})
+#: metadata that would carry the time or the library's version: left out, so the same run gives the same bytes
+_NO_STAMP = {"png": {"Software": None}, "svg": {"Date": None, "Creator": None},
+             "pdf": {"Creator": None, "Producer": None, "CreationDate": None}}
+
+
+def _save(fig, outdir: str, name: str, fmt: str = "png") -> str:
+    path = os.path.join(outdir, f"{name}.{fmt}")
+    tmp = f"{path}.tmp.{fmt}"
+    fig.savefig(tmp, format=fmt, dpi=110, metadata=_NO_STAMP[fmt])
     os.replace(tmp, path)
     _plt().close(fig)
     return path
@@ -67,7 +76,7 @@ def _frame(lon: np.ndarray, lat: np.ndarray, pad: float = 0.08, min_span_deg: fl
     return cx - hx, cx + hx, cy - hy, cy + hy
 
 
-def _trajectory(run: RunData, outdir: str) -> str:
+def _trajectory(run: RunData, outdir: str, fmt: str = "png") -> str:
     import shapely
 
     plt = _plt()
@@ -109,6 +118,7 @@ def _trajectory(run: RunData, outdir: str) -> str:
     ax.set_ylim(south, north)
     ax.set_xlabel("longitude (deg)")
     ax.set_ylabel("latitude (deg)")
+    ax.ticklabel_format(useOffset=False, style="plain")  # degrees as they are, never "-0.070 + -1.22e2"
     mid = (south + north) / 2
     ax.set_aspect(1 / max(np.cos(np.radians(mid)), 0.05))
     ax.set_title(f"{run.invoice.get('vehicle', '')}: positions by RAIM status, geo-objects (charged: blue)", fontsize=10, wrap=True)
@@ -120,10 +130,10 @@ def _trajectory(run: RunData, outdir: str) -> str:
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
-    return _save(fig, outdir, "trajectory.png")
+    return _save(fig, outdir, "trajectory", fmt)
 
 
-def _protection(run: RunData, outdir: str) -> str:
+def _protection(run: RunData, outdir: str, fmt: str = "png") -> str:
     plt = _plt()
     e = run.epochs
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
@@ -135,7 +145,12 @@ def _protection(run: RunData, outdir: str) -> str:
     if not np.isfinite(e["hpl_m"].to_numpy(float)).any():
         _nothing(ax1, "no epoch has a protection level (too few satellites, or no satellite reported)")
     else:
-        ax1.plot(e["t_s"], e["hpl_m"], lw=1, label="HPL (m)")
+        if mode == "etc":  # HPL ≡ HAL: a flat line on the HAL; what the geometry could bound instead
+            hpl, label = classic_hpl(run)
+            ax1.plot(e["t_s"], hpl, lw=1, label=label)
+            ax1.set_title("RAIM etc (HPL = HAL): the classic HPL of the same geometry, and the false-alarm probability", fontsize=10)
+        else:
+            ax1.plot(e["t_s"], e["hpl_m"], lw=1, label="HPL (m)")
         ax1.plot(e["t_s"], e["hal_m"], lw=1, ls="--", color="black", label="HAL (m)")
         ax1.legend(fontsize=8)
     p_fa = e["p_fa"].to_numpy(float)
@@ -159,10 +174,10 @@ def _protection(run: RunData, outdir: str) -> str:
         fig.text(0.01, 0.005, "probable_false_alarm: t > Th at a P_FA above p_fa — ETC keeps HPL = HAL by lowering Th, and "
                  "pays in false alarms. Not trusted, not charged on; no evidence of a fault.", fontsize=7, color="#555555")  # fmt: skip
     fig.tight_layout(rect=(0, 0.03, 1, 1))
-    return _save(fig, outdir, "protection.png")
+    return _save(fig, outdir, "protection", fmt)
 
 
-def _valid_positions(run: RunData, outdir: str) -> str:
+def _valid_positions(run: RunData, outdir: str, fmt: str = "png") -> str:
     plt = _plt()
     items = [(ln["geoobject"], ln["entry_utc"][11:19], ln["n_valid_independent"], True) for ln in run.invoice["lines"]]
     items += [(ln["geoobject"], ln["entry_utc"][11:19], ln["n_valid_independent"], False) for ln in run.invoice.get("not_charged", [])]
@@ -179,11 +194,27 @@ def _valid_positions(run: RunData, outdir: str) -> str:
     ax.set_title("Valid independent positions per passage\n(green: charged, red: seen, not charged)", fontsize=10)
     ax.legend()
     fig.tight_layout()
-    return _save(fig, outdir, "valid_positions.png")
+    return _save(fig, outdir, "valid_positions", fmt)
 
 
-def _stanford(run: RunData, outdir: str) -> str:
-    return _save(stanford_figure(run), outdir, "stanford.png")
+def _stanford(run: RunData, outdir: str, fmt: str = "png") -> str:
+    return _save(stanford_figure(run), outdir, "stanford", fmt)
+
+
+def classic_hpl(run: RunData) -> tuple[np.ndarray, str]:
+    """The classic RAIM's HPL of each epoch's geometry (m) and its label: what an ETC run (HPL ≡ HAL) is drawn with."""
+    from tollcli.integrity.design import classic_lambda_det
+
+    e = run.epochs
+    params = run.invoice.get("parameters") or {}
+    p_fa, p_md = float(params.get("p_fa", 5e-3)), float(params.get("p_md", 5e-5))
+    dof = e["dof"].to_numpy(float) if "dof" in e else np.full(len(e), np.nan)
+    slope = e["slope_max_m"].to_numpy(float) if "slope_max_m" in e else np.full(len(e), np.nan)
+    ok = np.isfinite(dof) & (dof >= 1)
+    lam = np.full(len(e), np.nan)
+    if ok.any():
+        lam[ok] = classic_lambda_det(p_fa, p_md, dof[ok].astype(int))
+    return slope * np.sqrt(lam), f"classic HPL at P_FA {p_fa:g}, P_MD {p_md:g} (m) — the ETC RAIM's HPL is HAL"
 
 
 def stanford_figure(run: RunData):
@@ -193,14 +224,7 @@ def stanford_figure(run: RunData):
     err, hpl, hal = e["horiz_error_m"].to_numpy(float), e["hpl_m"].to_numpy(float), float(run.hal_m)
     xlabel = "HPL (m)"
     if str(e["raim_mode"].iloc[0]) == "etc":  # HPL ≡ HAL there: plot the classic HPL of the same geometry instead
-        from tollcli.integrity.design import classic_lambda_det
-
-        params = run.invoice.get("parameters") or {}
-        p_fa, p_md = float(params.get("p_fa", 5e-3)), float(params.get("p_md", 5e-5))
-        dof = e["dof"].to_numpy(float)
-        lam = np.where(dof >= 1, classic_lambda_det(p_fa, p_md, np.maximum(dof, 1).astype(int)), np.nan)
-        hpl = e["slope_max_m"].to_numpy(float) * np.sqrt(lam)
-        xlabel = f"classic HPL at P_FA {p_fa:g}, P_MD {p_md:g} (m) — the ETC RAIM's HPL is HAL"
+        hpl, xlabel = classic_hpl(run)
     fig, ax = plt.subplots(figsize=(6.5, 6))
     ok = np.isfinite(err) & np.isfinite(hpl)
     valid = e["raim_status"].astype(str).isin(["valid", "excluded_valid"]).to_numpy()

@@ -1,0 +1,67 @@
+"""``tollcli info``: what a receiver log, a geo-object file or an invoice holds (as ``fio info``, ``gpsprof``)."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated
+
+import typer
+
+from tollcli.errors import UsageError
+
+
+def info(
+    path: Annotated[str, typer.Argument(metavar="LOG|GEOOBJECTS|INVOICE", help="A receiver log (any kind the tool reads, .gz too), a geo-object file or an invoice.", show_default=False)],
+    min_hal: Annotated[float, typer.Option("--min-hal", help="Geo-objects: also give the tolled length covered by geo-objects of at least this HAL, m.", min=0.0)] = 25.0,
+    as_json: Annotated[bool, typer.Option("--json", help="Everything as JSON on stdout.")] = False,
+) -> None:
+    """What a file holds, before anything is charged on it.
+
+    A log: its kind (what --input-format auto recognises), its messages (NMEA
+    sentence types, UBX messages, gpsd report classes, GnssLogger records, RTKLIB
+    solutions), and for a receiver's own solutions the epochs, their span and
+    rate, the fixes by quality, how many epochs carry each integrity source's
+    evidence (residuals, the receiver's RAIM, its error ellipse, satellites) and
+    the level --integrity-sources auto would settle on. A geo-object file: as
+    'tollcli geoobjects info'. An invoice: its vehicle, period, charges and total.
+    """
+    from tollcli.job.file_info import file_info
+
+    if path == "-":
+        raise UsageError("info reads a file (its messages are counted, then read): give a path")
+    summary = file_info(path, min_hal)
+    if as_json:
+        typer.echo(json.dumps(summary, sort_keys=True, default=str))
+        return
+    typer.echo("\n".join(text_lines(summary)))
+
+
+def text_lines(s: dict) -> list[str]:
+    """The summary as lines of text."""
+    if s["kind"] == "geoobjects":
+        h = s["hal_m"]
+        return [f"{s['file']}: geo-objects, {s['geoobjects']} ({s['sections_skipped']} tolled sections skipped at build)",
+                f"HAL {h['min']:g}–{h['max']:g} m, median {h['median']:g} m; covered {100 * (s['covered_share'] or 0):.1f} % of "
+                f"{(s['tolled_length_m'] or 0) / 1000:.3f} tolled km ('tollcli geoobjects info' lists each)"]  # fmt: skip
+    if s["kind"] == "invoice":
+        return [f"{s['file']}: invoice of {s['vehicle']}, {s['charged']} charged, {s['not_charged']} seen but not charged, "
+                f"total {s['total']} {s['currency']}; integrity level {s['integrity_sources_used']}"]  # fmt: skip
+    lines = [f"{s['file']}: {s['kind']}" + (f", {s['bytes']} bytes" if s.get("bytes") is not None else "")]
+    if s.get("messages"):
+        lines.append("messages: " + ", ".join(f"{k} {v}" for k, v in s["messages"].items()))
+    if s.get("problem"):
+        lines.append(f"nothing to read: {s['problem']}")
+    elif "epochs" in s:
+        lines.append(f"epochs: {s['epochs']} ({s['epochs_with_position']} with a position), {s['first_utc']} – {s['last_utc']}"
+                     + (f", every {s['interval_s']:g} s ({s['rate_hz']:g} Hz)" if s["interval_s"] else ""))  # fmt: skip
+        lines.append("fix quality (GGA): " + ", ".join(f"{k}: {v}" for k, v in s["fix_quality"].items()))
+        ev = s["integrity_evidence_epochs"]
+        lines.append("integrity evidence (epochs): " + ", ".join(f"{k} {v}" for k, v in ev.items())
+                     + f"; level under --integrity-sources auto: {s['integrity_level']}")
+        if s["skipped_lines"]:
+            lines.append(f"skipped lines: {s['skipped_lines']} (first: {s['first_problem']})")
+    elif s["kind"] == "unknown":
+        lines.append(s["needs"])
+    else:
+        lines.append(f"solved by {s['solved_by']}" + (f"; needs {s['needs']}" if s["needs"] else ""))
+    return lines

@@ -1,0 +1,114 @@
+"""``--config FILE``: a command's options kept in a file (as RTKLIB's ``rnx2rtkp -k``), or an invoice's settings.
+
+A settings file is TOML; its keys are the options' long names (``p-md`` or ``p_md``)::
+
+    raim = "ss"
+    p-md = 5e-5
+    vehicle-attr = ["euro_class=euro6"]
+    [integrity]          # keys for one command only (process, batch, integrity)
+    hal = 50
+
+A key that is an option of another of those commands but not of this one is passed over (one file serves
+``process``, ``batch`` and ``integrity``); a key that is no option of any is an error. Options given on the
+command line win over the file. An invoice (``.json``) gives its ``parameters``: a run with them is the run
+the invoice records, so ``tollcli process LOG --geo G --tariff T --config invoice.json`` writes the same
+invoice again.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from typing import Annotated, Optional
+
+import typer
+
+from tollcli.errors import UsageError
+
+#: the commands a settings file serves
+COMMANDS = ("process", "batch", "integrity")
+#: an invoice's parameters that are not options: what the run derived (recorded for the reader), not what it was given
+DERIVED = frozenset({"valid_statuses", "policy_used", "integrity_sources_used", "continued"})
+#: an invoice's parameter name → the option's name, where the two differ
+PARAMETER_OPTION = {"sigma_m": "sigma", "tc_s": "tc", "vehicle_attrs": "vehicle_attr"}
+#: options a settings file cannot hold: what names the file itself, and what only prints
+NOT_SETTINGS = frozenset({"config", "help", "quiet", "as_json"})
+
+
+def _known_elsewhere() -> set[str]:
+    """Every option name of the commands a settings file serves."""
+    import importlib
+
+    from tollcli.cli.app import COMMANDS as ALL
+
+    names: set[str] = set()
+    for command in COMMANDS:
+        module, attr = ALL[command]
+        fn = getattr(importlib.import_module(module), attr)
+        names.update(p for p in fn.__annotations__ if p != "return")
+    return names
+
+
+def read_settings(path: str) -> dict:
+    """The settings in ``path``: a TOML file (its tables kept), or an invoice's ``parameters``; a UsageError else."""
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read()
+    except OSError as exc:
+        raise UsageError(f"--config {path}: {exc.strerror or exc}") from None
+    if path.lower().endswith(".json"):
+        try:
+            doc = json.loads(raw)
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise UsageError(f"--config {path}: not JSON ({exc})") from None
+        params = doc.get("parameters") if isinstance(doc, dict) else None
+        if not isinstance(params, dict):
+            raise UsageError(f"--config {path}: a JSON settings file is an invoice, with its parameters")
+        return {PARAMETER_OPTION.get(k, k): _option_value(v) for k, v in params.items() if k not in DERIVED and v is not None}
+    try:
+        doc = tomllib.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise UsageError(f"--config {path}: not TOML ({exc})") from None
+    return doc
+
+
+def _option_value(value):
+    """An invoice's parameter as its option takes it (attributes as KEY=VALUE items)."""
+    if isinstance(value, dict):
+        return [f"{k}={v}" for k, v in sorted(value.items())]
+    return value
+
+
+def settings_for(command: str, doc: dict, path: str, options: set[str]) -> dict:
+    """The default map of ``command`` from a settings document: its top-level keys and its own table."""
+    known = _known_elsewhere()
+    out: dict = {}
+    merged = {k: v for k, v in doc.items() if not (k in COMMANDS and isinstance(v, dict))}
+    merged.update(doc.get(command) or {})
+    for key, value in merged.items():
+        name = key.replace("-", "_")
+        name = {"format": "out_fmt", "input_format": "input_format"}.get(name, name)
+        if name in NOT_SETTINGS:
+            raise UsageError(f"--config {path}: {key!r} is not a setting")
+        if name in options:
+            out[name] = value
+        elif name not in known:
+            raise UsageError(f"--config {path}: {key!r} is no option of {', '.join(COMMANDS)}")
+    return out
+
+
+def _load(ctx: typer.Context, param: typer.CallbackParam, value: str | None) -> str | None:
+    if not value:
+        return value
+    options = {p.name for p in ctx.command.params if p.param_type_name == "option"}
+    defaults = settings_for(ctx.info_name or "", read_settings(value), value, options)
+    ctx.default_map = {**(ctx.default_map or {}), **defaults}
+    return value
+
+
+Config = Annotated[
+    Optional[str],
+    typer.Option("--config", metavar="FILE", is_eager=True, callback=_load, show_default=False,
+                 help="Settings: a TOML file of options by their long names ([process], [batch], [integrity] tables "
+                      "for one command), or an invoice whose parameters to run with. Options given here win."),
+]

@@ -1,0 +1,117 @@
+"""``tollcli info``: what a receiver log or a geo-object file holds, before anything is charged on it.
+
+For a log: its kind (as ``--input-format auto`` recognises it), its messages (NMEA sentence types, UBX
+messages, gpsd report classes, GnssLogger records …), and — for the receivers' own solutions (NMEA, u-blox NAV,
+gpsd JSON, RTKLIB) — the epochs, their span and rate, the fixes by quality, the evidence each integrity source
+needs (residuals, the receiver's RAIM, its error ellipse, satellites) and so the level ``--integrity-sources
+auto`` would settle on. For a geo-object file: :func:`tollcli.charging.geoobject_info.geoobject_info`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import Counter
+
+import numpy as np
+
+from tollcli.errors import DataError
+from tollcli.io.sources import sniff_format
+from tollcli.readers.log_contents import message_counts
+from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
+from tollcli.readers.nmea import ReadStats
+
+#: what each pseudorange kind needs besides the log to be solved
+NEEDS = {"rinex": "a navigation file (--nav) for an observation file", "gnsslogger": "a navigation file (--nav)",
+         "ubx": "RXM-SFRBX navigation data in the log, or --nav", "device-gnss": "", "gsdc-derived": "", "librsf": ""}
+UNKNOWN_HINT = ("no NMEA sentence nor any other kind tollcli reads; a binary protocol gpsd decodes (SiRF, TSIP, "
+                "GREIS, …) is read through it: gpsdecode < FILE | tollcli integrity -")
+#: the integrity levels, strictest first, and the evidence each needs
+LEVEL_EVIDENCE = (("residual", "residuals"), ("receiver", "receiver_raim"), ("covariance", "error_ellipse"),
+                  ("model", "satellites"))
+
+
+def _is_json_doc(path: str) -> dict | None:
+    """The JSON document in ``path`` when it is one (a geo-object file, an invoice), else None."""
+    if path == "-" or not path.lower().endswith((".json", ".geojson")):
+        return None
+    from tollcli.io.sources import read_json
+
+    doc = read_json(path, "a JSON document")
+    return doc if isinstance(doc, dict) else None
+
+
+def file_info(path: str, min_hal_m: float = 25.0) -> dict:
+    """What ``path`` holds, as a JSON-ready dict (see the module's description)."""
+    doc = _is_json_doc(path)
+    if doc is not None and doc.get("type") == "FeatureCollection":
+        from tollcli.charging.geoobject_info import geoobject_info
+
+        return {"file": path, "kind": "geoobjects", **geoobject_info(path, min_hal_m)}
+    if doc is not None and "content_sha256" in doc and "lines" in doc:
+        return {"file": path, "kind": "invoice", "vehicle": doc.get("vehicle"), "period": doc.get("period"),
+                "charged": len(doc["lines"]), "not_charged": len(doc.get("not_charged") or []),
+                "total": doc.get("total"), "currency": doc.get("currency"), "inputs": doc.get("inputs"),
+                "integrity_sources_used": (doc.get("parameters") or {}).get("integrity_sources_used")}
+    kind = sniff_format(path)
+    out: dict = {"file": path, "kind": kind, "bytes": os.path.getsize(path) if path != "-" and os.path.isfile(path) else None}
+    if path != "-":
+        out["messages"] = message_counts(path, kind)
+        if kind == "nmea" and not out["messages"]:  # what is nothing else is read as NMEA: here there is none
+            return {**out, "kind": "unknown", "needs": UNKNOWN_HINT}
+    if kind in NAVIGATION_KINDS:
+        try:
+            out.update(_solution_info(path, kind))
+        except DataError as exc:  # nothing to read: what info says, not an error of info's
+            out.update(epochs=0, problem=str(exc))
+    elif kind != "unknown":
+        out["solved_by"] = "tollcli (pseudoranges: WLS, then the RAIM on their residuals)"
+        out["needs"] = NEEDS.get(kind, "")
+        out["integrity_level"] = "residual"
+    return out
+
+
+def _solution_info(path: str, kind: str) -> dict:
+    """Epochs, span, rate, fix qualities and integrity evidence of a receiver's own solutions, streamed."""
+    stats = ReadStats()
+    epochs = with_position = 0
+    first = last = None
+    steps: Counter[float] = Counter()
+    quality: Counter[int] = Counter()
+    evidence = dict.fromkeys(("residuals", "receiver_raim", "error_ellipse", "satellites", "hdop"), 0)
+    previous = None
+    for chunk in iter_navigation_tables(path, kind, stats=stats):
+        e, s = chunk.epochs, chunk.satellites
+        epochs += len(e)
+        with_position += int((np.isfinite(e["lat_deg"].to_numpy(float)) & np.isfinite(e["lon_deg"].to_numpy(float))).sum())
+        t = e["time_utc"].dropna()
+        if len(t):
+            first = t.min() if first is None else min(first, t.min())
+            last = t.max() if last is None else max(last, t.max())
+            times = t.to_numpy("datetime64[ms]").astype(np.int64)
+            if previous is not None:
+                times = np.r_[previous, times]
+            steps.update(np.round(np.diff(times) / 1000.0, 3).tolist())
+            previous = times[-1]
+        quality.update(e["fix_quality"].astype(int).tolist())
+        evidence["residuals"] += int(s["epoch"][np.isfinite(s["residual_m"].to_numpy(float))].nunique()) if len(s) else 0
+        evidence["receiver_raim"] += int(np.isfinite(e["gbs_err_lat_m"].to_numpy(float)).sum())
+        evidence["error_ellipse"] += int((np.isfinite(e["sigma_major_m"].to_numpy(float))
+                                          | np.isfinite(e["sigma_lat_m"].to_numpy(float))).sum())
+        evidence["satellites"] += int(s.loc[s["used"].astype(bool), "epoch"].nunique()) if len(s) else 0
+        evidence["hdop"] += int(np.isfinite(e["hdop"].to_numpy(float)).sum())
+    positive = {k: v for k, v in steps.items() if k > 0}
+    rate_s = max(sorted(positive), key=positive.get) if positive else None
+    level = next((name for name, key in LEVEL_EVIDENCE if evidence[key]), "model" if evidence["hdop"] else "none")
+    return {
+        "protocol": stats.protocol, "lines": stats.lines, "skipped_lines": stats.skipped,
+        "first_problem": stats.first_problem or None, "epochs": epochs, "epochs_with_position": with_position,
+        "first_utc": _iso(first), "last_utc": _iso(last),
+        "span_s": round((last - first).total_seconds(), 3) if first is not None and last is not None else None,
+        "interval_s": rate_s, "rate_hz": round(1.0 / rate_s, 3) if rate_s else None,
+        "fix_quality": {str(k): v for k, v in sorted(quality.items())},
+        "integrity_evidence_epochs": evidence, "integrity_level": level,
+    }
+
+
+def _iso(stamp) -> str | None:
+    return None if stamp is None else stamp.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
