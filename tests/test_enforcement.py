@@ -144,6 +144,10 @@ def test_roadside_cloned_tag_missed_read_and_silent_trip(tmp_path):
     far = found[0]
     assert far["gantry_id"] == "G-FAR" and far["distance_m"] == pytest.approx(50_000, rel=0.02)
     assert found[1]["gantry_id"] == "G-ROUTE-2" and found[1]["pass_utc"].startswith("2026-03-02T08:04:00")  # no read of TAG-1
+    summary = run_cli("enforce", log, "--reads", str(tmp_path / "reads.csv"), "--gantries", str(tmp_path / "gantries.geojson"),
+                      "--tag", "TAG-1", "-f", "csv", "-o", str(tmp_path / "enforce.csv"), "--json")  # fmt: skip
+    assert json.loads(summary.stdout)["kinds"] == {"missed_read": 1, "read_far_from_trip": 1, "read_without_trip": 1}
+    assert (tmp_path / "enforce.csv").read_text().splitlines()[0].startswith("kind,category,")
 
 
 def test_roadside_bad_inputs_are_one_line_errors(tmp_path):

@@ -76,13 +76,18 @@ def test_an_rtklib_file_is_recognised_and_checked(tmp_path):
 
 
 # ---------------------------------------------------------------- Debian's rnx2rtkp on real measurements
-@pytest.fixture(scope="module")
-def rtklib_runs(tmp_path_factory):
+def _need_rtklib(*paths: Path) -> None:
+    """Skip (saying why) without Debian's rnx2rtkp or the shared data."""
     if shutil.which("rnx2rtkp") is None:
         pytest.skip("Debian's rnx2rtkp (apt-get install rtklib) is not installed")
-    raw, nav = SHARED / "gsdc2022" / "device_gnss.csv", SHARED / "rinex" / "brdc1190.21n"
-    if not raw.exists() or not nav.exists():
+    if not all(p.exists() for p in paths):
         pytest.skip("shared data not present")
+
+
+@pytest.fixture(scope="module")
+def rtklib_runs(tmp_path_factory):
+    raw, nav = SHARED / "gsdc2022" / "device_gnss.csv", SHARED / "rinex" / "brdc1190.21n"
+    _need_rtklib(raw, nav)
     folder = tmp_path_factory.mktemp("rtklib")
     obs = folder / "phone.21o"
     assert write_rinex_obs(str(raw), str(obs)) == 6
@@ -124,11 +129,8 @@ def test_rtklib_bound_holds_against_the_truth(rtklib_runs, tmp_path):
 
 
 def test_rnx2rtkp_without_navigation_data_says_so(tmp_path):
-    if shutil.which("rnx2rtkp") is None:
-        pytest.skip("Debian's rnx2rtkp (apt-get install rtklib) is not installed")
     obs, nav = SHARED / "android" / "pixel6.23o", SHARED / "rinex" / "brdc1190.21n"
-    if not obs.exists() or not nav.exists():
-        pytest.skip("shared data not present")
+    _need_rtklib(obs, nav)
     out = tmp_path / "pixel6.pos"
     subprocess.run(["rnx2rtkp", "-p", "0", "-o", str(out), str(obs), str(nav)], capture_output=True, timeout=120)
     proc = run_cli("integrity", str(out))  # the 2023-11-07 session, a 2021-04-29 ephemeris: RTKLIB solves nothing

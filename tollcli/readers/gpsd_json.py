@@ -34,9 +34,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from tollcli.errors import DataError
-from tollcli.io.sources import iter_text_blocks, open_binary, source_name
-from tollcli.readers.nav_tables import TableBuilder
+from tollcli.readers.nav_tables import TableBuilder, skip_malformed, text_line_blocks
 from tollcli.readers.nmea.line_reader import ReadStats
 from tollcli.readers.nmea.reader import CHUNK_EPOCHS, NmeaTables
 from tollcli.readers.nmea.satellite_ids import by_number
@@ -123,51 +121,32 @@ def iter_gpsd_json_tables(source: str | os.PathLike | BinaryIO, *, strict: bool 
                           chunk_epochs: int = CHUNK_EPOCHS) -> Iterator[NmeaTables]:  # fmt: skip
     """The epoch and satellite tables of a gpsd JSON stream, chunk by chunk (see the module's description)."""
     stats = stats if stats is not None else ReadStats()
-    name = source_name(source)
-    stats.source = name
-    stream = open_binary(source)
     builder = TableBuilder(stats)
     state = _Epochs(builder, stats)
-    line_no = 0
-    try:
-        for lines in iter_text_blocks(stream, name):
-            for text in lines:
-                line_no += 1
-                stats.lines += 1
-                text = text.strip()
-                if not text:
-                    stats.blank += 1
-                    continue
-                if not text.startswith("{"):
-                    if text.startswith("#"):
-                        stats.comments += 1
-                    else:
-                        stats.unused += 1
-                    continue
-                try:
-                    report = json.loads(text)
-                    kind = report["class"]
-                except (ValueError, KeyError, TypeError, RecursionError) as exc:
-                    stats.malformed += 1
-                    what = f"not a gpsd JSON report ({type(exc).__name__})"
-                    if not stats.first_problem:
-                        stats.first_problem = f"{name}:{line_no}: {what}"
-                    if strict:
-                        raise DataError(f"{name}:{line_no}: {what}") from None
-                    continue
-                stats.sentences += 1
-                state.add(kind, report, line_no)
-            if len(builder) >= chunk_epochs:
-                tables = builder.take()
-                if tables is not None:
-                    yield tables
-        state.close()
-        tables = builder.take()
-        if tables is not None:
-            yield tables
-    finally:
-        if isinstance(source, (str, os.PathLike)) and os.fspath(source) != "-":
-            stream.close()
+    for block in text_line_blocks(source, stats):
+        for line_no, text in block:
+            if not text.startswith("{"):
+                if text.startswith("#"):
+                    stats.comments += 1
+                else:
+                    stats.unused += 1
+                continue
+            try:
+                report = json.loads(text)
+                kind = report["class"]
+            except (ValueError, KeyError, TypeError, RecursionError) as exc:
+                skip_malformed(stats, line_no, f"not a gpsd JSON report ({type(exc).__name__})", strict)
+                continue
+            stats.sentences += 1
+            state.add(kind, report, line_no)
+        if len(builder) >= chunk_epochs:
+            tables = builder.take()
+            if tables is not None:
+                yield tables
+    state.close()
+    tables = builder.take()
+    if tables is not None:
+        yield tables
 
 
 class _Epochs:

@@ -9,8 +9,14 @@ every ``chunk_epochs`` epochs: memory is a chunk's, not the log's.
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
+from typing import BinaryIO
+
 import numpy as np
 
+from tollcli.errors import DataError
+from tollcli.io.sources import iter_text_blocks, open_binary, source_name
 from tollcli.readers.nmea.line_reader import ReadStats
 from tollcli.readers.nmea.reader import NmeaTables
 from tollcli.readers.nmea.satellite_ids import CONSTELLATIONS
@@ -92,3 +98,36 @@ class TableBuilder:
         self.n_epochs += n
         self._reset()
         return NmeaTables(epochs, sats, self.stats)
+
+
+def text_line_blocks(source: str | os.PathLike | BinaryIO, stats: ReadStats) -> Iterator[list[tuple[int, str]]]:
+    """Blocks of (line number, text stripped) of a text log's non-blank lines, streamed; lines and blanks counted."""
+    name = source_name(source)
+    stats.source = name
+    stream = open_binary(source)
+    line_no = 0
+    try:
+        for lines in iter_text_blocks(stream, name):
+            block = []
+            for text in lines:
+                line_no += 1
+                stats.lines += 1
+                text = text.strip()
+                if text:
+                    block.append((line_no, text))
+                else:
+                    stats.blank += 1
+            yield block
+    finally:
+        if isinstance(source, (str, os.PathLike)) and os.fspath(source) != "-":
+            stream.close()
+
+
+def skip_malformed(stats: ReadStats, line_no: int, what: str, strict: bool) -> None:
+    """Count a line that does not parse (the first named in the summary); a DataError under ``--strict``."""
+    stats.malformed += 1
+    where = f"{stats.source}:{line_no}"
+    if not stats.first_problem:
+        stats.first_problem = f"{where}: {what}"
+    if strict:
+        raise DataError(f"{where}: {what}")

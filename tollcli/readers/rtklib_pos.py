@@ -28,8 +28,7 @@ from typing import BinaryIO
 import numpy as np
 
 from tollcli.errors import DataError
-from tollcli.io.sources import iter_text_blocks, open_binary, source_name
-from tollcli.readers.nav_tables import TableBuilder
+from tollcli.readers.nav_tables import TableBuilder, skip_malformed, text_line_blocks
 from tollcli.readers.nmea.line_reader import ReadStats
 from tollcli.readers.nmea.reader import CHUNK_EPOCHS, NmeaTables
 
@@ -142,52 +141,33 @@ def iter_rtklib_pos_tables(source: str | os.PathLike | BinaryIO, *, strict: bool
                            chunk_epochs: int = CHUNK_EPOCHS) -> Iterator[NmeaTables]:  # fmt: skip
     """The epoch tables of an RTKLIB solution file, chunk by chunk (no satellite rows: a .pos file has none)."""
     stats = stats if stats is not None else ReadStats()
-    name = source_name(source)
-    stats.source = name
-    stream = open_binary(source)
     builder = TableBuilder(stats)
     layout: _Layout | None = None
-    line_no = 0
-    try:
-        for lines in iter_text_blocks(stream, name):
-            for text in lines:
-                line_no += 1
-                stats.lines += 1
-                text = text.strip()
-                if not text:
-                    stats.blank += 1
-                    continue
-                if text.startswith("%"):
-                    stats.comments += 1
-                    body = text.lstrip("%").split()
-                    if body and body[0] in ("GPST", "UTC", "JST") and len(body) > 2:
-                        layout = _Layout(text, f"{name}:{line_no}")
-                    continue
-                try:
-                    if layout is None:
-                        raise ValueError("a solution before the header naming its columns")
-                    when, fields = _fields(text.split(), layout)
-                except (ValueError, IndexError, OverflowError) as exc:
-                    stats.malformed += 1
-                    what = f"not an RTKLIB solution line ({exc})"
-                    if not stats.first_problem:
-                        stats.first_problem = f"{name}:{line_no}: {what}"
-                    if strict:
-                        raise DataError(f"{name}:{line_no}: {what}") from None
-                    continue
-                stats.sentences += 1
-                stats.decoded += 1
-                builder.add_epoch(when, line_no, **fields)
-            if len(builder) >= chunk_epochs:
-                tables = builder.take()
-                if tables is not None:
-                    yield tables
-        tables = builder.take()
-        if tables is not None:
-            yield tables
-        elif stats.sentences == 0 and layout is not None:
-            raise DataError(f"{name}: an RTKLIB solution file without one solution (RTKLIB found none: "
-                            "no navigation data for the observations' time?)")
-    finally:
-        if isinstance(source, (str, os.PathLike)) and os.fspath(source) != "-":
-            stream.close()
+    for block in text_line_blocks(source, stats):
+        for line_no, text in block:
+            if text.startswith("%"):
+                stats.comments += 1
+                body = text.lstrip("%").split()
+                if body and body[0] in ("GPST", "UTC", "JST") and len(body) > 2:
+                    layout = _Layout(text, f"{stats.source}:{line_no}")
+                continue
+            try:
+                if layout is None:
+                    raise ValueError("a solution before the header naming its columns")
+                when, fields = _fields(text.split(), layout)
+            except (ValueError, IndexError, OverflowError) as exc:
+                skip_malformed(stats, line_no, f"not an RTKLIB solution line ({exc})", strict)
+                continue
+            stats.sentences += 1
+            stats.decoded += 1
+            builder.add_epoch(when, line_no, **fields)
+        if len(builder) >= chunk_epochs:
+            tables = builder.take()
+            if tables is not None:
+                yield tables
+    tables = builder.take()
+    if tables is not None:
+        yield tables
+    elif stats.sentences == 0 and layout is not None:
+        raise DataError(f"{stats.source}: an RTKLIB solution file without one solution (RTKLIB found none: "
+                        "no navigation data for the observations' time?)")
