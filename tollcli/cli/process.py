@@ -52,7 +52,8 @@ def process(
 ) -> None:
     """Charge a trip: valid, independent positions inside geo-objects → invoice lines with evidence.
 
-    The invoice (JSON by default; .csv with -o file.csv; a table on a terminal)
+    The invoice (JSON by default; -f csv or -o file.csv: one row per line, with
+    vehicle, log and currency, the total only in the JSON; a table on a terminal)
     lists each charged geo-object passage with its fee (with a per-km tariff: the
     table in force, the length charged and the rate), entry and exit times and
     the positions that support it, the passages seen but not charged, the input
