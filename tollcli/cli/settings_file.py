@@ -87,7 +87,7 @@ def settings_for(command: str, doc: dict, path: str, options: set[str]) -> dict:
     merged.update(doc.get(command) or {})
     for key, value in merged.items():
         name = key.replace("-", "_")
-        name = {"format": "out_fmt", "input_format": "input_format"}.get(name, name)
+        name = "out_fmt" if name == "format" else name  # -f/--format's parameter
         if name in NOT_SETTINGS:
             raise UsageError(f"--config {path}: {key!r} is not a setting")
         if name in options:

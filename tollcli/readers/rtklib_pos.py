@@ -97,9 +97,8 @@ def ellipse(sdn: float, sde: float, sdne: float) -> tuple[float, float, float]:
 
 def _fields(parts: list[str], layout: _Layout) -> tuple[int, dict]:
     """(UTC ms, epoch-table fields) of one solution line's tokens."""
-    n_time = 2
-    when = _utc_ms(parts[0], parts[1], layout.timesys)
-    rest = parts[n_time:]
+    when = _utc_ms(parts[0], parts[1], layout.timesys)  # the time is two tokens: date and time, or week and TOW
+    rest = parts[2:]
     if layout.dms:  # latitude and longitude as d m s: three tokens each
         lat, lon, rest = _dms(*rest[0:3]), _dms(*rest[3:6]), [None, None, *rest[6:]]
     elif layout.ecef:
