@@ -68,7 +68,10 @@ def test_a_deeply_nested_json_is_a_data_error(tmp_path):
     deep = tmp_path / "deep.json"
     deep.write_text("[" * 100_000)
     assert "nested too deeply" in _one_line(run_cli("verify", str(deep)), 1)
-    assert "nested too deeply" in _one_line(run_cli("process", DRIVE, "--geo", str(deep), "--tariff", TARIFF, "-q", "-o", "-"), 1)
+    deep_feature = tmp_path / "deep.geojson"  # a geo-object file is read feature by feature: nested in a feature
+    deep_feature.write_text('{"type": "FeatureCollection", "features": [' + "[" * 100_000)
+    assert "nested too deeply" in _one_line(run_cli("process", DRIVE, "--geo", str(deep_feature), "--tariff", TARIFF, "-q", "-o", "-"), 1)
+    assert "not a GeoJSON FeatureCollection" in _one_line(run_cli("process", DRIVE, "--geo", str(deep), "--tariff", TARIFF, "-q", "-o", "-"), 1)
 
 
 def test_an_unknown_metric_crs_in_a_geo_object_file_is_refused(tmp_path):

@@ -57,21 +57,39 @@ def test_chunk_size_does_not_change_the_invoice(monkeypatch, log):
     assert len(table_whole[0]) > 37 * 4
 
 
+def _same_geoobjects(a, b) -> None:
+    for name in ("ids", "names", "road_class", "hal_m", "length_m", "tunnel_m", "gap_m", "frame", "n_parts"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.crs == b.crs and a.frames == b.frames
+    assert (shapely.to_wkb(a.polygons.all()) == shapely.to_wkb(b.polygons.all())).all()  # every coordinate bit
+    assert np.array_equal(a.index.bounds, b.index.bounds)
+
+
 def test_compiled_geoobjects_are_the_parsed_ones(tmp_path, monkeypatch):
-    monkeypatch.setenv("TOLLCLI_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("TOLLCLI_CACHE_DIR", "off")
     parsed = geoobject_store.load_geoobjects(GEO)
-    files = list((tmp_path / "cache" / "geoobjects").glob("*.npz"))
-    assert len(files) == 1
-    compiled = geoobject_store.load_geoobjects(GEO)
-    for name in ("ids", "names", "road_class", "hal_m"):
-        assert np.array_equal(getattr(compiled, name), getattr(parsed, name))
-    assert compiled.crs == parsed.crs
-    assert (shapely.to_wkb(compiled.polygons) == shapely.to_wkb(parsed.polygons)).all()  # every coordinate bit
-    # a damaged copy is parsed again, and replaced
-    files[0].write_bytes(b"not an npz")
+    assert parsed.store is None
+    monkeypatch.setenv("TOLLCLI_CACHE_DIR", str(tmp_path / "cache"))
+    first = geoobject_store.load_geoobjects(GEO)
+    stores = list((tmp_path / "cache" / "geoobjects").glob(f"*.v{geoobject_store.STORE_FORMAT}"))
+    assert stores == [first.store]
+    mapped = geoobject_store.load_geoobjects(GEO)
+    assert isinstance(mapped.hal_m, np.memmap) and isinstance(mapped.polygons.wkb, np.memmap)  # mapped, not read
+    _same_geoobjects(mapped, parsed)
+    assert mapped.source_sha256 == parsed.source_sha256 == pipeline.file_sha256(GEO)
+    # a damaged store is compiled again, and replaced
+    (stores[0] / "metric_wkb.npy").write_bytes(b"not an array")
     again = geoobject_store.load_geoobjects(GEO)
-    assert (shapely.to_wkb(again.polygons) == shapely.to_wkb(parsed.polygons)).all()
-    assert files[0].stat().st_size > 100
+    _same_geoobjects(again, parsed)
+    assert (stores[0] / "metric_wkb.npy").stat().st_size > 1000
+
+
+def test_a_store_cut_short_is_compiled_again(tmp_path, monkeypatch):
+    monkeypatch.setenv("TOLLCLI_CACHE_DIR", str(tmp_path))
+    store = geoobject_store.load_geoobjects(GEO).store
+    wkb = np.load(store / "metric_wkb.npy")
+    np.save(store / "metric_wkb.npy", wkb[: len(wkb) // 2])
+    _same_geoobjects(geoobject_store.load_geoobjects(GEO), geoobject_store.geoobjects_from_columns(geoobject_store.compile_file(GEO)[0]))
 
 
 def test_cache_off_writes_nothing(tmp_path, monkeypatch):
@@ -79,7 +97,7 @@ def test_cache_off_writes_nothing(tmp_path, monkeypatch):
     monkeypatch.setenv("HOME", str(tmp_path))
     monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
     geoobject_store.load_geoobjects(GEO)
-    assert not any(tmp_path.rglob("*.npz"))
+    assert not any(tmp_path.rglob("*"))
 
 
 def test_cold_and_warm_cache_give_the_same_invoice(tmp_path, monkeypatch):
@@ -92,7 +110,7 @@ def test_cold_and_warm_cache_give_the_same_invoice(tmp_path, monkeypatch):
         assert r.returncode == 0, r.stderr
         out.append(target.read_bytes())
     assert out[0] == out[1]
-    assert list((tmp_path / "cache").rglob("*.npz"))
+    assert list((tmp_path / "cache").rglob("*.npy"))
 
 
 def test_sealed_text_is_the_canonical_encoding():

@@ -36,6 +36,8 @@ def feature_geometry(feature) -> tuple[object | None, str]:
     """A feature's shapely geometry, or None and why it cannot be read (never raises)."""
     if not isinstance(feature, dict):
         return None, "not a GeoJSON feature"
+    if isinstance(feature.get("geometry"), shapely.Geometry):  # a feature made here, its geometry not yet written out
+        return feature["geometry"], ""
     try:
         with np.errstate(invalid="ignore"):
             geom = shapely.geometry.shape(feature.get("geometry") or {})
@@ -45,6 +47,91 @@ def feature_geometry(feature) -> tuple[object | None, str]:
     if not np.isfinite(coords).all():
         return None, "coordinates must be finite numbers"
     return geom, ""
+
+
+def feature_geometries(features: list, kind: str) -> np.ndarray:
+    """Shapely geometries of GeoJSON features (None where unreadable), the plain ones built in bulk: ``kind``
+    ``"Polygon"`` (one ring of ≥ 4 points) or ``"LineString"`` (≥ 2 points); any other feature by
+    :func:`feature_geometry`. The same geometries, coordinate for coordinate, as ``feature_geometry`` gives."""
+    out = np.full(len(features), None, dtype=object)
+    simple, runs = [], []
+    for i, f in enumerate(features):
+        geom = f.get("geometry") if isinstance(f, dict) else None
+        if isinstance(geom, shapely.Geometry):
+            out[i] = geom
+            continue
+        coords = geom.get("coordinates") if isinstance(geom, dict) and geom.get("type") == kind else None
+        if kind == "Polygon":
+            coords = coords[0] if isinstance(coords, list) and len(coords) == 1 and isinstance(coords[0], list) and len(coords[0]) >= 4 else None
+        if isinstance(coords, list) and len(coords) >= 2:
+            try:
+                run = np.asarray(coords, dtype=float)
+            except (TypeError, ValueError):
+                run = None
+            if run is not None and run.ndim == 2 and run.shape[1] == 2 and np.isfinite(run).all():
+                simple.append(i)
+                runs.append(run)
+                continue
+        out[i] = feature_geometry(f)[0]
+    if simple:
+        lengths = np.array([len(r) for r in runs])
+        index = np.repeat(np.arange(len(runs)), lengths)
+        with np.errstate(invalid="ignore"):
+            if kind == "Polygon":
+                built = shapely.polygons(shapely.linearrings(np.concatenate(runs), indices=index))
+            else:
+                built = shapely.linestrings(np.concatenate(runs), indices=index)
+        out[np.array(simple)] = built
+    return out
+
+
+def geojson_coordinates(geoms) -> list:
+    """The GeoJSON ``coordinates`` of Polygons and MultiPolygons, built in bulk: the numbers
+    ``shapely.geometry.mapping`` gives (as lists where it gives tuples: the same JSON)."""
+    geoms = np.asarray(geoms, dtype=object)
+    parts, owner = shapely.get_parts(geoms, return_index=True)
+    rings, ring_part = shapely.get_rings(parts, return_index=True)
+    xy, ring_of = shapely.get_coordinates(rings, return_index=True)
+    cut = np.flatnonzero(np.diff(ring_of)) + 1
+    ring_lists = [r.tolist() for r in np.split(xy, cut)] if len(xy) else []
+    per_part: list[list] = [[] for _ in range(len(parts))]
+    for r, part in zip(ring_lists, ring_part.tolist()):
+        per_part[part].append(r)
+    out: list[list] = [[] for _ in range(len(geoms))]
+    for part, g in zip(per_part, owner.tolist()):
+        out[g].append(part)
+    multi = shapely.get_type_id(geoms) == 6
+    return [o if m else o[0] for o, m in zip(out, multi.tolist())]
+
+
+def feature_collection_text(doc: dict, chunk: int = 2000):
+    """``json.dumps(doc, separators=(",", ":"), sort_keys=True) + "\\n"`` of a FeatureCollection, in pieces: the
+    features' geometries (GeoJSON dicts, or shapely geometries not yet converted) written ``chunk`` features at a
+    time, so a network of any size is never held as one text nor as Python coordinate lists."""
+    import json
+
+    dumps = lambda value: json.dumps(value, separators=(",", ":"), sort_keys=True)  # noqa: E731
+    rest = {k: v for k, v in doc.items() if k != "features"}
+    keys = sorted([*rest, "features"])
+    yield "{"
+    for n, key in enumerate(keys):
+        yield ("," if n else "") + dumps(key) + ":"
+        if key != "features":
+            yield dumps(rest[key])
+            continue
+        features = doc["features"]
+        yield "["
+        for start in range(0, len(features), chunk):
+            block = features[start : start + chunk]
+            lazy = [i for i, f in enumerate(block) if isinstance(f.get("geometry"), shapely.Geometry)]
+            if lazy:
+                geoms = np.array([block[i]["geometry"] for i in lazy], dtype=object)
+                block = list(block)
+                for i, geom, coords in zip(lazy, geoms, geojson_coordinates(geoms)):
+                    block[i] = {**block[i], "geometry": {"type": geom.geom_type, "coordinates": coords}}
+            yield ("," if start else "") + ",".join(dumps(f) for f in block)
+        yield "]"
+    yield "}\n"
 
 
 def metric_crs(lines_wgs84) -> str:
@@ -90,7 +177,24 @@ def wgs84_to(crs: str):
 _TRANSFORMERS = threading.local()  # pyproj transformers are not shared between threads
 
 
+#: geometries projected per call of the transform: a national network's coordinates are never all copied at once
+PROJECT_CHUNK = 8192
+
+
 def project(geoms, crs: str, inverse: bool = False):
-    """Shapely geometries between WGS-84 lon/lat and ``crs`` (vectorized over coordinates)."""
+    """Shapely geometries between WGS-84 lon/lat and ``crs`` (vectorized over coordinates, ``PROJECT_CHUNK``
+    geometries at a time)."""
     transformer = _transformer(crs, inverse)
-    return shapely.transform(np.asarray(geoms, dtype=object), lambda xy: np.column_stack(transformer.transform(xy[:, 0], xy[:, 1])))
+
+    def moved(xy):
+        x, y = transformer.transform(xy[:, 0], xy[:, 1])
+        xy[:, 0], xy[:, 1] = x, y  # in place: shapely hands over its own copy
+        return xy
+
+    geoms = np.asarray(geoms, dtype=object)
+    if geoms.ndim != 1 or len(geoms) <= PROJECT_CHUNK:
+        return shapely.transform(geoms, moved)
+    out = np.empty(len(geoms), dtype=object)
+    for start in range(0, len(geoms), PROJECT_CHUNK):
+        out[start : start + PROJECT_CHUNK] = shapely.transform(geoms[start : start + PROJECT_CHUNK], moved)
+    return out

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from tollcli.spatial import feature_geometry, metric_crs, project, read_features
+from tollcli.spatial import feature_geometries, feature_geometry, metric_crs, project, read_features
 
 
 @dataclass
@@ -49,27 +49,41 @@ def _crs_problem(crs, seen: dict) -> str:
     return seen[crs]
 
 
-def check_geoobjects(path: str, hal_min_m: float = 5.0) -> list[Finding]:
+#: pairs of geo-objects measured for overlap at a time
+OVERLAP_BLOCK = 8192
+#: the smallest HAL ``check`` (and ``process``) accept unless told otherwise, m
+HAL_MIN_CHECK_M = 5.0
+
+
+def check_geoobjects(path: str, hal_min_m: float = HAL_MIN_CHECK_M) -> list[Finding]:
     """Problems of a geo-object file, each tied to a feature id (empty list: the file is usable)."""
     return check_features(read_features(path), hal_min_m)
 
 
-def check_features(features: list, hal_min_m: float = 5.0) -> list[Finding]:
+def check_features(features: list, hal_min_m: float = HAL_MIN_CHECK_M) -> list[Finding]:
     """Problems of geo-object features (GeoJSON dicts), each tied to a feature id (empty list: usable)."""
     findings: list[Finding] = []
     crs_seen: dict = {}
     ids: list[str] = []
+    seen: set[str] = set()
     partners: dict[str, set] = {}
     polys = []
+    geoms = feature_geometries(features, "Polygon")  # plain polygons in bulk; the others (and why not) one by one
+    have = np.flatnonzero(~shapely.is_missing(geoms))
+    valid = np.zeros(len(geoms), bool)
+    valid[have] = shapely.is_valid(geoms[have])
+    all_bounds = np.full((len(geoms), 4), np.nan)
+    all_bounds[have] = shapely.bounds(geoms[have])
     for i, feature in enumerate(features):
         fid = _feature_id(feature, i)
         props = feature.get("properties") if isinstance(feature, dict) and isinstance(feature.get("properties"), dict) else {}
         if fid.startswith("#"):
             findings.append(Finding(fid, "missing id"))
-        if fid in ids:
+        if fid in seen:
             findings.append(Finding(fid, "duplicate id"))
         ids.append(fid)
-        geom, why = feature_geometry(feature)
+        seen.add(fid)
+        geom, why = (geoms[i], "") if geoms[i] is not None else feature_geometry(feature)
         if geom is None:
             findings.append(Finding(fid, why))
             polys.append(None)
@@ -78,12 +92,12 @@ def check_features(features: list, hal_min_m: float = 5.0) -> list[Finding]:
             findings.append(Finding(fid, f"geometry must be a non-empty Polygon, got {geom.geom_type}{' (empty)' if geom.is_empty else ''}"))
             polys.append(None)
             continue
-        bounds = np.asarray(geom.bounds)
+        bounds = all_bounds[i]
         if (np.abs(bounds[[0, 2]]) > 180).any() or (np.abs(bounds[[1, 3]]) > 90).any():
             findings.append(Finding(fid, "coordinates are not WGS-84 longitude/latitude (wrong CRS?)"))
             polys.append(None)
             continue
-        if not geom.is_valid:
+        if not valid[i]:
             findings.append(Finding(fid, f"invalid geometry: {shapely.is_valid_reason(geom)}"))
         partners[fid] = set(map(str, props.get("opposite") or ()))
         if "axis" in props and not _is_axis(props["axis"]):
@@ -99,18 +113,35 @@ def check_features(features: list, hal_min_m: float = 5.0) -> list[Finding]:
         else:
             if not hal_value >= hal_min_m:
                 findings.append(Finding(fid, f"hal_m {hal_value:g} m below the minimum {hal_min_m:g} m"))
-        polys.append(geom if geom.is_valid else None)
+        polys.append(geom if valid[i] else None)
     usable = [(fid, p) for fid, p in zip(ids, polys) if p is not None]
     if len(usable) > 1:
-        crs = metric_crs([p for _, p in usable])
-        metric = project([p for _, p in usable], crs)
-        a, b = shapely.STRtree(metric).query(metric, predicate="intersects")
-        for i, j in zip(a, b):
-            if i < j and usable[j][0] not in partners.get(usable[i][0], ()):  # opposite carriageways may overlap
-                area = shapely.intersection(metric[i], metric[j]).area
-                if area > 1.0:
-                    findings.append(Finding(usable[i][0], f"overlaps {usable[j][0]} ({area:.0f} m²)"))
+        findings += _overlaps([fid for fid, _ in usable], np.array([p for _, p in usable], dtype=object), partners)
     return findings
+
+
+def _overlaps(ids: list[str], wgs84: np.ndarray, partners: dict[str, set]) -> list[Finding]:
+    """Geo-objects overlapping by more than 1 m² (opposite carriageways may), in file order. Pairs whose boxes meet
+    in longitude/latitude are measured in one metric CRS a block at a time (never all polygons projected at once)."""
+    crs = metric_crs(wgs84)
+    a, b = shapely.STRtree(wgs84).query(wgs84)
+    a, b = a[a < b], b[a < b]
+    order = np.lexsort((b, a))
+    a, b = a[order], b[order]
+    out = []
+    for start in range(0, len(a), OVERLAP_BLOCK):
+        pa, pb = a[start : start + OVERLAP_BLOCK], b[start : start + OVERLAP_BLOCK]
+        members = np.unique(np.r_[pa, pb])
+        metric = project(wgs84[members], crs)
+        ma, mb = metric[np.searchsorted(members, pa)], metric[np.searchsorted(members, pb)]
+        hit = np.flatnonzero(shapely.intersects(ma, mb))
+        for k in hit.tolist():
+            i, j = int(pa[k]), int(pb[k])
+            if ids[j] not in partners.get(ids[i], ()):  # opposite carriageways may overlap
+                area = shapely.intersection(ma[k], mb[k]).area
+                if area > 1.0:
+                    out.append(Finding(ids[i], f"overlaps {ids[j]} ({area:.0f} m²)"))
+    return out
 
 
 def _is_axis(value) -> bool:

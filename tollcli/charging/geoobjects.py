@@ -43,7 +43,7 @@ from tollcli.charging.design_hal import HAL_FLOOR_M, DesignHal
 from tollcli.charging.geoobject_check import check_geoobjects  # noqa: F401  (re-exported)
 from tollcli.charging.section_cut import cut_section, hal_bound, section_parts, skip_reason
 from tollcli.errors import DataError
-from tollcli.spatial import feature_geometry, local_frame, project
+from tollcli.spatial import feature_geometries, feature_geometry, geojson_coordinates, local_frame, project
 
 CONNECT_TOL_M = 1.0
 TRIM_FACTOR = 2.0
@@ -56,31 +56,41 @@ def _feature_id(feature, index: int) -> str:
 
 
 def _roads(features: list[dict], path: str):
-    """(ids, properties, WGS-84 lines) of the road features; DataError on unusable ones."""
-    ids, props, lines = [], [], []
-    for i, feature in enumerate(features):
-        fid = _feature_id(feature, i)
-        geom, why = feature_geometry(feature)
-        if geom is None:
-            raise DataError(f"{path}: feature {fid}: {why}")
-        if geom.geom_type == "MultiLineString" and len(geom.geoms) == 1:
-            geom = geom.geoms[0]
-        if geom.geom_type != "LineString" or geom.is_empty:
-            raise DataError(f"{path}: feature {fid}: a road must be a LineString, got {geom.geom_type}")
-        if geom.length == 0:
-            raise DataError(f"{path}: feature {fid}: a road of zero length (all its points are the same)")
-        lon, lat = np.asarray(geom.coords)[:, 0], np.asarray(geom.coords)[:, 1]
-        if (np.abs(lon) > 180).any() or (np.abs(lat) > 90).any():
-            raise DataError(f"{path}: feature {fid}: coordinates are not longitude/latitude degrees")
-        ids.append(fid)
-        props.append(dict(feature.get("properties") or {}) if isinstance(feature.get("properties"), dict) else {})
-        lines.append(geom)
+    """(ids, properties, WGS-84 lines) of the road features; DataError on unusable ones (the first, in file order)."""
+    ids = [_feature_id(feature, i) for i, feature in enumerate(features)]
+    geoms = feature_geometries(features, "LineString")
+    single = np.flatnonzero(~shapely.is_missing(geoms))
+    single = single[(shapely.get_type_id(geoms[single]) == 5) & (shapely.get_num_geometries(geoms[single]) == 1)]
+    geoms[single] = shapely.get_geometry(geoms[single], 0)  # a MultiLineString of one line is that line
+    bad = shapely.is_missing(geoms)
+    have = np.flatnonzero(~bad)
+    bounds = shapely.bounds(geoms[have])
+    bad[have] = (shapely.get_type_id(geoms[have]) != 1) | shapely.is_empty(geoms[have]) | (shapely.length(geoms[have]) == 0) \
+        | (np.abs(bounds[:, [0, 2]]) > 180).any(axis=1) | (np.abs(bounds[:, [1, 3]]) > 90).any(axis=1)
+    if bad.any():
+        _road_problem(features, int(np.flatnonzero(bad)[0]), ids, path)
+    props = [dict(f.get("properties") or {}) if isinstance(f.get("properties"), dict) else {} for f in features]
     if len(set(ids)) != len(ids):
         dup = sorted({i for i in ids if ids.count(i) > 1})
         raise DataError(f"{path}: duplicate road ids {', '.join(dup)}")
-    if not lines:
+    if not features:
         raise DataError(f"{path}: no roads")
-    return ids, props, lines
+    return ids, props, list(geoms)
+
+
+def _road_problem(features: list[dict], i: int, ids: list[str], path: str) -> None:
+    """Raise the DataError saying why road feature ``i`` cannot be used."""
+    fid = ids[i]
+    geom, why = feature_geometry(features[i])
+    if geom is None:
+        raise DataError(f"{path}: feature {fid}: {why}")
+    if geom.geom_type == "MultiLineString" and len(geom.geoms) == 1:
+        geom = geom.geoms[0]
+    if geom.geom_type != "LineString" or geom.is_empty:
+        raise DataError(f"{path}: feature {fid}: a road must be a LineString, got {geom.geom_type}")
+    if geom.length == 0:
+        raise DataError(f"{path}: feature {fid}: a road of zero length (all its points are the same)")
+    raise DataError(f"{path}: feature {fid}: coordinates are not longitude/latitude degrees")
 
 
 def road_level(props: dict) -> int:
@@ -139,13 +149,17 @@ def build_geoobjects(path: str, design: DesignHal | None = None, connect_tol_m: 
 
 
 def build_from_roads(roads: Roads, path: str, design: DesignHal | None = None, connect_tol_m: float = CONNECT_TOL_M,
-                     trim_factor: float = TRIM_FACTOR, hal_min_m: float = HAL_FLOOR_M) -> tuple[dict, list[dict]]:  # fmt: skip
+                     trim_factor: float = TRIM_FACTOR, hal_min_m: float = HAL_FLOOR_M,
+                     shapely_geometry: bool = False) -> tuple[dict, list[dict]]:  # fmt: skip
     """Geo-objects of the tolled roads, each built in its own metric frame (:func:`tollcli.spatial.local_frame`).
 
     Returns the FeatureCollection (with a foreign member ``tollcli``: the design, ``hal_min_m`` and the sections
     skipped, which ``tollcli geoobjects info`` counts in the tolled length) and the sections skipped — ``{"id", "reason"}``: nothing of them can have a HAL of
     ``hal_min_m`` — in id order. Sections built below their design HAL say so in their properties
-    (``hal_m`` < ``design_hal_m[0]``; :func:`fallbacks` lists them).
+    (``hal_m`` < ``design_hal_m[0]``; :func:`fallbacks` lists them). ``shapely_geometry``: each feature's
+    ``geometry`` is its shapely polygon (WGS-84) rather than a GeoJSON dict — what
+    :func:`tollcli.spatial.feature_collection_text` writes out a few at a time (a national network's coordinates are
+    never all held as Python lists).
     """
     design = design or DesignHal()
     props, lines = roads.props, roads.lines
@@ -160,7 +174,8 @@ def build_from_roads(roads: Roads, path: str, design: DesignHal | None = None, c
     skipped: list[dict] = []
     for frame in sorted(set(frames[tolled])):
         group = np.flatnonzero(tolled & (frames == frame))
-        built, gone = _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m)
+        built, gone = _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m,
+                                      shapely_geometry)  # fmt: skip
         features.update(built)
         skipped += gone
     order = sorted(features, key=lambda i: roads.ids[i])  # by id: the same file whatever order the roads came in
@@ -182,7 +197,7 @@ def fallbacks(doc: dict) -> list[dict]:
 #: buffered geo-objects are densified to this vertex spacing (m) before going back to longitude/latitude, so that
 #: a straight edge in the metric frame stays within a millimetre of the edge between its vertices in any frame
 SEGMENT_M = 100.0
-def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m):
+def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m, shapely_geometry=False):
     ids, props = roads.ids, roads.props
     metric = project(lines, frame)
     tree = shapely.STRtree(metric)
@@ -190,6 +205,8 @@ def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, t
     reach = 2 * max(high for _, high in ranges)
     left, right = tree.query(metric[group], predicate="dwithin", distance=reach)
     left = group[left]
+    by_section = np.argsort(left, kind="stable")  # grouped by section (the order within each kept)
+    left, right = left[by_section], right[by_section]
     other = left != right
     left, right = left[other], right[other]
     dist = shapely.distance(metric[left], metric[right])
@@ -199,21 +216,22 @@ def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, t
         meets = np.array([(a, b) in roads.junctions or (b, a) in roads.junctions for a, b in zip(left.tolist(), right.tolist())], bool)
     opposite = opposite_pairs(left, right, metric, props, meets)  # carriageways of one road: told apart by direction
     kept_clear = ~meets & ~opposite
-    built, skipped = {}, []
-    for i, (low, high) in zip(group.tolist(), ranges):
+    first = np.searchsorted(left, group, side="left")  # the pairs come grouped by section, sections in order
+    last = np.searchsorted(left, group, side="right")
+    built, skipped, polygons = {}, [], []
+    for i, (low, high), a, b in zip(group.tolist(), ranges, first.tolist(), last.tolist()):
         line = metric[i]
-        mine = left == i
-        met = right[mine & meets]
+        mine = slice(a, b)  # this section's pairs (a boolean mask over all pairs would make the loop quadratic)
+        met = right[mine][meets[mine]]
         met_union = shapely.union_all(metric[met]) if met.size else None
-        others, other_dist = right[mine & kept_clear], dist[mine & kept_clear]
+        others, other_dist = right[mine][kept_clear[mine]], dist[mine][kept_clear[mine]]
         cut = cut_section(line, met_union, others, other_dist, metric, low, high, trim_factor, hal_min_m)
         if cut is None:
             skipped.append({"id": ids[i], "section_length_m": round(line.length, 1),
                             "reason": skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, hal_min_m)})  # fmt: skip
             continue
         polys, spans = section_parts(line, cut.core, cut.hal, frame)
-        polygon = polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys)
-        polygon = shapely.segmentize(polygon, SEGMENT_M)
+        polygons.append(polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys))
         properties = {
             "id": ids[i], "name": props[i].get("name", ""), "road_class": props[i].get("road_class", ""),
             "direction": props[i].get("direction"), "hal_m": round(cut.hal, 3), "crs_metric": frame,
@@ -226,15 +244,22 @@ def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, t
         if spans is not None:
             gaps = [b[0] - a[1] for a, b in zip(spans[:-1], spans[1:])]
             properties.update(parts=spans, gap_m=round(max(0.0, *gaps), 1))
-        partners = right[mine & opposite]
+        partners = right[mine][opposite[mine]]
         if partners.size:  # a carriageway: its positions count only in its direction of travel, along this axis
             axis = shapely.get_coordinates(project([line], frame, inverse=True)[0])
             properties.update(opposite=sorted(ids[j] for j in partners), axis=np.round(axis, 7).tolist())
         for key in PASSED_THROUGH:
             if props[i].get(key) not in (None, ""):
                 properties[key] = props[i][key]
-        built[int(i)] = {"type": "Feature", "properties": properties,
-                         "geometry": shapely.geometry.mapping(project([polygon], frame, inverse=True)[0])}  # fmt: skip
+        built[int(i)] = {"type": "Feature", "properties": properties}
+    # back to longitude/latitude in bulk: one projection and one pass over the coordinates for the whole frame
+    wgs84 = project(shapely.segmentize(np.asarray(polygons, dtype=object), SEGMENT_M), frame, inverse=True) if polygons else []
+    if shapely_geometry:
+        for feature, polygon in zip(built.values(), wgs84):
+            feature["geometry"] = polygon
+        return built, skipped
+    for feature, polygon, coordinates in zip(built.values(), wgs84, geojson_coordinates(wgs84)):
+        feature["geometry"] = {"type": polygon.geom_type, "coordinates": coordinates}
     return built, skipped
 
 

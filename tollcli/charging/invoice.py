@@ -13,7 +13,6 @@ import json
 from decimal import Decimal
 
 import pandas as pd
-import shapely
 
 from tollcli import __version__
 from tollcli.charging.canonical_json import canonical_json
@@ -21,15 +20,8 @@ from tollcli.charging.recognition import PASSAGE_GAP_S, GeoObjects
 from tollcli.charging.tariffs import Tariff
 from tollcli.integrity.raim import STATUS_MEANINGS
 from tollcli.integrity.sources import SOURCE_MEANINGS
+from tollcli.io.sources import file_sha256  # noqa: F401  (re-exported: batch, verify, pipeline)
 from tollcli.times import iso_utc
-
-
-def file_sha256(path: str) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _iso(ts) -> str:
@@ -60,7 +52,7 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
     carried_in = dict(continued or {})
     vehicle_attributes = {**(vehicle_attrs or {}), "vehicle_class": vehicle_class}
     columns = ("geoobject", "passage", "n_inside", "n_valid", "n_independent", "charged", "entry_utc")
-    n_parts = shapely.get_num_geometries(geo.polygons)
+    n_parts = geo.n_parts
     parts_seen = charges["parts_seen"].tolist() if "parts_seen" in charges else [()] * len(charges)
     for k, (gid, passage, n_inside, n_valid, n_indep, charged, entry_utc) in enumerate(zip(*(charges[c] for c in columns))):
         i = index[gid]

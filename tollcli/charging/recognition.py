@@ -51,7 +51,7 @@ def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, 
     x, y = np.asarray(x, float), np.asarray(y, float)
     have = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
     # the boxes hit, then the exact test on coordinates: the same pairs as predicate="within", without a geometry per point
-    hit, obj = geo.tree.query(shapely.points(x[have], y[have]))
+    hit, obj = geo.index.query(shapely.points(x[have], y[have]))
     rows = have[hit]
     px, py = x[rows], y[rows]
     if geo.frame is not None and not (len(geo.frames) == 1 and geo.frames[0] == geo.crs):
@@ -146,7 +146,7 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
 def parts_of(geo: GeoObjects, obj: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Per position inside a geo-object: the index of its part (polygon) that holds it, 0 for a one-part geo-object."""
     out = np.zeros(obj.size, np.int64)
-    n_parts = shapely.get_num_geometries(geo.polygons[obj])
+    n_parts = geo.n_parts[obj]
     multi = np.flatnonzero(n_parts > 1)
     for k in range(1, int(n_parts.max(initial=1))):  # a few parts at most: one vectorized test per part number
         sel = multi[n_parts[multi] > k]

@@ -36,11 +36,14 @@ def cut_at_junctions(roads, connect_tol_m: float, levels: np.ndarray, tolled: np
     todo = np.flatnonzero(tolled)
     left, right = shapely.STRtree(metric).query(metric[todo], predicate="dwithin", distance=connect_tol_m)
     left = todo[left]
+    by_road = np.argsort(left, kind="stable")  # grouped by road (the order within each kept)
+    left, right = left[by_road], right[by_road]
     keep = (left != right) & (levels[left] == levels[right])
     left, right = left[keep], right[keep]
+    first, last = np.searchsorted(left, np.arange(len(lines)), side="left"), np.searchsorted(left, np.arange(len(lines)), side="right")
     ids, props, out = [], [], []
-    for i in range(len(lines)):
-        cuts = _junction_positions(metric[i], metric[right[left == i]], connect_tol_m) if tolled[i] else []
+    for i in range(len(lines)):  # the pairs come grouped by road, roads in order: a road's are right[first:last]
+        cuts = _junction_positions(metric[i], metric[right[first[i] : last[i]]], connect_tol_m) if tolled[i] else []
         pieces = _split(lines[i], metric[i], cuts, connect_tol_m) if cuts else [lines[i]]
         for k, piece in enumerate(pieces, start=1):
             ids.append(roads.ids[i] if len(pieces) == 1 else section_id(roads.ids[i], k))

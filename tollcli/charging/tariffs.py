@@ -113,6 +113,8 @@ class Tariff:
     def check_against(self, geo_ids, road_classes, geo_source: str) -> None:
         """DataError when the per-km tables name a geo-object or road class the geo-object file does not have:
         a misspelt id or class would otherwise leave its row unused and change fees silently."""
+        if not self.length_km and not any(rate.geoobjects or rate.road_classes for table in self.tables for rate in table.rates):
+            return  # nothing named: nothing to look up in a network of any size
         ids, classes = set(map(str, geo_ids)), set(map(str, road_classes))
         ids |= {road_of(i) for i in ids}  # a road cut into sections (ID/1, ID/2…) is named by its id
         unknown = sorted(set(self.length_km) - ids)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from typing import Annotated, Optional
 
@@ -38,10 +39,7 @@ def build(
     level). A section cut around a near road keeps several parts, charged once per passage at its whole length. Where
     no stretch can have the design HAL, the largest HAL down to --hal-min is used and listed. Nothing is written that
     'geoobjects check' or 'process' would refuse."""
-    from tollcli.charging.design_hal import parse_design_hal
-    from tollcli.charging.geoobject_check import check_features
-    from tollcli.charging.geoobjects import build_from_roads, fallbacks, roads_of
-    from tollcli.readers.osm import is_osm
+    from tollcli.charging.geoobject_compile import gc_paused
 
     if out_fmt is not None and out_fmt.lower() != "geojson":
         raise UsageError(f"-f {out_fmt}: geo-objects are written as GeoJSON (what check, info and process read)")
@@ -49,6 +47,18 @@ def build(
         raise UsageError(f"{output}: geo-objects are written as GeoJSON (.geojson)")
     if as_json and output == "-":
         raise UsageError("--json writes the summary on stdout: give -o FILE for the geo-objects")
+    with gc_paused():  # millions of dicts and lists, no cycles: the collector would cost more than the build
+        _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet)
+
+
+def _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet) -> None:
+    from tollcli.charging.design_hal import parse_design_hal
+    from tollcli.charging.geoobject_check import HAL_MIN_CHECK_M, check_features
+    from tollcli.charging.geoobject_store import precompile
+    from tollcli.charging.geoobjects import build_from_roads, fallbacks, roads_of
+    from tollcli.readers.osm import is_osm
+    from tollcli.spatial import feature_collection_text
+
     gives_default = any("=" not in h for h in hal or [])
     if hal_max is not None and not gives_default:  # the option of earlier versions: the papers' range, capped at it
         hal = [*(hal or []), f"{min(25.0, hal_max):g}-{hal_max:g}"]
@@ -62,14 +72,18 @@ def build(
         raise UsageError("--tolled selects ways of an OpenStreetMap file; a GeoJSON network says tolled per feature")
     else:
         network = roads_of(roads, connect_tol)
-    doc, skipped = build_from_roads(network, roads, design, connect_tol, trim_factor, hal_min)
+    doc, skipped = build_from_roads(network, roads, design, connect_tol, trim_factor, hal_min, shapely_geometry=True)
+    del network  # the centre lines: not needed to write and compile the geo-objects
     if not doc["features"]:
         raise DataError(f"{roads}: no tolled section could be built ({len(skipped)} skipped: {skipped[0]['id']}: {skipped[0]['reason'] if skipped else ''})")
     refused = check_features(doc["features"], hal_min)
     if refused:  # what check and process would say of the file, said before it is written
         more = f" and {len(refused) - 1} more" if len(refused) > 1 else ""
         raise DataError(f"{roads}: not writing geo-objects that check and process would refuse: {refused[0]}{more}")
-    write_text_atomic(output, json.dumps(doc, separators=(",", ":"), sort_keys=True) + "\n")
+    digest = hashlib.sha256()
+    write_text_atomic(output, _hashed(feature_collection_text(doc), digest))
+    if hal_min >= HAL_MIN_CHECK_M:  # what process will load: compiled now (with a smaller --hal-min, load checks it)
+        precompile(doc["features"], output, digest.hexdigest())
     below = fallbacks(doc)
     _tell(roads, doc, below, skipped, design.describe(), quiet)
     if as_json:
@@ -78,6 +92,13 @@ def build(
         typer.echo(json.dumps({"input": roads, "output": output, "geoobjects": len(hals), "hal_min_m": min(hals), "hal_max_m": max(hals),
                                "design_hal_m": design.describe(), "frames": frames, "below_design_hal": below, "skipped": skipped},
                               sort_keys=True))  # fmt: skip
+
+
+def _hashed(pieces, digest):
+    """The pieces of a text, each added to ``digest`` (its UTF-8 bytes) as it goes by."""
+    for piece in pieces:
+        digest.update(piece.encode("utf-8"))
+        yield piece
 
 
 def _tell(roads: str, doc: dict, below: list[dict], skipped: list[dict], design: str, quiet: bool) -> None:
@@ -156,3 +177,34 @@ def info(
         lines.append(f"{r['id']}\t{r['hal_m']:g}\t{design}\t{r['length_m']:g}\t{r['section_length_m']:g}\t{r['parts']}\t"
                      f"{r['hal_bound'] or ''}\t{r['nearest_road'] or ''}\t{distance}")
     typer.echo("\n".join(lines))
+
+
+@app.command("compile")
+def compile_store(
+    path: Annotated[str, typer.Argument(metavar="FILE", help="Geo-object file (GeoJSON from 'tollcli geoobjects build' or elsewhere).")],
+    as_json: Annotated[bool, typer.Option("--json", help="What was compiled (file, SHA-256, geo-objects, store folder and size, seconds) as JSON on stdout.")] = False,
+    quiet: opt.Quiet = False,
+) -> None:
+    """Compile a geo-object file into its store ahead of the logs: checked, projected, indexed and kept as arrays in the
+    cache ($TOLLCLI_CACHE_DIR/geoobjects/SHA-256.vN), which every later process, batch and worker maps instead of
+    parsing the file. 'geoobjects build' compiles what it writes; a file made elsewhere is compiled by its first
+    process, or here (exit 1 if check would refuse it). Nothing to do when the store exists."""
+    import time
+
+    from tollcli.cache import cache_dir
+    from tollcli.charging.geoobject_store import load_geoobjects
+
+    if cache_dir() is None:
+        raise UsageError("TOLLCLI_CACHE_DIR=off: there is no cache to compile into")
+    start = time.perf_counter()
+    geo = load_geoobjects(path)
+    seconds = time.perf_counter() - start
+    if geo.store is None:
+        raise DataError(f"{path}: the store could not be written in {cache_dir()}")
+    size = sum(f.stat().st_size for f in geo.store.iterdir())
+    summary = {"file": path, "sha256": geo.source_sha256, "geoobjects": len(geo.ids), "store": str(geo.store),
+               "store_bytes": size, "seconds": round(seconds, 3)}  # fmt: skip
+    if as_json:
+        typer.echo(json.dumps(summary, sort_keys=True))
+    else:
+        warn(f"{path}: {len(geo.ids)} geo-objects in {geo.store} ({size / 1e6:.1f} MB, {seconds:.1f} s)", quiet)

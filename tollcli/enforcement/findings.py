@@ -178,14 +178,14 @@ def _crossable(geo, lat0, lon0, lat1, lon1, reach_m: float) -> tuple[list[str], 
     tr = wgs84_to(geo.crs)
     (x0, x1), (y0, y1) = tr.transform([lon0, lon1], [lat0, lat1])
     line = shapely.LineString([(x0, y0), (x1, y1)])
-    on_line = sorted(str(geo.ids[i]) for i in geo.tree.query(line, predicate="intersects"))
+    on_line = sorted(str(geo.ids[i]) for i in geo.index.query(line, predicate="intersects"))
     c = line.length / 2.0
     a = max(reach_m / 2.0, c)
     b = np.sqrt(max(a * a - c * c, 0.0))
     ellipse = affinity.scale(shapely.Point(0, 0).buffer(1.0, quad_segs=32), a, max(b, 1.0))
     ellipse = affinity.rotate(ellipse, np.degrees(np.arctan2(y1 - y0, x1 - x0)), origin=(0, 0))
     ellipse = affinity.translate(ellipse, (x0 + x1) / 2, (y0 + y1) / 2)
-    reach = sorted(str(geo.ids[i]) for i in geo.tree.query(ellipse, predicate="intersects"))
+    reach = sorted(str(geo.ids[i]) for i in geo.index.query(ellipse, predicate="intersects"))
     return on_line, [g for g in reach if g not in on_line]
 
 

@@ -38,7 +38,7 @@ def tunnel_outages(found: list[dict], geo, portal_m: float = 50.0, reacquire_s: 
             out.append(f)
             continue
         x, y = tr.transform([e[0] for e in ends], [e[1] for e in ends])
-        _, near = geo.tree.query(shapely.points(x, y), predicate="dwithin", distance=portal_m)
+        _, near = geo.index.query(shapely.points(x, y), predicate="dwithin", distance=portal_m)
         near = np.unique(near[times[near] > 0])
         duration_s = (pd.Timestamp(f["end_utc"]) - pd.Timestamp(f["start_utc"])).total_seconds()
         if near.size and duration_s <= times[near].max() + reacquire_s:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import hashlib
 import io
 import os
 import re
@@ -108,6 +109,15 @@ def iter_text_blocks(stream: BinaryIO, name: str, block_bytes: int = BLOCK_BYTES
     """Yield lists of complete lines (latin-1 decoded, ``\\r`` removed)."""
     for block in iter_byte_blocks(stream, name, block_bytes):
         yield block.decode("latin-1").replace("\r", "").split("\n")
+
+
+def file_sha256(path: str) -> str:
+    """SHA-256 of a file's bytes (hex), read in 1 MiB blocks (an input's identity in invoices and caches)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def read_json(path: str, what: str):

@@ -348,14 +348,17 @@ def output_folder(path: str, what: str = "outputs") -> str:
     return path
 
 
-def write_text_atomic(path: str, text: str) -> None:
-    """Write a whole document: to stdout for ``-``, else to a temporary file renamed into place."""
+def write_text_atomic(path: str, text) -> None:
+    """Write a whole document (a string, or an iterable of its pieces): to stdout for ``-``, else to a temporary file
+    renamed into place."""
+    pieces = [text] if isinstance(text, str) else text
     if path == "-":
-        sys.stdout.write(text)
+        for piece in pieces:
+            sys.stdout.write(piece)
         return
     if is_stream(path):  # /dev/null, a pipe: nothing to rename
         with open(path, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
+            fh.writelines(pieces)
         return
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
@@ -366,7 +369,7 @@ def write_text_atomic(path: str, text: str) -> None:
             fd, tmp = _temporary(path, folder)
         os.chmod(tmp, _umask_mode())
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
+            fh.writelines(pieces)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)

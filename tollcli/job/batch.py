@@ -173,7 +173,8 @@ def _failed(job: Job, name: str, outcome: dict, message: str) -> dict:
 
 def _process(job: Job, settings: ChargeSettings, folder: str, name: str, inv_path: str, outcome: dict) -> dict:
     tables: list = []
-    invoice, stats = charge_log(job.log, job.geo, job.tariff, settings, job.nav, roads=job.roads, epoch_table=tables)
+    invoice, stats = charge_log(job.log, job.geo, job.tariff, settings, job.nav, roads=job.roads, epoch_table=tables,
+                                geo_sha256=dict(job.input_sha256).get("geoobjects_sha256"))  # hashed once per batch
     table = tables[0]
     dated = table["time_utc"].dropna()
     date = dated.iloc[0].strftime("%Y-%m-%d") if len(dated) else "unknown"

@@ -142,12 +142,13 @@ def content_sha256(invoice: dict) -> str:
 
 def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | None = None,
                roads: str | None = None, epoch_table: list | None = None,
-               as_recorded: dict[str, str] | None = None) -> tuple[dict, ReadStats | None]:  # fmt: skip
+               as_recorded: dict[str, str] | None = None, geo_sha256: str | None = None) -> tuple[dict, ReadStats | None]:  # fmt: skip
     """The invoice for one log (with its content hash) and the reader's statistics (NMEA).
 
     ``epoch_table``: a list that receives the per-epoch table (epochs + RAIM columns) for batch outputs.
     ``as_recorded``: the input paths to record instead of the ones read (``verify`` reads an invoice's
-    inputs where it finds them and records them as the invoice names them).
+    inputs where it finds them and records them as the invoice names them). ``geo_sha256``: the geo-object file's
+    SHA-256 when the caller has it (a batch hashes it once for all its logs).
     """
     try:
         params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde,
@@ -157,7 +158,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         raise UsageError(str(exc)) from None
     tariff_doc = load_tariff(tariff)
     check_settings(settings, tariff_doc)
-    geo_objects = load_geoobjects(geo)
+    geo_objects = load_geoobjects(geo, sha256=geo_sha256)
     tariff_doc.check_against(geo_objects.ids, geo_objects.road_class, geo)
     kind = sniff_format(log) if settings.input_format == "auto" else settings.input_format
     stats = None
