@@ -29,11 +29,16 @@ from decimal import Decimal
 import numpy as np
 import pandas as pd
 
+from tollcli.charging.truth_passages import (
+    is_id_list,
+    passages_from_ids,
+    truth_passages,
+    truth_trajectory,
+)
 from tollcli.errors import DataError
 from tollcli.integrity.sources import FAULT_DETECTING
 from tollcli.io.sources import read_json
 from tollcli.stats import wilson
-from tollcli.charging.truth_passages import is_id_list, passages_from_ids, truth_passages, truth_trajectory
 
 
 def load_invoice(path: str) -> dict:

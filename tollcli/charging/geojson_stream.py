@@ -10,6 +10,8 @@ geometries are kept. The bytes are hashed as they are read: the digest is of exa
 from __future__ import annotations
 
 import codecs
+import contextlib
+import gc
 import hashlib
 import json
 import re
@@ -20,6 +22,20 @@ from tollcli.spatial import feature_geometries, features_of
 READ_BYTES = 8 << 20
 BLOCK = 2000  # features made into geometries at a time
 _SPACE = re.compile(r"[ \t\n\r]*")
+
+
+@contextlib.contextmanager
+def gc_paused():
+    """Python's cycle collector off for a while: parsing or writing a national network makes millions of lists and
+    dicts and no cycles, and a collection every few thousand of them, each over all of them, costs more than the work
+    (6× on the GeoJSON coordinates)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
 
 
 class _Text:
@@ -77,6 +93,13 @@ def stream_features(path: str, keep: frozenset[str] | None = None) -> tuple[list
     """The features of a GeoJSON FeatureCollection — each ``{"type", "properties", "geometry"}`` with the geometry a
     shapely one (a feature whose geometry cannot be read keeps its own, to say why) — and the file's SHA-256.
     ``keep``: the only properties kept (None: all)."""
+    doc, digest = stream_collection(path, keep)
+    return doc["features"], digest
+
+
+def stream_collection(path: str, keep: frozenset[str] | None = None, geometry: bool = True) -> tuple[dict, str]:
+    """The FeatureCollection's members, its ``features`` as :func:`stream_features` gives them (``geometry``
+    False: their properties only), and the file's SHA-256."""
     digest = hashlib.sha256()
     try:
         fh = open(path, "rb")
@@ -98,7 +121,7 @@ def stream_features(path: str, keep: frozenset[str] | None = None) -> tuple[list
                 text.expect(":", path)
                 if key == "features" and text.skip_space() == "[":
                     text.pos += 1
-                    features += _features(text, decoder, path, keep)
+                    features += _features(text, decoder, path, keep, geometry)
                     members["features"] = None
                 else:
                     members[key] = text.value(decoder, path)
@@ -109,10 +132,11 @@ def stream_features(path: str, keep: frozenset[str] | None = None) -> tuple[list
         raise DataError(f"{path}: not a GeoJSON file ({exc})") from None
     if members.get("features", 0) is None:
         members["features"] = features
-    return features_of(members, path), digest.hexdigest()
+    features_of(members, path)  # a WGS-84 FeatureCollection, or the error saying what it is not
+    return members, digest.hexdigest()
 
 
-def _features(text: _Text, decoder: json.JSONDecoder, path: str, keep: frozenset[str] | None) -> list[dict]:
+def _features(text: _Text, decoder: json.JSONDecoder, path: str, keep: frozenset[str] | None, geometry: bool) -> list[dict]:
     """The features of the array the text is in (after its '['), made into geometries a block at a time."""
     out: list[dict] = []
     block: list = []
@@ -121,15 +145,17 @@ def _features(text: _Text, decoder: json.JSONDecoder, path: str, keep: frozenset
             text.expect(",", path)
         block.append(text.value(decoder, path))
         if len(block) == BLOCK:
-            out += _slim(block, keep)
+            out += _slim(block, keep, geometry)
             block = []
     text.pos += 1
-    return out + _slim(block, keep)
+    return out + _slim(block, keep, geometry)
 
 
-def _slim(block: list, keep: frozenset[str] | None) -> list:
+def _slim(block: list, keep: frozenset[str] | None, geometry: bool = True) -> list:
     """Features with their coordinates made into shapely geometries (a feature whose geometry cannot be read, or
     that is no feature, kept as it is: check says why)."""
+    if not geometry:
+        return [{"type": f.get("type"), "properties": f.get("properties")} if isinstance(f, dict) else f for f in block]
     geoms = feature_geometries(block, "Polygon")
     out = []
     for feature, geom in zip(block, geoms):

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from tollcli.spatial import feature_geometries, feature_geometry, metric_crs, project, read_features
+from tollcli.spatial import feature_geometries, feature_geometry, metric_crs, project
 
 
 @dataclass
@@ -57,7 +57,10 @@ HAL_MIN_CHECK_M = 5.0
 
 def check_geoobjects(path: str, hal_min_m: float = HAL_MIN_CHECK_M) -> list[Finding]:
     """Problems of a geo-object file, each tied to a feature id (empty list: the file is usable)."""
-    return check_features(read_features(path), hal_min_m)
+    from tollcli.charging.geojson_stream import gc_paused, stream_features
+
+    with gc_paused():  # read feature by feature: a national network's file is never held whole
+        return check_features(stream_features(path)[0], hal_min_m)
 
 
 def check_features(features: list, hal_min_m: float = HAL_MIN_CHECK_M) -> list[Finding]:

@@ -7,12 +7,10 @@ projections to each geo-object's own metric frame and to the file's search CRS, 
 
 from __future__ import annotations
 
-import contextlib
-import gc
-
 import numpy as np
 import shapely
 
+from tollcli.charging.geojson_stream import gc_paused
 from tollcli.charging.geoobject_index import build_grid
 from tollcli.errors import DataError
 from tollcli.spatial import feature_geometries, feature_geometry, project
@@ -24,20 +22,6 @@ CHUNK = 8192
 #: the properties the store and ``geoobjects check`` read (the others — the build's report — are not kept)
 USED_PROPERTIES = frozenset(("id", "name", "road_class", "hal_m", "crs_metric", "section_length_m", "length_m", "tunnel",
                              "tunnel_m", "gap_m", "axis", "opposite"))  # fmt: skip
-
-
-@contextlib.contextmanager
-def gc_paused():
-    """Python's cycle collector off for a while: parsing or writing a national network makes millions of lists and
-    dicts and no cycles, and a collection every few thousand of them, each over all of them, costs more than the work
-    (6× on the GeoJSON coordinates)."""
-    was = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was:
-            gc.enable()
 
 
 def compile_file(path: str, columns: dict | None = None) -> tuple[dict[str, np.ndarray], str]:

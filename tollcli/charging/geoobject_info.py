@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from tollcli.io.sources import read_json
-from tollcli.spatial import features_of
 
 #: HAL histogram bin edges, m (the papers' 25–50 m range in the middle)
 HAL_BINS_M = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 40.0, 50.0, float("inf"))
@@ -31,8 +29,11 @@ def covered_lengths_m(props: list[dict], skipped: list[dict], min_hal_m: float =
 
 def geoobject_info(path: str, min_hal_m: float = 25.0) -> dict:
     """The summary of a geo-object file as a JSON-ready dict (lengths in metres)."""
-    doc = read_json(path, "a GeoJSON file")
-    doc_features = features_of(doc, path)
+    from tollcli.charging.geojson_stream import gc_paused, stream_collection
+
+    with gc_paused():  # feature by feature, the properties only: a national network's file is never held whole
+        doc, _ = stream_collection(path, geometry=False)
+    doc_features = doc["features"]
     build = doc.get("tollcli") if isinstance(doc.get("tollcli"), dict) else {}
     skipped = build.get("skipped") or []
     props = [f.get("properties") or {} for f in doc_features]

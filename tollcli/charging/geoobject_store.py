@@ -103,7 +103,7 @@ def load_geoobjects(path: str, sha256: str | None = None) -> GeoObjects:
     try:
         digest = sha256 or file_sha256(path)
     except OSError:
-        digest = None  # read_features reports it
+        digest = None  # the compile says why it cannot be read
     folder = store_path(digest) if digest is not None else None
     if folder is not None and folder.is_dir():
         try:

@@ -41,9 +41,20 @@ import shapely
 from tollcli.charging.carriageways import opposite_pairs
 from tollcli.charging.design_hal import HAL_FLOOR_M, DesignHal
 from tollcli.charging.geoobject_check import check_geoobjects  # noqa: F401  (re-exported)
-from tollcli.charging.section_cut import cut_section, hal_bound, section_parts, skip_reason
+from tollcli.charging.section_cut import (
+    cut_section,
+    hal_bound,
+    section_parts,
+    skip_reason,
+)
 from tollcli.errors import DataError
-from tollcli.spatial import feature_geometries, feature_geometry, geojson_coordinates, local_frame, project
+from tollcli.spatial import (
+    feature_geometries,
+    feature_geometry,
+    geojson_coordinates,
+    local_frame,
+    project,
+)
 
 CONNECT_TOL_M = 1.0
 TRIM_FACTOR = 2.0

@@ -6,7 +6,15 @@ Shared by the flat fee tables and the per-km rate tables (``tariffs.py``, ``rate
 from __future__ import annotations
 
 import re
-from decimal import MAX_EMAX, MIN_EMIN, ROUND_HALF_UP, Decimal, Inexact, InvalidOperation, localcontext
+from decimal import (
+    MAX_EMAX,
+    MIN_EMIN,
+    ROUND_HALF_UP,
+    Decimal,
+    Inexact,
+    InvalidOperation,
+    localcontext,
+)
 
 from tollcli.errors import DataError
 

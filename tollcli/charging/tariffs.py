@@ -44,7 +44,9 @@ from dataclasses import dataclass, field
 from decimal import ROUND_HALF_UP, Decimal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
-from tollcli.charging.money import exact, exact_fee, line_of, money as _money, where as _where
+from tollcli.charging.money import exact, exact_fee, line_of
+from tollcli.charging.money import money as _money
+from tollcli.charging.money import where as _where
 from tollcli.charging.rate_tables import (
     VEHICLE_CLASS,
     Price,

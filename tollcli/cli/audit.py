@@ -3,20 +3,26 @@
 from __future__ import annotations
 
 import glob
-from collections import Counter
 import json
 import os
 import sys
-
+from collections import Counter
 from typing import Annotated, Optional
 
 import pandas as pd
 import typer
 
-from tollcli.charging.audit import MONEY_UNKNOWN, audit_with_truth, check_same_trip, findings_of, load_invoice, risk_report
-from tollcli.charging.truth_passages import is_id_list, truth_passages, truth_trajectory
+from tollcli.charging.audit import (
+    MONEY_UNKNOWN,
+    audit_with_truth,
+    check_same_trip,
+    findings_of,
+    load_invoice,
+    risk_report,
+)
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
+from tollcli.charging.truth_passages import is_id_list, truth_passages, truth_trajectory
 from tollcli.cli import options as opt
 from tollcli.cli.console import audit_tables, show, warn
 from tollcli.errors import DataError, UsageError

@@ -27,7 +27,14 @@ def progress(description: str, quiet: bool, log: str | None = None, total: int |
     if quiet or not sys.stderr.isatty():
         yield lambda n, line=None: None
         return
-    from rich.progress import BarColumn, Progress, SpinnerColumn, TaskProgressColumn, TextColumn, TimeElapsedColumn
+    from rich.progress import (
+        BarColumn,
+        Progress,
+        SpinnerColumn,
+        TaskProgressColumn,
+        TextColumn,
+        TimeElapsedColumn,
+    )
 
     lines = _line_count(log) if total is None and log is not None else None
     known = total if total is not None else lines

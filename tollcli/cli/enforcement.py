@@ -13,7 +13,11 @@ import typer
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.cli import options as opt
 from tollcli.cli.console import warn
-from tollcli.enforcement.findings import CLASS_MAX_SPEED_MPS, FindingSettings, trip_findings
+from tollcli.enforcement.findings import (
+    CLASS_MAX_SPEED_MPS,
+    FindingSettings,
+    trip_findings,
+)
 from tollcli.enforcement.locate import (
     COLUMNS,
     latest_per_vehicle,
@@ -23,14 +27,19 @@ from tollcli.enforcement.locate import (
     vehicle_from_log,
     vehicle_from_path,
 )
-from tollcli.enforcement.roadside import RoadsideSettings, cross_check, read_gantries, read_reads
+from tollcli.enforcement.roadside import (
+    RoadsideSettings,
+    cross_check,
+    read_gantries,
+    read_reads,
+)
 from tollcli.errors import UsageError
 from tollcli.integrity.raim import RaimParams
 from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for, write_text_atomic
 from tollcli.job.log_integrity import iter_integrity
-from tollcli.readers.nmea import ReadStats
 from tollcli.readers.navigation import NAVIGATION_KINDS
+from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_usable
 
 VehicleClass = Annotated[str, typer.Option("--vehicle-class", help=f"Vehicle class, sets the top speed: {', '.join(CLASS_MAX_SPEED_MPS)}.")]

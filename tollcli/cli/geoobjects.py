@@ -39,7 +39,7 @@ def build(
     level). A section cut around a near road keeps several parts, charged once per passage at its whole length. Where
     no stretch can have the design HAL, the largest HAL down to --hal-min is used and listed. Nothing is written that
     'geoobjects check' or 'process' would refuse."""
-    from tollcli.charging.geoobject_compile import gc_paused
+    from tollcli.charging.geojson_stream import gc_paused
 
     if out_fmt is not None and out_fmt.lower() != "geojson":
         raise UsageError(f"-f {out_fmt}: geo-objects are written as GeoJSON (what check, info and process read)")

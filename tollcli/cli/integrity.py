@@ -21,8 +21,8 @@ from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for
 from tollcli.job.log_integrity import iter_integrity
-from tollcli.readers.nmea import ReadStats
 from tollcli.readers.navigation import NAVIGATION_KINDS
+from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_partial, check_usable
 
 

@@ -25,10 +25,8 @@ def plot(
     as_json: Annotated[bool, typer.Option("--json", help="Print the figures written as JSON on stdout.")] = False,
 ) -> None:
     """Figures of a run (PNG, or -f svg|pdf): trajectory over the geo-objects by RAIM status; HPL/HAL and P_FA over time; valid independent positions per passage against N_Th; with --truth, the Stanford diagram."""
-    from tollcli.report.plots import write_plots
+    from tollcli.report.plots import PLOT_FORMATS, write_plots
     from tollcli.report.run_data import load_run
-
-    from tollcli.report.plots import PLOT_FORMATS
 
     fmt = (out_fmt or "png").lower()
     if fmt not in PLOT_FORMATS:

@@ -48,7 +48,11 @@ def pseudorange_epochs(log: str, kind: str, nav: str | None, sigma_model: str, s
 
 def _raw_epochs(log: str, kind: str, nav: str | None, sigma_model: str, sigma_m: float, nominal: NominalModel,
                 strict: bool) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
-    from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites, with_device_gnss_satellites
+    from tollcli.gnss.raw_positions import (
+        raw_epochs,
+        with_broadcast_satellites,
+        with_device_gnss_satellites,
+    )
 
     ephemerides, iono = None, None
     if nav is not None:

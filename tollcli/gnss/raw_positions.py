@@ -26,7 +26,12 @@ from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
 from tollcli.gnss.doppler_velocity import doppler_velocity
 from tollcli.gnss.measurements import Measurements, pad, slots
 from tollcli.gnss.orbits import WEEK_S
-from tollcli.gnss.pseudorange_wls import C_MPS, final_geometry, line_of_sight, solve_positions
+from tollcli.gnss.pseudorange_wls import (
+    C_MPS,
+    final_geometry,
+    line_of_sight,
+    solve_positions,
+)
 from tollcli.gnss.satellite_states import satellite_states
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.gps_time import gps_millis_to_utc

@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from tollcli.gnss.android_raw import PHYSICAL_RANGE_M
 from tollcli.gnss import inav_words, lnav_subframes
+from tollcli.gnss.android_raw import PHYSICAL_RANGE_M
 from tollcli.gnss.measurements import sv_labels
 from tollcli.gnss.orbits import WEEK_S
 from tollcli.readers.ubx import GNSS_ID, UbxRead

@@ -28,7 +28,13 @@ import pandas as pd
 import shapely
 
 from tollcli.errors import DataError
-from tollcli.spatial import feature_geometry, metric_crs, project, read_features, wgs84_to
+from tollcli.spatial import (
+    feature_geometry,
+    metric_crs,
+    project,
+    read_features,
+    wgs84_to,
+)
 
 
 @dataclass(frozen=True)

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tollcli.gnss.wls import Geometry
 from tollcli.gnss.sigma_models import urban_sigma_m
+from tollcli.gnss.wls import Geometry
 from tollcli.integrity.sources import k_h
 
 #: σ (m) of the worst satellite a receiver can use under the nominal model (5° elevation, low latitude, single

@@ -22,11 +22,10 @@ import numpy as np
 import pandas as pd
 
 from tollcli.gnss.measurements import Measurements
+from tollcli.gnss.receiver_outputs import GST_RMS_NOTES
 from tollcli.gnss.wls import Geometry, post_fit_residuals, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
-from tollcli.integrity.solution_separation import separation_detection, separation_exclusion
 from tollcli.integrity.kalman_hit import hpl_sbas_m
-from tollcli.gnss.receiver_outputs import GST_RMS_NOTES
 from tollcli.integrity.raim import (
     EXCLUDED,
     FAULT,
@@ -39,6 +38,10 @@ from tollcli.integrity.raim import (
     RaimParams,
     detect,
     status_names,
+)
+from tollcli.integrity.solution_separation import (
+    separation_detection,
+    separation_exclusion,
 )
 from tollcli.integrity.sources import (
     LEVELS,

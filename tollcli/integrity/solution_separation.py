@@ -40,7 +40,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from tollcli.gnss.wls import Geometry, wls_geometry
-from tollcli.integrity.raim import FAULT, INSUFFICIENT, UNAVAILABLE, UNMONITORED, VALID, Detection
+from tollcli.integrity.raim import (
+    FAULT,
+    INSUFFICIENT,
+    UNAVAILABLE,
+    UNMONITORED,
+    VALID,
+    Detection,
+)
 
 P_SAT = 1e-5  # ARAIM's usual prior of a satellite fault per approach
 P_CONST = 1e-8  # and of a constellation-wide fault

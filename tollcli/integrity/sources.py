@@ -50,7 +50,13 @@ import math
 import numpy as np
 
 from tollcli.gnss.receiver_outputs import ReceiverOutputs
-from tollcli.integrity.raim import EXCLUDED, FAULT, PROBABLE_FALSE_ALARM, UNAVAILABLE, VALID
+from tollcli.integrity.raim import (
+    EXCLUDED,
+    FAULT,
+    PROBABLE_FALSE_ALARM,
+    UNAVAILABLE,
+    VALID,
+)
 
 SOURCES = ("grs", "pseudorange", "gbs", "gst", "model", "none")
 RESIDUAL_SOURCES = ("grs", "pseudorange")

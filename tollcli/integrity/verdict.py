@@ -25,7 +25,13 @@ import numpy as np
 import pandas as pd
 
 from tollcli.integrity.fuzzy_mm import alarm, integrity_scale
-from tollcli.integrity.map_matching import MatchParams, MatchState, MatchTrace, Roads, match_with_trace
+from tollcli.integrity.map_matching import (
+    MatchParams,
+    MatchState,
+    MatchTrace,
+    Roads,
+    match_with_trace,
+)
 from tollcli.integrity.speed import SpeedParams, speed_integrity, trapezoid_average
 
 POLICIES = {"raim": (), "raim+speed": ("speed",), "raim+mm": ("mm",), "all": ("speed", "mm")}

@@ -42,10 +42,15 @@ def _is_json_doc(path: str) -> dict | None:
 
 def file_info(path: str, min_hal_m: float = 25.0) -> dict:
     """What ``path`` holds, as a JSON-ready dict (see the module's description)."""
-    doc = _is_json_doc(path)
-    if doc is not None and doc.get("type") == "FeatureCollection":
-        from tollcli.charging.geoobject_info import geoobject_info
+    from tollcli.charging.geoobject_info import geoobject_info
 
+    if path != "-" and path.lower().endswith((".json", ".geojson")):
+        try:  # read feature by feature: a national network's file is never parsed whole
+            return {"file": path, "kind": "geoobjects", **geoobject_info(path, min_hal_m)}
+        except DataError:
+            pass  # no FeatureCollection (an invoice?): read as a document below
+    doc = _is_json_doc(path)
+    if doc is not None and doc.get("type") == "FeatureCollection":  # one geoobject_info refused: say why
         return {"file": path, "kind": "geoobjects", **geoobject_info(path, min_hal_m)}
     if doc is not None and "content_sha256" in doc and "lines" in doc:
         return {"file": path, "kind": "invoice", "vehicle": doc.get("vehicle"), "period": doc.get("period"),

@@ -10,14 +10,20 @@ from dataclasses import asdict, dataclass, replace
 
 import pandas as pd
 
-from tollcli.charging.invoice import build_invoice, explain_not_charged, file_sha256, invoice_json, seal
+from tollcli.charging.invoice import (
+    build_invoice,
+    explain_not_charged,
+    file_sha256,
+    invoice_json,
+    seal,
+)
+from tollcli.charging.rate_tables import check_vehicle
 from tollcli.charging.recognition import (
     charges,
     inside_pairs,
     load_geoobjects,
     positions_from_pairs,
 )
-from tollcli.charging.rate_tables import check_vehicle
 from tollcli.charging.tariffs import load_tariff
 from tollcli.enforcement.findings import FindingSettings, trip_findings
 from tollcli.enforcement.trip import cn0_summary
@@ -30,8 +36,8 @@ from tollcli.integrity.environment import ENVIRONMENTS, EnvironmentCarry
 from tollcli.integrity.raim import MODES, RaimParams
 from tollcli.integrity.run import level_name, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
-from tollcli.io.sources import INPUT_KINDS, BLOCK_BYTES as SOURCE_BLOCK_BYTES
-from tollcli.io.sources import printable_path, sniff_format
+from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
+from tollcli.io.sources import INPUT_KINDS, printable_path, sniff_format
 from tollcli.job.log_integrity import measured_environment
 from tollcli.job.streaming import TailCharger, choose_policy, has_speeds
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables

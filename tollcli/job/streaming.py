@@ -37,10 +37,10 @@ from tollcli.charging.invoice import passage_details
 from tollcli.charging.recognition import (
     PAIR_COLUMNS,
     PASSAGE_GAP_S,
-    passage_gaps_s,
     charges,
     concat_pairs,
     pair_verdicts,
+    passage_gaps_s,
     passages,
     utc_seconds_or_nan,
 )

@@ -21,7 +21,12 @@ from types import SimpleNamespace
 import numpy as np
 
 from tollcli.gnss.sigma_models import NominalModel
-from tollcli.gnss.wls import observation_matrix, residuals_from_prefit, wls_geometry, wsse
+from tollcli.gnss.wls import (
+    observation_matrix,
+    residuals_from_prefit,
+    wls_geometry,
+    wsse,
+)
 from tollcli.integrity.raim import VALID, RaimParams, detect
 from tollcli.simulate.constellations import nominal, stacked
 from tollcli.simulate.errors import gauss_markov

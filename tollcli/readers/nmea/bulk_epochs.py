@@ -12,8 +12,15 @@ from __future__ import annotations
 import numpy as np
 
 from tollcli.readers.nmea.assembler import FLOAT_COLUMNS
+from tollcli.readers.nmea.bulk_picks import (
+    first_finite,
+    first_given,
+    group_seq,
+    last_finite,
+    pick,
+    scatter,
+)
 from tollcli.readers.nmea.bulk_sentences import GBS_COLUMNS
-from tollcli.readers.nmea.bulk_picks import first_finite, first_given, group_seq, last_finite, pick, scatter
 
 SENTENCE_TYPES = ("GGA", "RMC", "VTG", "GSA", "GSV", "GST", "GLL", "ZDA", "GRS", "GBS", "GNS")
 SAT_FIELDS = ("sat_row", "sat_k", "sat_const", "sat_svid", "sat_prn", "sat_signal", "sat_elev", "sat_azim", "sat_cn0")

@@ -36,7 +36,12 @@ from tollcli.readers.nmea.bulk_lines import (
     unpack_address,
 )
 from tollcli.readers.nmea.fields import time_of_day_s
-from tollcli.readers.nmea.line_reader import DISCARDED, HANDLED_TYPES, classify_line, feed_lines
+from tollcli.readers.nmea.line_reader import (
+    DISCARDED,
+    HANDLED_TYPES,
+    classify_line,
+    feed_lines,
+)
 
 #: line kinds
 BLANK, COMMENT, NOT_NMEA, NO_CHECKSUM, BAD_CHECKSUM, UNUSED, MALFORMED, DECODED = range(8)
