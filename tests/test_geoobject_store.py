@@ -205,3 +205,16 @@ def test_overlaps_found_block_by_block_are_every_pair_measured_at_once(monkeypat
             if area > 1.0 and not (i, j) == (0, 1):
                 expected.append((ids[i], f"overlaps {ids[j]} ({area:.0f} m²)"))
     assert found == expected and len(expected) > 20
+
+
+def test_a_store_damaged_inside_says_so(tmp_path, monkeypatch):
+    """Bytes of a polygon changed on disk after the store was written: a one-line error naming the store, exit 1."""
+    monkeypatch.setenv("TOLLCLI_CACHE_DIR", str(tmp_path / "cache"))
+    store = geoobject_store.load_geoobjects(GEO).store
+    wkb = np.load(store / "metric_wkb.npy")
+    wkb[1:5] = 0xFF  # the first polygon's geometry type
+    np.save(store / "metric_wkb.npy", wkb)
+    r = run_cli("process", str(SAMPLES / "sim" / "urban-fault" / "drive.nmea"), "--geo", GEO, "--tariff", TARIFF, "-o", str(tmp_path / "i.json"), "-q")
+    assert r.returncode == 1, r.stderr
+    assert b"metric_wkb.npy: damaged" in r.stderr and b"geoobjects compile" in r.stderr and r.stderr.count(b"\n") == 1
+    assert not (tmp_path / "i.json").exists()

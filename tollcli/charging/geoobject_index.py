@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
+from tollcli.errors import DataError
+
 #: a geo-object whose box would cover more cells than this is checked by its box alone (the ``big`` list)
 MAX_CELLS = 64
 
@@ -41,7 +43,12 @@ class StoredGeometries:
         if missing.size:
             starts = np.where(missing > 0, self.ends[np.maximum(missing - 1, 0)], 0)
             stops = self.ends[missing]
-            self._decoded[missing] = shapely.from_wkb([self.wkb[a:b].tobytes() for a, b in zip(starts.tolist(), stops.tolist())])
+            try:
+                self._decoded[missing] = shapely.from_wkb([self.wkb[a:b].tobytes() for a, b in zip(starts.tolist(), stops.tolist())])
+            except shapely.errors.ShapelyError as exc:  # bytes changed on disk after the store was written
+                where = getattr(self.wkb, "filename", None)
+                raise DataError(f"{where or 'the geo-object store'}: damaged ({exc}); delete its folder and run "
+                                "tollcli geoobjects compile") from None  # fmt: skip
         return self._decoded[index]
 
     def all(self) -> np.ndarray:
