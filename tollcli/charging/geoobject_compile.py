@@ -111,7 +111,8 @@ def compile_features(features: list, path: str, checked: bool = False, columns: 
         columns[name] = value
     axes = _axes(props, frames, frame)
     if axes is not None:  # an empty line stands for "no axis"
-        columns["axes_wkb"], columns["axes_ends"] = _to_wkb([shapely.LineString() if a is None else a for a in axes])
+        lines = np.array([shapely.LineString() if a is None else a for a in axes], dtype=object)
+        _put_wkb(columns, "axes", [_wkb_block(lines[start : start + CHUNK]) for start in range(0, len(lines), CHUNK)])
     return columns
 
 
@@ -166,12 +167,6 @@ def _float(value) -> float:
         return float("nan")
 
 
-def _to_wkb(geoms) -> tuple[np.ndarray, np.ndarray]:
-    """Geometries as one WKB byte array and each one's end offset (in blocks: never all the WKB twice in memory)."""
-    geoms = np.asarray(geoms, dtype=object)
-    return _joined([_wkb_block(geoms[start : start + CHUNK]) for start in range(0, len(geoms), CHUNK)])
-
-
 def _wkb_block(geoms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     wkb = shapely.to_wkb(geoms).tolist()
     return np.frombuffer(b"".join(wkb), np.uint8), np.array([len(w) for w in wkb], dtype=np.int64)
@@ -185,10 +180,3 @@ def _put_wkb(columns: dict, name: str, blocks: list[tuple[np.ndarray, np.ndarray
         columns.put_blocks(f"{name}_wkb", [b for b, _ in blocks])
     else:
         columns[f"{name}_wkb"] = np.concatenate([b for b, _ in blocks]) if blocks else np.zeros(0, np.uint8)
-
-
-def _joined(blocks: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Blocks of (WKB bytes, lengths) as one byte array and the end offset of each geometry."""
-    if not blocks:
-        return np.zeros(0, np.uint8), np.zeros(0, np.int64)
-    return np.concatenate([b for b, _ in blocks]), np.cumsum(np.concatenate([n for _, n in blocks]))
