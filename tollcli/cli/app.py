@@ -17,7 +17,7 @@ COMMANDS = {
     "findings": ("tollcli.cli.enforcement", "findings"), "enforce": ("tollcli.cli.enforcement", "enforce"),
     "plot": ("tollcli.cli.report", "plot"), "report": ("tollcli.cli.report", "report"),
     "batch": ("tollcli.cli.batch", "batch"), "info": ("tollcli.cli.info", "info"),
-    "geoobjects": ("tollcli.cli.geoobjects", "app"),
+    "geoobjects": ("tollcli.cli.geoobjects", "app"), "osnma": ("tollcli.cli.osnma", "osnma"),
 }  # fmt: skip
 
 EPILOG = (
