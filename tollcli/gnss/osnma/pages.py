@@ -134,50 +134,36 @@ def ubx_page_bits(words: np.ndarray) -> np.ndarray:
 def read_ubx(path: str | os.PathLike, strict: bool = False) -> Pages:
     """The Galileo I/NAV pages of a u-blox log (RXM-SFRBX), timed by NAV-TIMEGAL."""
     from tollcli.io.sources import open_binary
+    from tollcli.readers.nmea.line_reader import ReadStats
+    from tollcli.readers.ubx_nav import iter_frames
 
-    try:
-        with open_binary(str(path)) as stream:
-            data = stream.read()
-    except FileNotFoundError:
-        raise UsageError(f"{path}: no such file") from None
     rows: list[tuple] = []
     words: list[tuple] = []
     tow = wn = None
     seen: set[tuple[int, int]] = set()
     dropped = n = 0
-    at = data.find(b"\xb5\x62")
-    while 0 <= at and at + 8 <= len(data):
-        cls, ident, length = data[at + 2], data[at + 3], int.from_bytes(data[at + 4 : at + 6], "little")
-        end = at + 6 + length + 2
-        body = data[at + 2 : at + 6 + length]
-        a = b = 0
-        for byte in body:  # the UBX Fletcher checksum
-            a = (a + byte) & 0xFF
-            b = (b + a) & 0xFF
-        if end > len(data) or data[end - 2 : end] != bytes((a, b)):
-            if strict:
-                raise DataError(f"{path}: UBX message at byte {at}: bad checksum")
-            at = data.find(b"\xb5\x62", at + 2)
-            continue
-        n += 1
-        payload = body[4:]
-        if (cls, ident) == _TIMEGAL and length >= 16:  # iTOW, galTow, fGalTow, galWno, leapS, valid, tAcc
-            gal_tow, gal_wno = struct.unpack_from("<I", payload, 4)[0], struct.unpack_from("<h", payload, 12)[0]
-            valid = payload[15] & 0x03 == 0x03  # galTowValid, galWnoValid
-            label = gal_tow - (3 - gal_tow % 2)
-            if valid and (tow, wn) != (label, gal_wno):
-                tow, wn, seen = label, gal_wno, set()
-        elif (cls, ident) == _SFRBX and length >= 8 + 32 and payload[0] == 2:
-            signal = _UBX_SIGNAL.get(payload[2] if payload[6] >= 2 else 1)
-            if signal is not None:
-                key = (payload[1], payload[2])
-                if tow is None or key in seen:
-                    dropped += 1
-                else:
+    stats = ReadStats()
+    try:
+        with open_binary(str(path)) as stream:
+            for cls, ident, payload, n in iter_frames(stream, str(path), stats, strict):
+                if (cls, ident) == _TIMEGAL and len(payload) >= 16:  # iTOW, galTow, fGalTow, galWno, leapS, valid, tAcc
+                    gal_tow, gal_wno = struct.unpack_from("<I", payload, 4)[0], struct.unpack_from("<h", payload, 12)[0]
+                    label = gal_tow - (3 - gal_tow % 2)
+                    if payload[15] & 0x03 == 0x03 and (tow, wn) != (label, gal_wno):  # galTowValid, galWnoValid
+                        tow, wn, seen = label, gal_wno, set()
+                elif (cls, ident) == _SFRBX and len(payload) >= 8 + 32 and payload[0] == 2:
+                    signal = _UBX_SIGNAL.get(payload[2] if payload[6] >= 2 else 1)
+                    if signal is None:
+                        continue
+                    key = (payload[1], payload[2])
+                    if tow is None or key in seen:
+                        dropped += 1
+                        continue
                     seen.add(key)
                     rows.append((payload[1], wn, tow, signal, n))
                     words.append(struct.unpack_from("<8I", payload, 8))
-        at = data.find(b"\xb5\x62", end)
+    except FileNotFoundError:
+        raise UsageError(f"{path}: no such file") from None
     if n == 0:
         raise DataError(f"{path}: no UBX messages")
     bits = ubx_page_bits(np.array(words, np.uint64).reshape(len(words), 8))
