@@ -207,14 +207,17 @@ def _evidence(positions: pd.DataFrame) -> dict[tuple, list[dict]]:
     numbers = [[None if v != v else float(f"{v:.10g}") for v in kept[c].to_numpy(float).tolist()] if c in kept else [None] * len(kept)
                for c in ("test_stat", "threshold", "p_fa", "hpl_m", "separation_ratio")]  # fmt: skip
     vouching = kept["integrity_source"] if "integrity_source" in kept else kept["test_stat_source"]
-    for gid, passage, epoch, when, status, stat, threshold, p_fa, hpl, ratio, source, vouched in zip(
+    nav_auth = kept["nav_auth"].tolist() if "nav_auth" in kept else [None] * len(kept)
+    for gid, passage, epoch, when, status, stat, threshold, p_fa, hpl, ratio, source, vouched, authenticated in zip(
         kept["geoobject"], kept["passage"].tolist(), kept["epoch_row"].tolist(), times, kept["raim_status"],
-        *numbers, kept["test_stat_source"], vouching,
+        *numbers, kept["test_stat_source"], vouching, nav_auth,
     ):  # fmt: skip
         item = {"epoch": epoch, "time_utc": when, "raim_status": status, "test_stat": stat, "threshold": threshold,
                 "p_fa": p_fa, "test_stat_source": source, "integrity_source": vouched}  # fmt: skip
         if ratio is not None:  # solution separation: the bound it was declared against and its largest separation
             item.update(hpl_m=hpl, separation_ratio=ratio)
+        if authenticated is not None:  # the log was checked for authenticated navigation data (OSNMA)
+            item["nav_auth"] = authenticated
         out.setdefault((gid, passage), []).append(item)
     return out
 

@@ -246,6 +246,7 @@ def passages(cols: dict[str, np.ndarray], geo: GeoObjects, tc_s: float = 5.0, pa
         "valid": valid, "independent": independent,
         "verdict": cols["verdict"][by_obj],
         **({"part": cols["part"][by_obj]} if "part" in cols else {}),
+        **({"nav_auth": cols["nav_auth"][by_obj]} if "nav_auth" in cols else {}),
     })  # fmt: skip
 
 

@@ -45,6 +45,9 @@ def batch(
     sigma: opt.Sigma = 5.0,
     tc: opt.Tc = 5.0,
     n_th: opt.NTh = 1,
+    require_authenticated: opt.RequireAuthenticated = False,
+    osnma_merkle: opt.OsnmaMerkle = None,
+    osnma_public_key: opt.OsnmaPublicKey = None,
     strict: opt.Strict = False,
     date: opt.DateOpt = None,
     max_bad: opt.MaxBad = None,
@@ -77,10 +80,12 @@ def batch(
                               environment=environment, p_sat=p_sat, p_const=p_const,
                               fde=fde, sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
                               date=date.date().isoformat() if date else None,
-                              integrity_sources=integrity_sources, input_format=input_format)  # fmt: skip
+                              integrity_sources=integrity_sources, input_format=input_format,
+                              require_authenticated=require_authenticated)  # fmt: skip
     with progress(f"batch of {len(logs)} logs", quiet, total=len(logs), unit="logs") as advance:
         summary = run_batch(logs, geo, tariff, settings, output, workers=workers, scheduler=scheduler, force=force,
-                            roads=roads, nav=nav, progress=advance, fleet=fleet)  # fmt: skip
+                            roads=roads, nav=nav, progress=advance, fleet=fleet, osnma_merkle=osnma_merkle,
+                            osnma_public_keys=osnma_public_key)  # fmt: skip
     line = (f"{output}: {summary['logs']} logs: {summary['done']} done, {summary['skipped']} up to date, {summary['failed']} failed; "
             + ", ".join(f"{v} {k}" for k, v in summary["totals"].items()))  # fmt: skip
     if as_json:

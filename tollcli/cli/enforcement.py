@@ -125,6 +125,8 @@ def findings(
     gap_min: Annotated[float, typer.Option("--gap-min", help="A gap lasts at least this long, s.", min=1.0)] = 60.0,
     gap_min_distance: Annotated[float, typer.Option("--gap-min-distance", help="…and ends at least this far away, m.", min=0.0)] = 500.0,
     hal: opt.Hal = 50.0,
+    osnma_merkle: opt.OsnmaMerkle = None,
+    osnma_public_key: opt.OsnmaPublicKey = None,
     output: opt.FindingsOutput = "-",
     out_fmt: opt.FindingsFormat = None,
     strict: opt.Strict = False,
@@ -133,6 +135,10 @@ def findings(
     as_json: opt.JsonSummary = False,
 ) -> None:
     """Tamper and evasion findings of one trip (gaps, jamming signs, spoofing signs), with times, positions and evidence.
+
+    A u-blox log with Galileo I/NAV pages and the OSNMA Merkle tree beside it (or
+    --osnma-merkle) is authenticated too: each failure (a tag, key or signature
+    that does not verify) is an osnma_failure finding naming satellite and time.
 
     Writes JSON: the settings used and one record per finding (kind, category,
     start_utc, end_utc, lat_deg, lon_deg, end_lat_deg, end_lon_deg, evidence);
@@ -145,6 +151,11 @@ def findings(
     settings = FindingSettings.for_class(vehicle_class, **overrides)
     table, sats = _trip(log, hal, strict, date)
     items = trip_findings(table, sats, table, load_geoobjects(geo) if geo else None, settings) if not table.empty else []
+    from tollcli.job.osnma_evidence import failure_findings, osnma_evidence
+
+    evidence = osnma_evidence(log, sniff_format(log), osnma_merkle, osnma_public_key, strict=strict)
+    if evidence is not None and not table.empty:
+        items = sorted([*items, *failure_findings(evidence, table)], key=lambda f: (f["start_utc"], f["kind"]))
     doc = {"log": log, "settings": settings.__dict__, "findings": items}
     _write_findings(output, kind, doc)
     _findings_summary(log, output, items, "findings", quiet, as_json)

@@ -84,6 +84,10 @@ def split_format(fmt: str | None, input_format: str) -> tuple[str | None, str]:
     return fmt, check_input_format(input_format)
 
 
+OsnmaMerkle = Annotated[Optional[str], typer.Option("--osnma-merkle", help="The Galileo OSNMA Merkle tree (GSC XML) to authenticate a u-blox log's navigation data with; default: OSNMA_MerkleTree.xml beside the log, if there.")]
+OsnmaPublicKey = Annotated[Optional[list[str]], typer.Option("--osnma-public-key", help="An OSNMA public key file (GSC XML), repeatable; default: OSNMA_PublicKey*.xml beside the log (a key is used only when the Merkle tree holds it; without one it comes from the signal).")]
+RequireAuthenticated = Annotated[bool, typer.Option("--require-authenticated", help="A position counts only when its navigation data were authenticated by Galileo OSNMA (every used satellite, or ≥ 4 whose own position agrees with the fix); others are 'unauthenticated' or 'subset_disagrees'.")]
+
 Strict = Annotated[
     bool,
     typer.Option("--strict", help="Stop at the first unusable line (bad checksum, malformed, not NMEA) with its line number."),

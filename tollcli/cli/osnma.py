@@ -29,7 +29,10 @@ def osnma(
     against its ECDSA signature, every TESLA key back to that root, and each MAC
     tag over the ephemeris, clock and status (ADKD 0, 12) or time conversion
     (ADKD 4) data it covers. Writes per epoch how many used Galileo satellites
-    had authenticated data (-o), and on request per epoch and satellite
+    had authenticated data (-o; for a u-blox log also nav_auth and the position
+    from the authenticated satellites alone, auth_lat_deg, auth_lon_deg, with its
+    distance to the fix auth_sep_m and that distance's no-fault bound
+    auth_sep_threshold_m), and on request per epoch and satellite
     (--satellites), each tag (--tags) and each failure (--failures). A failure
     names satellite and time: forged or replayed data, or a damaged log.
     Authentication covers the data, not the ranging (see docs/osnma.md).

@@ -43,6 +43,9 @@ def process(
     sigma: opt.Sigma = 5.0,
     tc: opt.Tc = 5.0,
     n_th: opt.NTh = 1,
+    require_authenticated: opt.RequireAuthenticated = False,
+    osnma_merkle: opt.OsnmaMerkle = None,
+    osnma_public_key: opt.OsnmaPublicKey = None,
     strict: opt.Strict = False,
     date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
@@ -58,7 +61,10 @@ def process(
     table in force, the length charged and the rate), entry and exit times and
     the positions that support it, the passages seen but not charged, the input
     files and their SHA-256, every parameter used, and the SHA-256 of its own
-    content; 'tollcli verify' re-runs it.
+    content; 'tollcli verify' re-runs it. A u-blox log with Galileo I/NAV pages
+    and the OSNMA Merkle tree beside it (or --osnma-merkle) is authenticated:
+    each position and line says whether its navigation data were authenticated,
+    each OSNMA failure is an osnma_failure finding (see docs/osnma.md).
     """
     out_fmt, fmt = opt.split_format(out_fmt, input_format)
     kind = format_for(output, "json", out_fmt, ("json", "csv"))
@@ -68,8 +74,9 @@ def process(
                               environment=environment, p_sat=p_sat, p_const=p_const,
                               sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
                               date=date.date().isoformat() if date else None, policy=policy,
-                              integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt))  # fmt: skip
-    invoice, stats = charge_log(log, geo, tariff, settings, nav, roads)
+                              integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt),
+                              require_authenticated=require_authenticated)  # fmt: skip
+    invoice, stats = charge_log(log, geo, tariff, settings, nav, roads, osnma_merkle=osnma_merkle, osnma_public_keys=osnma_public_key)
     if output == "-" and out_fmt is None and sys.stdout.isatty():
         show(lambda: invoice_tables(invoice), False, to_stdout=True)
     else:
@@ -90,7 +97,7 @@ def invoice_summary(invoice: dict, output: str, stats=None) -> dict:
             "charged": len(invoice["lines"]), "not_charged": len(invoice["not_charged"]),
             "total": invoice["total"], "currency": invoice["currency"], "content_sha256": invoice["content_sha256"],
             "integrity_sources_used": invoice["parameters"].get("integrity_sources_used"),
-            "policy_used": invoice["parameters"].get("policy_used"), "findings": len(invoice.get("findings") or []),
+            "policy_used": invoice["parameters"].get("policy_used"), "findings": len((invoice.get("findings") or {}).get("items") or []),
             "skipped_lines": int(stats.skipped) if stats is not None else 0}
 
 

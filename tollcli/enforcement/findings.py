@@ -32,6 +32,8 @@ spoofing
   ``doppler_mismatch``  over ``doppler_window_s`` s the fixes' displacement and the one the reported (Doppler)
   velocity gives differ by more than max(``doppler_tol_mps``, 30 %) as speeds, for ≥ ``doppler_window_s`` s
   (a time window, whatever the rate: :func:`doppler_windows`).
+  ``osnma_failure``  Galileo OSNMA refused a satellite's navigation data, a key or a signature (``osnma_failures.py``:
+  from the log's navigation pages, not from these epochs).
 expected
   ``tunnel_outage``  a gap, fix loss or collapse at a geo-object's tunnel, no longer than the tunnel takes
   (``tunnels.py``; ``tunnel_portal_m``, ``tunnel_reacquire_s``): the kind it replaces is in ``evidence.explains``.
@@ -61,7 +63,7 @@ CATEGORY = {
     "position_jump": "spoofing", "time_jump": "spoofing", "overspeed": "spoofing", "cn0_uniform": "spoofing",
     "raim_persistent_alarm": "spoofing", "position_disagreement": "spoofing", "date_disagreement": "spoofing",
     "date_jump": "spoofing",
-    "doppler_mismatch": "spoofing", "tunnel_outage": "expected",
+    "doppler_mismatch": "spoofing", "osnma_failure": "spoofing", "tunnel_outage": "expected",
 }  # fmt: skip
 #: a persistent RAIM alarm is reported when no-fault alarms (each epoch at its own P_FA) would be this unlikely
 RAIM_ALARM_P_VALUE = 1e-3

@@ -72,6 +72,8 @@ class Job:
     input_sha256: tuple = ()  # (key, SHA-256) of the shared inputs, for the resume check
     nav: str | None = None  # the navigation file shared by the logs (raw-measurement inputs)
     error: str = ""  # why the log cannot be charged before it is read (a vehicle the fleet file does not list)
+    osnma_merkle: str | None = None  # the OSNMA Merkle tree for every log (None: each u-blox log's own, beside it)
+    osnma_public_keys: tuple[str, ...] | None = None
 
 
 def path_component(text: str) -> str:
@@ -129,7 +131,7 @@ def _current(done: dict, job: Job, settings: ChargeSettings, log_sha: str) -> bo
     if inputs.get("log_sha256") != log_sha or any(inputs.get(key) != sha for key, sha in job.input_sha256):
         return False
     # ``continued`` depends on the vehicle's other logs: join_passages checks it after every log is done
-    recorded = {"input_format": "auto", "vehicle_attrs": None, **parameters}  # recorded only when given
+    recorded = {"input_format": "auto", "vehicle_attrs": None, "require_authenticated": False, **parameters}  # recorded only when given
     return all(k in recorded and recorded[k] == v for k, v in asdict(settings).items() if k != "continued")
 
 
@@ -174,7 +176,9 @@ def _failed(job: Job, name: str, outcome: dict, message: str) -> dict:
 def _process(job: Job, settings: ChargeSettings, folder: str, name: str, inv_path: str, outcome: dict) -> dict:
     tables: list = []
     invoice, stats = charge_log(job.log, job.geo, job.tariff, settings, job.nav, roads=job.roads, epoch_table=tables,
-                                geo_sha256=dict(job.input_sha256).get("geoobjects_sha256"))  # hashed once per batch
+                                geo_sha256=dict(job.input_sha256).get("geoobjects_sha256"),  # hashed once per batch
+                                osnma_merkle=job.osnma_merkle,
+                                osnma_public_keys=list(job.osnma_public_keys) if job.osnma_public_keys is not None else None)  # fmt: skip
     table = tables[0]
     dated = table["time_utc"].dropna()
     date = dated.iloc[0].strftime("%Y-%m-%d") if len(dated) else "unknown"
@@ -330,7 +334,8 @@ def _fleet_jobs(jobs: list[Job], table: dict, fleet: str) -> list[Job]:
 
 def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, outdir: str, *, workers: int = 1,
               scheduler: str | None = None, force: bool = False, roads: str | None = None, nav: str | None = None,
-              progress=None, fleet: str | None = None) -> dict:  # fmt: skip
+              progress=None, fleet: str | None = None, osnma_merkle: str | None = None,
+              osnma_public_keys: list[str] | None = None) -> dict:  # fmt: skip
     """Process every log; returns the summary (also written to OUTDIR/summary.json).
 
     ``fleet``: a fleet CSV (``fleet.py``) giving each vehicle its class and tariff attributes; a log of a vehicle
@@ -343,7 +348,11 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
         shared.append(("roads_sha256", file_sha256(roads)))
     if nav is not None:
         shared.append(("nav_sha256", file_sha256(nav)))
-    jobs = [Job(log, geo, tariff, settings, outdir, force, roads, vehicle, name, tuple(shared), nav)
+    if osnma_merkle is not None:
+        shared.append(("osnma_merkle_sha256", file_sha256(osnma_merkle)))
+    keys = tuple(osnma_public_keys) if osnma_public_keys is not None else None
+    jobs = [Job(log, geo, tariff, settings, outdir, force, roads, vehicle, name, tuple(shared), nav,
+                osnma_merkle=osnma_merkle, osnma_public_keys=keys)
             for log, (vehicle, _, name) in zip(logs, plan_outputs(logs, settings, outdir))]  # fmt: skip
     if vehicles is not None:
         jobs = _fleet_jobs(jobs, vehicles, fleet)

@@ -5,8 +5,9 @@ The keys: the Merkle tree file and public key files given, else those lying besi
 A public key file is used only when the tree file holds its path to the root; without one the receiver
 starts cold and takes the key from the signal's DSM-PKR (checked against the same root).
 
-Epochs: a u-blox log's NAV-PVT/NAV-SAT epochs (which satellites the fix used); a page file without epochs
-(the ICD test vectors) gets one epoch per subframe with every satellite that sent pages in it.
+Epochs: a u-blox log's NAV-PVT/NAV-SAT epochs (which satellites the fix used), with the position from the
+satellites with authenticated data alone and its distance to the fix (:func:`authenticated_fixes`); a page file
+without epochs (the ICD test vectors) gets one epoch per subframe with every satellite that sent pages in it.
 """
 
 from __future__ import annotations
@@ -64,8 +65,9 @@ def _log_satellites(log: str, pages: pd.DataFrame) -> pd.DataFrame:
 
 
 def check_osnma(log: str, merkle: str | None = None, public_keys: list[str] | None = None, sync_bound_s: float = 30.0,
-                strict: bool = False) -> OsnmaCheck:  # fmt: skip
-    """Verify the OSNMA of a log (u-blox or ICD test-vector CSV) and join it with the log's epochs."""
+                strict: bool = False, p_fa: float = 5e-3, positions: bool = True) -> OsnmaCheck:  # fmt: skip
+    """Verify the OSNMA of a log (u-blox or ICD test-vector CSV) and join it with the log's epochs
+    (``positions``: with the authenticated satellites' own position per epoch, :func:`authenticated_fixes`)."""
     merkle, public_keys = key_files(log, merkle, public_keys)
     tree = read_merkle_tree(merkle)
     keys = [read_public_key(path, tree) for path in public_keys]
@@ -73,7 +75,51 @@ def check_osnma(log: str, merkle: str | None = None, public_keys: list[str] | No
     result = run_osnma(pages.table, OsnmaSettings(tree, keys, sync_bound_s=sync_bound_s))
     status = satellite_status(result, _log_satellites(log, pages.table))
     epochs = epoch_counts(status)
-    return OsnmaCheck(result, status, epochs, summarize(log, result, epochs, keys, pages.n_dropped))
+    positions = authenticated_fixes(log, status, p_fa) if positions and len(status) else None
+    if positions is not None:
+        epochs = epochs.merge(positions.drop(columns=["n_used_slots", "n_used_authenticated"]), on="time_utc", how="left")
+    summary = summarize(log, result, epochs, keys, pages.n_dropped)
+    if positions is not None:
+        summary.update(position_summary(epochs))
+    return OsnmaCheck(result, status, epochs, summary)
+
+
+def authenticated_fixes(log: str, status: pd.DataFrame, p_fa: float = 5e-3) -> pd.DataFrame | None:
+    """Per epoch of a u-blox log: the receiver's fix, the position from the satellites with authenticated data
+    alone and its distance to the fix (:func:`tollcli.integrity.nav_authentication.authenticated_positions`);
+    None for a page file without fixes."""
+    from tollcli.io.sources import sniff_format
+
+    if sniff_format(log) not in ("ubx-nav", "ubx"):
+        return None
+    from tollcli.gnss.measurements import sv_labels
+    from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
+    from tollcli.integrity.nav_authentication import authenticated_positions, authenticated_slots
+    from tollcli.readers.ubx_nav import iter_ubx_nav_tables
+
+    auth = status[status["nav_authenticated"].to_numpy(bool)]
+    auth = pd.DataFrame({"time_utc": auth["time_utc"].to_numpy(), "sv": sv_labels(auth["constellation"].to_numpy(object), auth["svid"].to_numpy())})
+    carry, parts = AngleCarry(), []
+    for chunk in iter_ubx_nav_tables(log):
+        e = chunk.epochs
+        if e.empty:
+            continue
+        meas = nmea_measurements(e, chunk.satellites, carry=carry)
+        lat, lon = e["lat_deg"].to_numpy(float), e["lon_deg"].to_numpy(float)
+        fixes = authenticated_positions(meas, authenticated_slots(meas.sv, e["time_utc"], auth), lat, lon, p_fa)
+        parts.append(pd.concat([pd.DataFrame({"time_utc": e["time_utc"].to_numpy(), "lat_deg": lat, "lon_deg": lon}), fixes], axis=1))
+    return pd.concat(parts, ignore_index=True).drop_duplicates("time_utc") if parts else None
+
+
+def position_summary(epochs: pd.DataFrame) -> dict:
+    """How often the position from authenticated satellites alone existed, and how far it was from the fix."""
+    sep = epochs["auth_sep_m"].to_numpy(float)
+    partial = np.isfinite(sep) & (epochs["nav_auth"].to_numpy(object) != "authenticated")
+    ratio = sep[partial] / epochs["auth_sep_threshold_m"].to_numpy(float)[partial]
+    q = (lambda v, p: round(float(np.percentile(v, p)), 3) if v.size else None)  # noqa: E731
+    return {"nav_auth_epochs": {str(k): int(v) for k, v in epochs["nav_auth"].value_counts().sort_index().items()},
+            "auth_sep_m_subset": {"epochs": int(partial.sum()), "median": q(sep[partial], 50), "p95": q(sep[partial], 95),
+                                  "max": q(sep[partial], 100), "max_over_threshold": q(ratio, 100)}}  # fmt: skip
 
 
 def _gst_text(gst_s) -> str | None:

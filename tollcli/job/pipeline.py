@@ -8,6 +8,7 @@ import math
 import os
 from dataclasses import asdict, dataclass, replace
 
+import numpy as np
 import pandas as pd
 
 from tollcli.charging.invoice import (
@@ -33,12 +34,15 @@ from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.gnss.wls import wls_geometry
 from tollcli.integrity.environment import ENVIRONMENTS, EnvironmentCarry
+from tollcli.integrity.nav_authentication import authenticated_positions, authenticated_slots, not_checked, require_authenticated
 from tollcli.integrity.raim import MODES, RaimParams
 from tollcli.integrity.run import level_name, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
 from tollcli.io.sources import INPUT_KINDS, printable_path, sniff_format
 from tollcli.job.log_integrity import measured_environment
+from tollcli.job.osnma_evidence import OsnmaEvidence, failure_findings, fixes_before, osnma_evidence, record_in_invoice
+from tollcli.job.osnma_evidence import inputs_record as osnma_inputs
 from tollcli.job.streaming import TailCharger, choose_policy, has_speeds
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
@@ -75,6 +79,9 @@ class ChargeSettings:
     input_format: str = "auto"
     #: the vehicle's attributes for a tariff of per-km tables (attribute → value, e.g. euro_class → euro6); None: none
     vehicle_attrs: dict | None = None
+    #: a position counts only when its navigation data were authenticated (Galileo OSNMA,
+    #: integrity.nav_authentication.ACCEPTED): ``--require-authenticated``
+    require_authenticated: bool = False
 
 
 #: the shortest correlation time accepted, s (a 10 Hz receiver's epoch interval)
@@ -113,6 +120,8 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
     if attrs is not None and (not isinstance(attrs, dict) or not all(isinstance(k, str) and isinstance(v, str) and k and v
                                                                         for k, v in attrs.items())):  # fmt: skip
         bad("vehicle_attrs (--vehicle-attr)", attrs, "a table of attribute → value, both texts")
+    if not isinstance(settings.require_authenticated, bool):
+        bad("require_authenticated (--require-authenticated)", settings.require_authenticated, "true or false")
     if attrs and "vehicle_class" in attrs:
         bad("vehicle_attrs (--vehicle-attr)", attrs, "the vehicle class is given by --vehicle-class")
     if tariff is not None:
@@ -148,8 +157,14 @@ def content_sha256(invoice: dict) -> str:
 
 def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | None = None,
                roads: str | None = None, epoch_table: list | None = None,
-               as_recorded: dict[str, str] | None = None, geo_sha256: str | None = None) -> tuple[dict, ReadStats | None]:  # fmt: skip
+               as_recorded: dict[str, str] | None = None, geo_sha256: str | None = None,
+               osnma_merkle: str | None = None, osnma_public_keys: list[str] | None = None,
+               osnma_auto: bool = True) -> tuple[dict, ReadStats | None]:  # fmt: skip
     """The invoice for one log (with its content hash) and the reader's statistics (NMEA).
+
+    OSNMA (:mod:`tollcli.job.osnma_evidence`): the Merkle tree ``osnma_merkle`` and public keys
+    ``osnma_public_keys`` when given, else (``osnma_auto``) those beside a u-blox log; with them each position
+    records whether its navigation data were authenticated, and each failure becomes a finding.
 
     ``epoch_table``: a list that receives the per-epoch table (epochs + RAIM columns) for batch outputs.
     ``as_recorded``: the input paths to record instead of the ones read (``verify`` reads an invoice's
@@ -167,13 +182,18 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     geo_objects = load_geoobjects(geo, sha256=geo_sha256)
     tariff_doc.check_against(geo_objects.ids, geo_objects.road_class, geo)
     kind = sniff_format(log) if settings.input_format == "auto" else settings.input_format
+    osnma = osnma_evidence(log, kind, osnma_merkle, osnma_public_keys, auto=osnma_auto, required=settings.require_authenticated,
+                           strict=settings.strict)  # fmt: skip
+    auth_counts: dict[str, int] = {}
+    failure_fixes: list[pd.DataFrame] = []  # the fixes the OSNMA failures are placed at (a few rows per chunk)
     stats = None
     nominal = NominalModel()
     epoch_raim = replace(params, fde=False)
     finding_settings = FindingSettings.for_class(settings.vehicle_class)
     if kind in NAVIGATION_KINDS:
         charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
-        stats, params = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table, kind)
+        stats, params = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table, kind,
+                                          osnma, auth_counts, failure_fixes)  # fmt: skip
         policy, table, details, found, period = charger.finish()
         positions, step_s = None, charger.step_s
     else:
@@ -183,6 +203,9 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         per_epoch = run_raim(meas, replace(epoch_raim, sources=params.sources))
         pairs = inside_pairs(epochs, meas, geo_objects, params)
         policy, why, matched = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
+        if settings.require_authenticated:  # a pseudorange log carries no Galileo pages: nothing is authenticated
+            why = require_authenticated(why, np.full(len(epochs), "not_checked", dtype=object))
+            auth_counts["not_checked"] = len(epochs)
         positions = positions_from_pairs(pairs, epochs["time_utc"], geo_objects, tc_s=settings.tc_s, epoch_why=why,
                                          matched_road=matched)  # fmt: skip
         found = trip_findings(epochs, None, per_epoch, geo_objects, finding_settings)
@@ -202,6 +225,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         inputs["log_sha256"] = file_sha256(log)
     if nav is not None:
         inputs.update(nav=printable_path(nav), nav_sha256=file_sha256(nav))
+    if osnma is not None:
+        inputs.update(osnma_inputs(osnma))
     if roads is not None:
         inputs.update(roads=printable_path(roads), roads_sha256=file_sha256(roads))
     inputs.update({k: v for k, v in (as_recorded or {}).items() if k in inputs})
@@ -213,10 +238,17 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         del parameters["continued"]  # recorded only by an invoice that continues a passage of the log before
     if settings.vehicle_attrs is None:
         del parameters["vehicle_attrs"]  # recorded only for a tariff of per-km tables
+    if not settings.require_authenticated:
+        del parameters["require_authenticated"]  # recorded only when required: invoices made before it stay as they were
     invoice = build_invoice(table, positions, geo_objects, tariff_doc,
                             vehicle=settings.vehicle or printable_path(os.path.basename(log)), vehicle_class=settings.vehicle_class,
                             inputs=inputs, parameters=parameters, period=period, details=details,
                             continued=settings.continued, vehicle_attrs=settings.vehicle_attrs)  # fmt: skip
+    if osnma is not None:
+        fixes = pd.concat(failure_fixes, ignore_index=True) if positions is None else epochs[["time_utc", "lat_deg", "lon_deg"]]
+        found = sorted([*found, *failure_findings(osnma, fixes)], key=lambda f: (f["start_utc"], f["kind"]))
+    if osnma is not None or settings.require_authenticated:
+        record_in_invoice(invoice, osnma, auth_counts, settings.require_authenticated)
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
     _speed_notes(invoice, period, step_s)
     explain_not_charged(invoice)
@@ -249,7 +281,8 @@ STREAM_ROUNDS = True
 
 def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams,
                       nominal: NominalModel, charger: TailCharger,
-                      epoch_table: list | None = None, kind: str = "nmea") -> tuple[ReadStats, RaimParams]:  # fmt: skip
+                      epoch_table: list | None = None, kind: str = "nmea", osnma: OsnmaEvidence | None = None,
+                      auth_counts: dict | None = None, failure_fixes: list | None = None) -> tuple[ReadStats, RaimParams]:  # fmt: skip
     """Read a navigation log (NMEA, u-blox NAV, gpsd JSON: ``kind``) chunk by chunk: each chunk's satellites, RAIM and geo-object pairs are done
     before the next, and handed to ``charger`` with the few per-epoch columns it needs.
 
@@ -276,10 +309,22 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
         raim = run_raim(meas, epoch_raim, geometry=geometry)
         pairs = inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry)
         cn0 = cn0_summary(chunk.satellites, len(epochs), int(epochs["epoch"].iat[0]))
-        charger.add(epochs[list(KEPT_EPOCH_COLUMNS)], raim[list(KEPT_RAIM_COLUMNS)], cn0, pairs)
+        kept = epochs[list(KEPT_EPOCH_COLUMNS)]
+        auth = None
+        if osnma is not None or settings.require_authenticated:
+            auth = (not_checked(len(epochs)) if osnma is None else authenticated_positions(
+                meas, authenticated_slots(meas.sv, epochs["time_utc"], osnma.authenticated), epochs["lat_deg"].to_numpy(float),
+                epochs["lon_deg"].to_numpy(float), settings.p_fa))  # fmt: skip
+            kept = kept.assign(nav_auth=auth["nav_auth"].to_numpy())
+            if osnma is not None and failure_fixes is not None:
+                failure_fixes.append(fixes_before(epochs, osnma.failure_times))
+            for status, n in auth["nav_auth"].value_counts().items():
+                auth_counts[status] = auth_counts.get(status, 0) + int(n)
+        charger.add(kept, raim[list(KEPT_RAIM_COLUMNS)], cn0, pairs)
         if epoch_table is not None:
             table_parts.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}),
-                                          env_columns, raim.reset_index(drop=True)], axis=1))  # fmt: skip
+                                          env_columns, raim.reset_index(drop=True), *([auth] if auth is not None else [])],
+                                         axis=1))  # fmt: skip
         offset += len(epochs)
         del chunk, epochs, meas, geometry, raim, pairs, cn0  # freed before the next chunk is read, not after
     check_usable(stats)

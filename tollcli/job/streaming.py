@@ -235,14 +235,22 @@ class TailCharger:
     def _checks(self, epochs: pd.DataFrame, raim: pd.DataFrame):
         """Per tail row: the policy's failed check ('' when none), the matched road, and the matching trace."""
         if not self.needs:
-            return None, None, None
+            return self._authenticated(None, epochs), None, None
         from tollcli.integrity.verdict import epoch_checks_traced, failed_check
 
         epochs = epochs.assign(raim_status=raim["raim_status"].to_numpy())
         checks, trace = epoch_checks_traced(epochs, self.roads if "mm" in self.needs else None, step_s=self.step_s,
                                             match_state=self.match_state)  # fmt: skip
         matched = checks["matched_road"].astype(str).to_numpy(dtype=object) if "mm" in self.needs else None
-        return failed_check(checks, self.policy), matched, trace
+        return self._authenticated(failed_check(checks, self.policy), epochs), matched, trace
+
+    def _authenticated(self, why, epochs: pd.DataFrame):
+        """``why`` with authenticated navigation data as one more condition when the settings require it."""
+        if not getattr(self.settings, "require_authenticated", False):
+            return why
+        from tollcli.integrity.nav_authentication import require_authenticated
+
+        return require_authenticated(why, epochs["nav_auth"].to_numpy(object))
 
     def _commit_positions(self, epochs: pd.DataFrame, done: int, frontier: int, final: bool, why, matched) -> None:
         if self.any_pairs and self.undated:
@@ -262,6 +270,8 @@ class TailCharger:
                 times = epochs["time_utc"].array[rows]
                 cols = {**{k: pairs[k] for k in (*PAIR_COLUMNS, "hpl_m", "separation_ratio", "part") if k in pairs}, "valid": valid, "verdict": verdict,
                         "t_s": utc_seconds_or_nan(times), "time_utc": times}  # fmt: skip
+                if "nav_auth" in epochs:  # whether the position's navigation data were authenticated (OSNMA)
+                    cols["nav_auth"] = epochs["nav_auth"].to_numpy(object)[rows]
         if final:
             self.passages.add(cols, None)
             return

@@ -48,8 +48,11 @@ def verify_invoice(path: str) -> dict:
         if file == "-":
             raise VerifyFailed(f"{path}: the {label} was read from stdin and cannot be read again")
         found[key] = locate_input(path, str(file), inputs.get(f"{key}_sha256"), label)
+    merkle, keys = _osnma_keys(path, inputs)
     again, _ = charge_log(found["log"], found["geoobjects"], found["tariff"], settings_from_invoice(invoice), found.get("nav"),
-                          found.get("roads"), as_recorded={k: inputs[k] for k in found})  # fmt: skip
+                          found.get("roads"), as_recorded={**{k: inputs[k] for k in found}, **({k: inputs[k] for k in ("osnma_merkle", "osnma_public_keys")} if merkle else {})},
+                          osnma_merkle=merkle,
+                          osnma_public_keys=keys, osnma_auto=False)  # fmt: skip
     original = invoice_json(invoice)
     fresh = invoice_json(again)
     if fresh != original:
@@ -57,6 +60,18 @@ def verify_invoice(path: str) -> dict:
         line = original.count("\n", 0, at) + 1
         raise VerifyFailed(f"{path}: processing the same inputs again gives a different invoice (first difference on line {line})")
     return {"invoice": path, "content_sha256": invoice["content_sha256"], "inputs": {k: inputs[k] for k, _ in INPUTS if k in inputs}}
+
+
+def _osnma_keys(path: str, inputs: dict) -> tuple[str | None, list[str] | None]:
+    """The OSNMA key files the invoice names, located like its other inputs (None, None: made without OSNMA)."""
+    merkle = inputs.get("osnma_merkle")
+    if not isinstance(merkle, str):
+        return None, None
+    keys, sums = inputs.get("osnma_public_keys") or [], inputs.get("osnma_public_keys_sha256") or []
+    if not isinstance(keys, list) or not isinstance(sums, list) or len(keys) != len(sums):
+        raise DataError(f"{path}: the invoice's osnma_public_keys and their SHA-256 do not pair up")
+    found = locate_input(path, merkle, inputs.get("osnma_merkle_sha256"), "OSNMA Merkle tree")
+    return found, [locate_input(path, str(k), s, "OSNMA public key") for k, s in zip(keys, sums)]
 
 
 def locate_input(invoice_path: str, file: str, recorded, label: str) -> str:

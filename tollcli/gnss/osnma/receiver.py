@@ -20,6 +20,7 @@ complete the ephemeris.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,7 +55,7 @@ class OsnmaResult:
     kroots: pd.DataFrame  # gst_s, cid, pkid, gst0_s, verified
     keys: pd.DataFrame  # gst_sf_s, svid, index, verified, new, reconstructed
     failures: pd.DataFrame  # gst_s, svid, kind (tag, macseq, key, kroot, pkr, maclt), detail
-    iods: pd.DataFrame  # svid, gst_s, iod: each satellite's issue of data as its pages carried it
+    iods: pd.DataFrame  # svid, gst_s, iod, data_key: the data set each satellite's pages carried then (key: its words' digest)
     counts: dict = field(default_factory=dict)
 
 
@@ -130,11 +131,17 @@ class _Dsm:
 
 
 class _AuthData:
-    __slots__ = ("bits", "first_sf_s", "last_sf_s", "iod", "new", "adkd", "prn_d")
+    __slots__ = ("bits", "first_sf_s", "last_sf_s", "iod", "new", "adkd", "prn_d", "data_key")
 
-    def __init__(self, tag: Tag, iod: str | None):
+    def __init__(self, tag: Tag, iod: str | None, stream: str):
         self.bits, self.first_sf_s, self.last_sf_s = len(tag.value), tag.gst_sf_s, tag.gst_sf_s
         self.iod, self.new, self.adkd, self.prn_d = iod, True, tag.adkd, tag.prn_d
+        self.data_key = data_key(stream)
+
+
+def data_key(stream: str | None) -> str | None:
+    """A short digest naming a data stream (the words a tag covers), to tell one data set from another."""
+    return None if stream is None else hashlib.blake2b(stream.encode(), digest_size=8).hexdigest()
 
 
 class Receiver:
@@ -208,8 +215,6 @@ class Receiver:
         word_type = uint(bits[2:8])
         word = bits[2:114] + bits[122:138]
         if word_type in (1, 2, 3, 4, 5):
-            if word_type != 5:
-                self.rows["iods"].append((svid, gst_s, word[6:16]))
             self.adkd0[svid].add_word(word_type, word, gst_s)
         elif word_type == 6 or (word_type == 10 and band == E1B):
             self.adkd4[svid].add_word(word_type, word, gst_s)
@@ -224,6 +229,10 @@ class Receiver:
                 recovered = {}
             for wt, w in recovered.items():
                 self.adkd0[svid].add_word(wt, w, gst_s)
+        if word_type in (1, 2, 3, 4, 5, 17, 18, 19, 20):
+            newest = self.adkd0[svid].blocks[-1] if self.adkd0[svid].blocks else None
+            if newest is not None:  # the data set the satellite sends now: its IOD and words (key None until complete)
+                self.rows["iods"].append((svid, gst_s, newest.iod, data_key(newest.stream)))
 
     def _end_of_subframe(self) -> None:
         for svid, sat in self.sats.items():
@@ -466,13 +475,13 @@ class Receiver:
                 a = self.auth[key_]
                 a.bits, a.last_sf_s, a.new = a.bits + len(tag.value), tag.gst_sf_s, True
             else:
-                self.auth[key_] = _AuthData(tag, iod if tag.adkd != 4 else None)
+                self.auth[key_] = _AuthData(tag, iod if tag.adkd != 4 else None, stream)
 
     def _check_data(self) -> None:
         for a in self.auth.values():
             if a.new and a.bits >= self.s.min_tag_bits:
                 a.new = False
-                self.rows["data"].append((a.adkd, a.prn_d, a.iod, a.first_sf_s, a.last_sf_s, a.bits, self.now_s))
+                self.rows["data"].append((a.adkd, a.prn_d, a.iod, a.first_sf_s, a.last_sf_s, a.bits, self.now_s, a.data_key))
                 if a.adkd != 4 and a.prn_d not in self._auth_sats:
                     self._auth_sats.add(a.prn_d)
                     if len(self._auth_sats) == 4:
@@ -487,11 +496,11 @@ class Receiver:
     def result(self) -> OsnmaResult:
         r = self.rows
         tags = pd.DataFrame(r["tags"], columns=["gst_sf_s", "prn_a", "prn_d", "adkd", "cop", "flx", "tag0", "dummy", "verified", "at_s", "iod"])
-        data = pd.DataFrame(r["data"], columns=["adkd", "prn_d", "iod", "first_sf_s", "last_sf_s", "bits", "at_s"])
+        data = pd.DataFrame(r["data"], columns=["adkd", "prn_d", "iod", "first_sf_s", "last_sf_s", "bits", "at_s", "data_key"])
         kroots = pd.DataFrame(r["kroots"], columns=["gst_s", "cid", "pkid", "gst0_s", "verified"])
         keys = pd.DataFrame(r["keys"], columns=["gst_sf_s", "svid", "index", "verified", "new", "reconstructed"])
         failures = pd.DataFrame(r["failures"], columns=FAILURE_COLUMNS)
-        iods = pd.DataFrame(r["iods"], columns=["svid", "gst_s", "iod"])
+        iods = pd.DataFrame(r["iods"], columns=["svid", "gst_s", "iod", "data_key"])
         counts = dict(self.counts, tags_authenticated=int(tags["verified"].sum()) if len(tags) else 0,
                       data_authenticated=len(data), kroots_authenticated=int(kroots["verified"].sum()) if len(kroots) else 0,
                       failures=len(failures), state=self.state)  # fmt: skip

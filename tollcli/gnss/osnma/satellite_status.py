@@ -1,9 +1,10 @@
 """What OSNMA verified → per epoch and Galileo satellite whether its navigation data were authenticated then.
 
-A satellite's data are authenticated at an epoch when the issue of data (IOD) its pages carried last before
-that epoch had been authenticated by then: ``nav_auth_adkd0`` by ADKD 0 tags (fast MAC, the key one
+A satellite's data are authenticated at an epoch when the data set its pages carried last before that epoch
+(its words 1–5, told apart by their digest ``data_key``: a word changed under the same IOD is another data
+set) had been authenticated by then: ``nav_auth_adkd0`` by ADKD 0 tags (fast MAC, the key one
 subframe later), ``nav_auth_adkd12`` by ADKD 12 tags (slow MAC, ten subframes later); ``nav_authenticated``
-is either; ``nav_auth_gst_s`` is when that IOD was first authenticated (GST seconds). An authentication is
+is either; ``nav_auth_gst_s`` is when that data set was first authenticated (GST seconds), ``iod`` its issue of data. An authentication is
 known at the receiver 2 s after the page that completed it began (the page's end). After a change of IOD
 a satellite is unauthenticated until tags over the new data verified (about one to six minutes).
 
@@ -37,7 +38,7 @@ def utc_to_gst_s(time_utc) -> np.ndarray:
 
 def _first_auth(result: OsnmaResult, adkd: int) -> pd.DataFrame:
     d = result.data[result.data["adkd"] == adkd]
-    out = d.groupby(["prn_d", "iod"], as_index=False)["at_s"].min().rename(columns={"prn_d": "svid"})
+    out = d.groupby(["prn_d", "data_key"], as_index=False)["at_s"].min().rename(columns={"prn_d": "svid"})
     out["known_s"] = out.pop("at_s") + KNOWN_AFTER_S
     return out
 
@@ -50,12 +51,12 @@ def satellite_status(result: OsnmaResult, satellites: pd.DataFrame) -> pd.DataFr
     out["gst_s"] = utc_to_gst_s(out["time_utc"]) if n else np.zeros(0)
     gal = (out["constellation"].to_numpy(object) == "Galileo") if n else np.zeros(0, bool)
     rows = pd.DataFrame({"_i": np.flatnonzero(gal), "svid": out["svid"].to_numpy(np.int64)[gal], "t": out["gst_s"].to_numpy(float)[gal]})
-    iods = result.iods.assign(t=result.iods["gst_s"].astype(float) + KNOWN_AFTER_S).sort_values("t")[["svid", "t", "iod"]]
-    rows = pd.merge_asof(rows.sort_values("t"), iods, on="t", by="svid", direction="backward")
+    iods = result.iods.assign(t=result.iods["gst_s"].astype(float) + KNOWN_AFTER_S).sort_values("t", kind="stable")
+    rows = pd.merge_asof(rows.sort_values("t"), iods[["svid", "t", "iod", "data_key"]], on="t", by="svid", direction="backward")
     known = {}
     for adkd in (0, 12):
         first = _first_auth(result, adkd)
-        rows = rows.merge(first.rename(columns={"known_s": f"k{adkd}"}), on=["svid", "iod"], how="left")
+        rows = rows.merge(first.rename(columns={"known_s": f"k{adkd}"}), on=["svid", "data_key"], how="left")
         known[adkd] = rows[f"k{adkd}"].to_numpy(float) <= rows["t"].to_numpy(float)
     for adkd in (0, 12):
         col = np.zeros(n, bool)
