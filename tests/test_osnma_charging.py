@@ -324,3 +324,24 @@ def test_audit_counts_the_osnma_failure_of_a_forged_log(site, pages, forged_row)
     _tollcli("audit", site / "forged.json", site / "clean.json", "-o", site / "audit.json")
     found = json.loads((site / "audit.json").read_text())["findings"]
     assert [(f["kind"], f["vehicle"], f["evidence"]["satellite"]) for f in found] == [("osnma_failure", "forged.ubx", "E31")]
+
+
+def _e31_row(pages, tow_mod: int) -> int:
+    pick = (pages["svid"] == SVID) & (pages["tow_s"] % 30 == tow_mod) & (np.arange(len(pages)) > 1000)
+    return int(np.flatnonzero(pick)[0])
+
+
+@pytest.mark.parametrize(("what", "tow_mod", "bit", "kind"), [
+    ("tag", 1, 146 + 4, "tag"),  # page 0 of the subframe: the first 32 bits of tag 0
+    ("key", 23, 146 + 5, "key"),  # page 11: bits 16–47 of the TESLA key
+])  # fmt: skip
+def test_a_flipped_tag_or_key_bit_is_one_osnma_failure_finding(site, pages, clean, what, tow_mod, bit, kind):
+    row = _e31_row(pages, tow_mod)
+    tampered = _tampered(site, pages, f"flipped-{what}", {row: _flipped(pages.at[row, "bits"], bit)})
+    (f,) = _failures(tampered)
+    assert (f["evidence"]["satellite"], f["evidence"]["failure"], f["evidence"]["failures"]) == ("E31", kind, 1)
+    start = np.datetime64(f["start_utc"].rstrip("Z")) - np.datetime64(_utc_of(pages, row).tz_convert(None))
+    assert np.timedelta64(0, "s") <= start <= np.timedelta64(60, "s")  # named at the subframe it came in
+    assert _without_osnma(tampered) == _without_osnma(clean)
+    # one tag, or a key the other satellites also sent: no satellite's data lose their authentication
+    assert tampered["navigation_authentication"]["epochs"] == clean["navigation_authentication"]["epochs"]
