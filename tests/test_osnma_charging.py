@@ -318,7 +318,7 @@ def test_findings_reports_the_same_osnma_failures(site, pages, forged_row):
     assert f["evidence"]["satellite"] == "E31" and f["evidence"]["failure"] == "tag"
 
 
-def test_audit_counts_the_osnma_failure_of_a_forged_log(site, pages, forged_row):
+def test_audit_counts_the_osnma_failure_of_a_forged_log(site, pages, clean, forged_row):
     if not (site / "forged.json").exists():
         _tampered(site, pages, "forged", {forged_row: _flipped(pages.at[forged_row, "bits"], 2 + 40)})
     _tollcli("audit", site / "forged.json", site / "clean.json", "-o", site / "audit.json")

@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 from tollcli.geodesy import enu_shift2geodetic
-from tollcli.gnss.measurements import Measurements
+from tollcli.gnss.measurements import Measurements, sv_labels
 from tollcli.gnss.wls import wls_geometry
 
 NAV_AUTH_STATUSES = ("authenticated", "authenticated_subset", "subset_disagrees", "unauthenticated", "not_checked")
@@ -50,6 +50,22 @@ STATUS_NOTES = {
     "subset_disagrees": "the position from the satellites with authenticated navigation data lies further from the "
                         "receiver's fix than the no-fault bound (auth_sep_threshold_m)",
 }  # fmt: skip
+
+
+def authenticated_satellites(status: pd.DataFrame) -> pd.DataFrame:
+    """(``time_utc``, ``sv``) of the rows of a per-epoch-and-satellite status table (``time_utc``,
+    ``constellation``, ``svid``, ``nav_authenticated``) whose data were authenticated: what
+    :func:`epoch_authentication` looks up."""
+    auth = status[status["nav_authenticated"].to_numpy(bool)]
+    return pd.DataFrame({"time_utc": auth["time_utc"].to_numpy(),
+                         "sv": sv_labels(auth["constellation"].to_numpy(object), auth["svid"].to_numpy())})  # fmt: skip
+
+
+def epoch_authentication(meas: Measurements, epochs: pd.DataFrame, authenticated: pd.DataFrame, p_fa: float = 5e-3) -> pd.DataFrame:
+    """:func:`authenticated_positions` of ``epochs`` (``time_utc``, ``lat_deg``, ``lon_deg``; the rows of ``meas``)
+    with the satellites :func:`authenticated_satellites` lists."""
+    auth = authenticated_slots(meas.sv, epochs["time_utc"], authenticated)
+    return authenticated_positions(meas, auth, epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float), p_fa)
 
 
 def authenticated_slots(sv: np.ndarray, time_utc: pd.Series, authenticated: pd.DataFrame) -> np.ndarray:

@@ -92,22 +92,18 @@ def authenticated_fixes(log: str, status: pd.DataFrame, p_fa: float = 5e-3) -> p
 
     if sniff_format(log) not in ("ubx-nav", "ubx"):
         return None
-    from tollcli.gnss.measurements import sv_labels
     from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
-    from tollcli.integrity.nav_authentication import authenticated_positions, authenticated_slots
+    from tollcli.integrity.nav_authentication import authenticated_satellites, epoch_authentication
     from tollcli.readers.ubx_nav import iter_ubx_nav_tables
 
-    auth = status[status["nav_authenticated"].to_numpy(bool)]
-    auth = pd.DataFrame({"time_utc": auth["time_utc"].to_numpy(), "sv": sv_labels(auth["constellation"].to_numpy(object), auth["svid"].to_numpy())})
+    auth = authenticated_satellites(status)
     carry, parts = AngleCarry(), []
     for chunk in iter_ubx_nav_tables(log):
         e = chunk.epochs
         if e.empty:
             continue
-        meas = nmea_measurements(e, chunk.satellites, carry=carry)
-        lat, lon = e["lat_deg"].to_numpy(float), e["lon_deg"].to_numpy(float)
-        fixes = authenticated_positions(meas, authenticated_slots(meas.sv, e["time_utc"], auth), lat, lon, p_fa)
-        parts.append(pd.concat([pd.DataFrame({"time_utc": e["time_utc"].to_numpy(), "lat_deg": lat, "lon_deg": lon}), fixes], axis=1))
+        fixes = epoch_authentication(nmea_measurements(e, chunk.satellites, carry=carry), e, auth, p_fa)
+        parts.append(pd.concat([e[["time_utc", "lat_deg", "lon_deg"]].reset_index(drop=True), fixes], axis=1))
     return pd.concat(parts, ignore_index=True).drop_duplicates("time_utc") if parts else None
 
 

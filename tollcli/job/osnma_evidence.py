@@ -18,8 +18,7 @@ import pandas as pd
 from tollcli.charging.invoice import file_sha256
 from tollcli.enforcement.osnma_failures import osnma_failure_findings
 from tollcli.errors import UsageError
-from tollcli.gnss.measurements import sv_labels
-from tollcli.integrity.nav_authentication import ACCEPTED, NAV_AUTH_STATUSES, STATUS_NOTES
+from tollcli.integrity.nav_authentication import ACCEPTED, NAV_AUTH_STATUSES, STATUS_NOTES, authenticated_satellites
 from tollcli.io.sources import printable_path
 from tollcli.readers.gps_time import LEAP_SECONDS
 
@@ -66,15 +65,7 @@ def osnma_evidence(log: str, kind: str, merkle: str | None = None, public_keys: 
             return None
     merkle, public_keys = key_files(log, merkle, public_keys)
     check = check_osnma(log, merkle, public_keys, SYNC_BOUND_S, strict, positions=False)  # process computes them per chunk
-    if check.summary["pages"] == 0:
-        if required or merkle is not None:
-            return OsnmaEvidence(check, pd.DataFrame({"time_utc": [], "sv": []}), merkle, public_keys)
-        return None
-    s = check.satellites
-    auth = s[s["nav_authenticated"].to_numpy(bool)]
-    table = pd.DataFrame({"time_utc": auth["time_utc"].to_numpy(), "sv": sv_labels(auth["constellation"].to_numpy(object),
-                                                                                  auth["svid"].to_numpy())})  # fmt: skip
-    return OsnmaEvidence(check, table, merkle, public_keys)
+    return OsnmaEvidence(check, authenticated_satellites(check.satellites), merkle, public_keys)
 
 
 def inputs_record(evidence: OsnmaEvidence) -> dict:

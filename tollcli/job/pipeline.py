@@ -34,7 +34,7 @@ from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.gnss.wls import wls_geometry
 from tollcli.integrity.environment import ENVIRONMENTS, EnvironmentCarry
-from tollcli.integrity.nav_authentication import authenticated_positions, authenticated_slots, not_checked, require_authenticated
+from tollcli.integrity.nav_authentication import epoch_authentication, not_checked, require_authenticated
 from tollcli.integrity.raim import MODES, RaimParams
 from tollcli.integrity.run import level_name, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
@@ -312,9 +312,7 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
         kept = epochs[list(KEPT_EPOCH_COLUMNS)]
         auth = None
         if osnma is not None or settings.require_authenticated:
-            auth = (not_checked(len(epochs)) if osnma is None else authenticated_positions(
-                meas, authenticated_slots(meas.sv, epochs["time_utc"], osnma.authenticated), epochs["lat_deg"].to_numpy(float),
-                epochs["lon_deg"].to_numpy(float), settings.p_fa))  # fmt: skip
+            auth = not_checked(len(epochs)) if osnma is None else epoch_authentication(meas, epochs, osnma.authenticated, settings.p_fa)
             kept = kept.assign(nav_auth=auth["nav_auth"].to_numpy())
             if osnma is not None and failure_fixes is not None:
                 failure_fixes.append(fixes_before(epochs, osnma.failure_times))

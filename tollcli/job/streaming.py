@@ -246,7 +246,7 @@ class TailCharger:
 
     def _authenticated(self, why, epochs: pd.DataFrame):
         """``why`` with authenticated navigation data as one more condition when the settings require it."""
-        if not getattr(self.settings, "require_authenticated", False):
+        if not self.settings.require_authenticated:
             return why
         from tollcli.integrity.nav_authentication import require_authenticated
 
