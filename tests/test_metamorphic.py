@@ -50,7 +50,7 @@ def _lines_by_object(invoice: dict) -> dict[str, dict]:
 # ---------------------------------------------------------------- one epoch without speed (issue: NaN poisons windows)
 def test_a_missing_speed_only_touches_the_windows_it_is_in():
     """Speed integrity over a table with one missing speed equals the intact one outside the N + 1 windows holding it."""
-    n = SpeedParams().window_intervals
+    n = SpeedParams().intervals(1.0)
     rng = np.random.default_rng(7)
     k = 300
     t = pd.date_range("2026-03-02 08:00", periods=k, freq="1s", tz="UTC")
@@ -201,7 +201,7 @@ def test_a_20s_gap_changes_only_the_passages_it_touches(tmp_path, log, at, how):
     holed = tmp_path / "drive.nmea"
     holed.write_text("\n".join(line for g in kept for line in g) + "\n")
     before, after = _charge(log), _charge(holed)
-    margin = SpeedParams().window_intervals + 1
+    margin = SpeedParams().intervals(1.0) + 1
     untouched = _passages_away_from(before, start_utc, end_utc, margin)
     assert _passages_away_from(after, start_utc, end_utc, margin) == untouched
 

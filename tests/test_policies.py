@@ -42,8 +42,10 @@ def test_map_matching_integrity_stops_what_raim_alone_charges(parallel_drive):
     assert raim_audit["false_recognitions"] == 2 and {ln["geoobject"] for ln in raim_inv["lines"]} == {"A9-N1", "A9-N2"}
     assert all(ln["statuses"].get("valid", 0) > 10 for ln in raim_inv["lines"])  # RAIM vouched for the biased fixes
     assert all_audit["false_recognitions"] == 0 and all_inv["lines"] == []
-    # the positions were RAIM-valid but matched to the road the vehicle is on
-    assert all(ln["statuses"].get("mm_other_road", 0) > 10 for ln in all_inv["not_charged"])
+    # the positions were RAIM-valid, but map matching holds the road the vehicle is on (no road connects it to the
+    # A9) 80 m away, beyond their bound: a fault (mm_off_road); the speed check caught the jump onto the A9 itself
+    assert all(ln["statuses"].get("mm_off_road", 0) > 50 for ln in all_inv["not_charged"])
+    assert all_inv["not_charged"][0]["statuses"].get("speed_inconsistent", 0) >= 5
     assert raim_inv["parameters"]["policy_used"] == "raim" and all_inv["parameters"]["policy_used"] == "all"
     assert run_cli("verify", str(parallel_drive / "invoice-all.json")).returncode == 0
 

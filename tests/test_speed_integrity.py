@@ -27,8 +27,8 @@ def test_detrended_standard_error_ignores_steady_acceleration():
     assert np.sqrt(np.mean((se * np.sqrt(11)) ** 2)) == pytest.approx(0.2, rel=0.02)
 
 
-def _drive(edit=None, seconds=300):
-    traj = straight(42.6, 2.88, 30.0, 13.89, seconds)
+def _drive(edit=None, seconds=300, speed_mps=13.89, rate_hz=1.0, stops=()):
+    traj = straight(42.6, 2.88, 30.0, speed_mps, seconds, rate_hz, stops=list(stops))
     chunks = list(simulate(traj, SimConfig(env="rural", seed=8)))
     epochs = pd.concat([c.epochs for c in chunks], ignore_index=True)
     return edit(epochs) if edit else epochs
@@ -36,7 +36,7 @@ def _drive(edit=None, seconds=300):
 
 def test_a_clean_drive_passes_and_a_speed_fault_is_flagged():
     clean = speed_integrity(_drive())
-    assert (clean["speed_status"][10:] == "ok").mean() > 0.99
+    assert (clean["speed_status"][10:] == "ok").mean() > 0.85 and "inconsistent" not in set(clean["speed_status"])
     assert clean["speed_error_mps"].iloc[-1] == pytest.approx(0.1 / np.sqrt(10))
 
     def fault(epochs):  # the reported (Doppler) speed 4 m/s too high for 60 s
@@ -51,5 +51,9 @@ def test_a_clean_drive_passes_and_a_speed_fault_is_flagged():
 
 
 def test_low_speed_rule():
-    epochs = _drive(lambda e: e.assign(speed_mps=1.0))
-    assert set(speed_integrity(epochs)["speed_status"][10:]) == {"low_speed"}
+    """A vehicle slower than 2 m/s is not checked (low_speed), and is no fault; a 1 m/s speed reported while the
+    positions move at 13.9 m/s is one."""
+    slow = speed_integrity(_drive(speed_mps=1.0))
+    assert set(slow["speed_status"][10:]) == {"low_speed"}
+    wrong = speed_integrity(_drive(lambda e: e.assign(speed_mps=1.0)))
+    assert set(wrong["speed_status"][10:]) == {"inconsistent"}

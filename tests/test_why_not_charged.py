@@ -1,6 +1,9 @@
-"""The user is told why nothing was charged: a log shorter than the speed window, a vehicle that did not move.
+"""The user is told why a check did not check and why nothing was charged: a log shorter than the speed window, a
+vehicle that did not move, a receiver without integrity output.
 
-Before: a 5 s log was ``speed_no_data`` on every position, charged nothing, and nothing said why."""
+Before: a 5 s log was ``speed_no_data`` on every position, charged nothing, and nothing said why; then it said why
+but still charged nothing — though no check had found a fault. Now the speed check vetoes only on a fault: the RAIM's
+verdict stands, and the line says which checks did not check and why."""
 
 from __future__ import annotations
 
@@ -26,19 +29,23 @@ def test_a_log_shorter_than_the_speed_window_says_so(tmp_path):
     short = tmp_path / "short.nmea"
     short.write_text("\n".join(line for line in lines if line[7:13] < "080005") + "\n")  # 5 s inside the A9
     invoice, err = _process(short, tmp_path)
-    assert invoice["total"] == "0.00" and set(invoice["not_charged"][0]["statuses"]) == {"speed_no_data"}
+    line = invoice["lines"][0]
+    assert invoice["total"] == "1.19" and invoice["not_charged"] == [] and set(line["statuses"]) == {"valid"}
+    assert line["checks"] == {"confirmed": {}, "not_checked": {"speed_no_data": len(line["evidence"])}}
+    assert all(item["confirmed_by"] == [] and item["not_checked"] == ["speed_no_data"] for item in line["evidence"])
     assert invoice["status_notes"]["speed_no_data"].startswith("log shorter than the speed window: 4 s")
-    assert invoice["not_charged"][0]["why"].startswith("log shorter than the speed window: 4 s")  # per passage too
-    assert "log shorter than the speed window" in err and len(err.strip().splitlines()) == 1
+    assert "the checks confirmed: speed 0" in err and len(err.strip().splitlines()) == 1
 
 
 def test_a_stationary_vehicle_says_so(tmp_path):
     log = tmp_path / "parked.nmea"
     log.write_text("\n".join(straight_drive(120, speed_mps=0.0)) + "\n")  # parked on the A9 for two minutes
     invoice, err = _process(log, tmp_path)
-    assert invoice["total"] == "0.00" and "speed_low_speed" in invoice["not_charged"][0]["statuses"]
-    assert "stationary" in invoice["status_notes"]["speed_low_speed"] and "stationary" in err
-    assert "stationary" in invoice["not_charged"][0]["why"] and "speed_low_speed" in invoice["not_charged"][0]["why"]
+    # parked inside the geo-object with RAIM-valid positions: it is there, and charged (a stop is no fault)
+    assert invoice["total"] != "0.00" and invoice["not_charged"] == []
+    checks = invoice["lines"][0]["checks"]
+    assert checks["confirmed"] == {} and checks["not_checked"].get("speed_low_speed", 0) > 10
+    assert "stationary" in invoice["status_notes"]["speed_low_speed"] and "RAIM's verdict stands" in invoice["status_notes"]["speed_low_speed"]
 
 
 def test_a_log_without_integrity_sources_says_so_per_passage(tmp_path):

@@ -62,6 +62,18 @@ def enu_shift2geodetic(lat_deg, lon_deg, east_m, north_m):
     return lat_deg + np.degrees(north_m / m), lon_deg + np.degrees(east_m / (n * np.cos(lat)))
 
 
+def geodetic2enu_shift(lat0_deg, lon0_deg, lat_deg, lon_deg):
+    """The small horizontal shift (east, north; m) from one position to another: the inverse of
+    :func:`enu_shift2geodetic`, with the radii of curvature at the mean latitude (exact to mm over km)."""
+    lat0, lat = np.asarray(lat0_deg, float), np.asarray(lat_deg, float)
+    mid = np.radians((lat0 + lat) / 2.0)
+    s2 = np.sin(mid) ** 2
+    n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * s2)
+    m = n * (1.0 - WGS84_E2) / (1.0 - WGS84_E2 * s2)
+    dlon = (np.asarray(lon_deg, float) - np.asarray(lon0_deg, float) + 180.0) % 360.0 - 180.0
+    return np.radians(dlon) * n * np.cos(mid), np.radians(lat - lat0) * m
+
+
 def great_circle_distance_m(lat1_deg, lon1_deg, lat2_deg, lon2_deg):
     """Great-circle distance (haversine on the WGS-84 equatorial radius), metres."""
     p1, p2 = np.radians(lat1_deg), np.radians(lat2_deg)

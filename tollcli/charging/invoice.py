@@ -79,6 +79,9 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
                       "evidence": evidence.get((gid, passage), [])})  # fmt: skip
     for line in lines:  # the sources whose verdicts made its positions count (the audit bounds a false charge with them)
         line["vouched_by"] = vouched_by(line["evidence"])
+        checks = evidence_checks(line["evidence"])
+        if checks is not None:  # the checks that confirmed its evidence, and why the others did not check
+            line["checks"] = checks
     doc = {
         "tool": f"tollcli {__version__}",
         "vehicle": vehicle,
@@ -104,19 +107,27 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
         if notes:
             doc["status_notes"] = {**doc.get("status_notes", {}), **notes}
     if parameters.get("integrity_sources_used") == "model" and "unavailable" in seen:  # the log's only evidence
+        declared = parameters.get("environment", "auto")
         doc["status_notes"] = {**doc.get("status_notes", {}), "unavailable": MODEL_UNAVAILABLE.format(
-            environment=parameters.get("environment", "auto"))}  # fmt: skip
+            environment=MODEL_ENVIRONMENT.get(declared, f"environment {declared}"))}  # fmt: skip
     return doc
 
 
-#: why a log at the ``model`` level (satellites or HDOP, no integrity output) was not charged
+#: why a log at the ``model`` level (satellites or HDOP, no integrity output) was not charged; {environment} is the
+#: sentence of :data:`MODEL_ENVIRONMENT` for the environment the user declared (or auto)
 MODEL_UNAVAILABLE = (
     "the receiver reports no integrity output (no GRS, GBS or GST, no pseudorange residuals): only the satellites' "
-    "geometry bounds its positions, and under the error model assumed here (environment {environment}: the urban σ "
-    "unless the residuals measured open sky or --environment open declares it) the protection level exceeds the "
-    "geo-object's HAL. Such a bound detects no fault; a receiver that writes GRS, GBS or GST (or u-blox NAV-SAT with "
-    "prRes) is charged on its own evidence"
+    "geometry bounds its positions, and under the error model assumed here ({environment}) the protection level "
+    "exceeds the geo-object's HAL. Such a bound detects no fault; a receiver that writes GRS, GBS or GST (or u-blox "
+    "NAV-SAT with prRes) is charged on its own evidence"
 )
+#: the error model the ``model`` level assumed, by the declared ``--environment``
+MODEL_ENVIRONMENT = {
+    "auto": ("environment auto: the urban σ, since no residual measured the environment, except where the receiver "
+             "reported a corrected fix (DGNSS/SBAS, RTK: the corrected σ); --environment open declares open country"),
+    "open": "environment open, as declared: the nominal σ (the corrected σ for a corrected fix)",
+    "urban": "environment urban, as declared: the urban σ on every epoch",
+}
 
 
 #: what the solution-separation RAIM's denials mean (first sentence: the process summary's reason)
@@ -145,8 +156,9 @@ WHY_NOT = {
     "probable_false_alarm": "the RAIM test failed (the papers' ETC at a HAL this small fails often without a fault)",
     "wrong_direction": "the vehicle drove against this carriageway's direction: the other carriageway",
     "direction_unknown": "no course or too slow to tell the direction on this carriageway",
-    "mm_alarm": "map matching did not trust the road match", "mm_unmatched": "no road matched",
-    "mm_other_road": "map matching put the vehicle on another road",
+    "speed_inconsistent": "the positions were not where the reported (Doppler) velocity took them (a fault)",
+    "mm_off_road": "the position jumped off the road the vehicle was matched to (a fault)",
+    "mm_other_road": "map matching put the vehicle on another road, beyond the position's bound from this one",
 }  # fmt: skip
 
 
@@ -208,9 +220,12 @@ def _evidence(positions: pd.DataFrame) -> dict[tuple, list[dict]]:
                for c in ("test_stat", "threshold", "p_fa", "hpl_m", "separation_ratio")]  # fmt: skip
     vouching = kept["integrity_source"] if "integrity_source" in kept else kept["test_stat_source"]
     nav_auth = kept["nav_auth"].tolist() if "nav_auth" in kept else [None] * len(kept)
-    for gid, passage, epoch, when, status, stat, threshold, p_fa, hpl, ratio, source, vouched, authenticated in zip(
+    checked = "confirmed_by" in kept
+    confirmed = kept["confirmed_by"].tolist() if checked else [None] * len(kept)
+    unchecked = kept["not_checked"].tolist() if checked else [None] * len(kept)
+    for gid, passage, epoch, when, status, stat, threshold, p_fa, hpl, ratio, source, vouched, authenticated, by, not_by in zip(
         kept["geoobject"], kept["passage"].tolist(), kept["epoch_row"].tolist(), times, kept["raim_status"],
-        *numbers, kept["test_stat_source"], vouching, nav_auth,
+        *numbers, kept["test_stat_source"], vouching, nav_auth, confirmed, unchecked,
     ):  # fmt: skip
         item = {"epoch": epoch, "time_utc": when, "raim_status": status, "test_stat": stat, "threshold": threshold,
                 "p_fa": p_fa, "test_stat_source": source, "integrity_source": vouched}  # fmt: skip
@@ -218,8 +233,26 @@ def _evidence(positions: pd.DataFrame) -> dict[tuple, list[dict]]:
             item.update(hpl_m=hpl, separation_ratio=ratio)
         if authenticated is not None:  # the log was checked for authenticated navigation data (OSNMA)
             item["nav_auth"] = authenticated
+        if checked:  # the policy's checks: which confirmed the position, and why the others did not check
+            item["confirmed_by"] = [c for c in str(by).split("+") if c]
+            item["not_checked"] = [c for c in str(not_by).split("+") if c]
         out.setdefault((gid, passage), []).append(item)
     return out
+
+
+def evidence_checks(evidence: list[dict]) -> dict[str, dict[str, int]] | None:
+    """The policy's checks over a line's evidence: {``confirmed``: check → positions it confirmed, ``not_checked``:
+    why → positions} (None when no check ran: the RAIM alone)."""
+    if not evidence or "confirmed_by" not in evidence[0]:
+        return None
+    confirmed: dict[str, int] = {}
+    not_checked: dict[str, int] = {}
+    for item in evidence:
+        for c in item["confirmed_by"]:
+            confirmed[c] = confirmed.get(c, 0) + 1
+        for c in item["not_checked"]:
+            not_checked[c] = not_checked.get(c, 0) + 1
+    return {"confirmed": dict(sorted(confirmed.items())), "not_checked": dict(sorted(not_checked.items()))}
 
 
 def vouched_by(evidence: list[dict]) -> dict[str, int]:

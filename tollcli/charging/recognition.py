@@ -84,22 +84,22 @@ def utc_seconds_or_nan(times) -> np.ndarray:
 
 def recognise(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams,
               tc_s: float = 5.0, n_th: int = 1, passage_gap_s: float = PASSAGE_GAP_S,
-              epoch_why: np.ndarray | None = None, matched_road: np.ndarray | None = None) -> pd.DataFrame:  # fmt: skip
+              epoch_why: np.ndarray | None = None, checks: pd.DataFrame | None = None) -> pd.DataFrame:  # fmt: skip
     """One row per (epoch, geo-object) position inside, with its RAIM verdict under that HAL.
 
     Columns: ``epoch_row``, ``geoobject``, ``time_utc``, ``passage`` (per geo-object),
     ``raim_status``, ``test_stat``, ``threshold``, ``p_fa``, ``test_stat_source``, ``integrity_source``
     (the source whose verdict decided, :mod:`tollcli.integrity.sources`),
     ``valid`` (counts for the geo-object), ``independent`` (kept by T_c thinning), ``verdict``
-    (the RAIM status, or for a RAIM-valid position the policy's failed check: ``epoch_why`` per
-    epoch row, '' when it passes; with ``matched_road`` a position counts only for the geo-object of
-    the road it is matched to, else ``mm_other_road``).
+    (the RAIM status, or for a RAIM-valid position the fault a check found: ``epoch_why`` per
+    epoch row, '' when none; ``checks``, per epoch row, the policy's check columns: :func:`pair_verdicts`),
+    ``confirmed_by`` and ``not_checked`` (with ``checks``).
 
     Two steps, so that a long log can run the first chunk by chunk: :func:`inside_pairs`
     (the RAIM under each geo-object's HAL, per epoch inside it) and :func:`positions_from_pairs`.
     """
     pairs = inside_pairs(epochs, meas, geo, params)
-    return positions_from_pairs(pairs, epochs["time_utc"], geo, tc_s, passage_gap_s, epoch_why, matched_road)
+    return positions_from_pairs(pairs, epochs["time_utc"], geo, tc_s, passage_gap_s, epoch_why, checks)
 
 
 PAIR_COLUMNS = ("epoch_row", "obj", "raim_status", "test_stat", "threshold", "p_fa", "test_stat_source", "integrity_source",
@@ -176,14 +176,14 @@ def concat_pairs(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
 
 def positions_from_pairs(pairs: dict[str, np.ndarray], time_utc: pd.Series, geo: GeoObjects, tc_s: float = 5.0,
                          passage_gap_s: float = PASSAGE_GAP_S, epoch_why: np.ndarray | None = None,
-                         matched_road: np.ndarray | None = None) -> pd.DataFrame:  # fmt: skip
+                         checks: pd.DataFrame | None = None) -> pd.DataFrame:  # fmt: skip
     """The positions table of :func:`recognise` from :func:`inside_pairs` (``time_utc``: of every epoch row)."""
     if not pairs or pairs["epoch_row"].size == 0:
         return empty_positions()
     rows = pairs["epoch_row"]
-    valid, verdict = pair_verdicts(pairs, geo, epoch_why, matched_road)
-    return passages({**pairs, "valid": valid, "verdict": verdict, "t_s": utc_seconds(time_utc)[rows],
-                     "time_utc": time_utc.array[rows]}, geo, tc_s, passage_gap_s)  # fmt: skip
+    verdicts = pair_verdicts(pairs, geo, epoch_why, checks)
+    return passages({**pairs, **verdicts, "t_s": utc_seconds(time_utc)[rows], "time_utc": time_utc.array[rows]}, geo, tc_s,
+                    passage_gap_s)  # fmt: skip
 
 
 POSITION_COLUMNS = ("epoch_row", "geoobject", "time_utc", "passage", "raim_status", "test_stat", "threshold", "p_fa",
@@ -195,11 +195,20 @@ def empty_positions() -> pd.DataFrame:
 
 
 def pair_verdicts(pairs: dict[str, np.ndarray], geo: GeoObjects, epoch_why: np.ndarray | None = None,
-                  matched_road: np.ndarray | None = None, row_offset: int = 0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """Per pair: whether it counts (``valid``) and its verdict (the RAIM status, or the policy's failed check).
+                  checks: pd.DataFrame | None = None, row_offset: int = 0) -> dict[str, np.ndarray]:  # fmt: skip
+    """Per pair: whether it counts (``valid``), its verdict (the RAIM status, or the fault a check found), and with
+    ``checks`` the checks that confirmed it (``confirmed_by``: '', ``speed``, ``map_matching`` or both joined by
+    '+') and why the others did not check (``not_checked``: '' or statuses joined by '+').
 
-    ``epoch_why`` / ``matched_road`` are indexed by epoch row − ``row_offset``.
+    ``epoch_why``: per epoch, '' or the fault an epoch-level check found (``speed_inconsistent``, an unauthenticated
+    position under --require-authenticated). ``checks``: per epoch, the policy's check columns — ``speed_status``
+    for the speed check, ``matched_road``/``mm_status``/``match_dist_m`` for map matching, whose veto depends on
+    the geo-object (:func:`tollcli.integrity.verdict.map_matching_pair_checks`; the pairs' ``geo_road`` is each
+    geo-object's road in the network, ``geo_road_dist_m`` the position's distance to it). Both are indexed by epoch row − ``row_offset``.
     """
+    from tollcli.integrity.speed import SPEED_NOT_CHECKED
+    from tollcli.integrity.verdict import map_matching_pair_checks
+
     rows, obj = pairs["epoch_row"] - row_offset, pairs["obj"]
     valid = pairs["raim_valid"].copy()
     verdict = pairs["raim_status"].copy()
@@ -215,11 +224,42 @@ def pair_verdicts(pairs: dict[str, np.ndarray], geo: GeoObjects, epoch_why: np.n
         fails = valid & (why != "")
         verdict[fails] = why[fails]
         valid &= ~fails
-    if matched_road is not None:
-        other = valid & (np.asarray(matched_road, dtype=object)[rows] != geo.ids[obj])
-        verdict[other] = "mm_other_road"
-        valid &= ~other
-    return valid, verdict
+    out = {"valid": valid, "verdict": verdict}
+    if checks is None:
+        return out
+    confirmed = [np.full(rows.size, "", dtype=object)]
+    not_checked = []
+    if "matched_road" in checks:
+        hal = geo.hal_m[obj]
+        hpl = pairs.get("hpl_m", np.full(rows.size, np.nan))
+        bound = np.where(np.isfinite(hpl), hpl, hal)
+        dist = pairs.get("geo_road_dist_m", np.full(rows.size, np.nan))
+        veto, mm_ok, mm_not = map_matching_pair_checks(
+            pairs.get("geo_road", geo.ids[obj]), checks["matched_road"].to_numpy(object)[rows], checks["mm_status"].to_numpy(object)[rows],
+            checks["match_dist_m"].to_numpy(float)[rows], dist, bound)  # fmt: skip
+        fails = valid & (veto != "")
+        verdict[fails] = veto[fails]
+        valid &= ~fails
+        confirmed.append(np.where(mm_ok, "map_matching", ""))
+        not_checked.append(mm_not)
+    if "speed_status" in checks:
+        speed = checks["speed_status"].to_numpy(object).astype(str)[rows]
+        confirmed.append(np.where(speed == "ok", "speed", ""))
+        not_checked.append(np.where(np.isin(speed, SPEED_NOT_CHECKED), np.char.add("speed_", speed), ""))
+    out.update(confirmed_by=_joined(confirmed), not_checked=_joined(not_checked))
+    return out
+
+
+def _joined(parts: list[np.ndarray]) -> np.ndarray:
+    """Per row, the non-empty strings of ``parts`` joined by '+' ('' when none)."""
+    if not parts:
+        return np.zeros(0, dtype=object)
+    out = np.full(np.asarray(parts[0]).shape, "", dtype=object)
+    for part in parts:
+        part = np.asarray(part, dtype=object)
+        both = (out != "") & (part != "")
+        out = np.where(both, out + "+" + part, np.where(part != "", part, out)).astype(object)
+    return out
 
 
 def passages(cols: dict[str, np.ndarray], geo: GeoObjects, tc_s: float = 5.0, passage_gap_s: float = PASSAGE_GAP_S,
@@ -247,6 +287,7 @@ def passages(cols: dict[str, np.ndarray], geo: GeoObjects, tc_s: float = 5.0, pa
         "verdict": cols["verdict"][by_obj],
         **({"part": cols["part"][by_obj]} if "part" in cols else {}),
         **({"nav_auth": cols["nav_auth"][by_obj]} if "nav_auth" in cols else {}),
+        **{k: cols[k][by_obj] for k in ("confirmed_by", "not_checked") if k in cols},
     })  # fmt: skip
 
 

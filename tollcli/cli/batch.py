@@ -32,7 +32,7 @@ def batch(
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network for map-matching integrity.")] = None,
     input_format: opt.InputFormat = "auto",
     nav: opt.Nav = None,
-    policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all.")] = None,
+    policy: Annotated[Optional[str], typer.Option("--policy", help="Checks that may veto a position, on evidence of a fault only: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")] = None,
     integrity_sources: opt.IntegritySources = "auto",
     raim: opt.RaimMode = "ss",
     environment: opt.Environment = "auto",

@@ -134,8 +134,10 @@ def integrity(
         if counts["skipped", "lines"]:
             text += f"; skipped {counts['skipped', 'lines']} malformed lines (--strict: an error)"
         if sources.get("model"):
-            text += ("; model level: the satellites' geometry and an error model only, no fault detection"
-                     + (" (no residuals: the urban σ; --environment open declares open country)" if environment == "auto" else ""))
+            text += ("; model level: the satellites' geometry and an error model only, no fault detection ("
+                     + {"auto": "no residuals: the urban σ but for corrected fixes; --environment open declares open country",
+                        "open": "environment open, as declared: the nominal σ",
+                        "urban": "environment urban, as declared: the urban σ"}.get(environment, environment) + ")")  # fmt: skip
         if summary["environments"]:
             text += "; environment " + ", ".join(f"{n} {e or 'unknown'}" for e, n in summary["environments"].items())
         if ignored:

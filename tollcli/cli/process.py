@@ -30,7 +30,7 @@ def process(
     input_format: opt.InputFormat = "auto",
     nav: opt.Nav = None,
     roads: Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings, tolled and free) for map-matching integrity.")] = None,
-    policy: Annotated[Optional[str], typer.Option("--policy", help="Checks a position must pass: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")] = None,
+    policy: Annotated[Optional[str], typer.Option("--policy", help="Checks that may veto a position, on evidence of a fault only: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")] = None,
     integrity_sources: opt.IntegritySources = "auto",
     raim: opt.RaimMode = "ss",
     environment: opt.Environment = "auto",
@@ -86,7 +86,7 @@ def process(
         typer.echo(json.dumps(invoice_summary(invoice, output, stats), sort_keys=True))
     else:
         warn(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged{_why_not(invoice)}, "
-             f"total {invoice['total']} {invoice['currency']}", quiet)  # fmt: skip
+             f"total {invoice['total']} {invoice['currency']}{_checks_said(invoice)}", quiet)  # fmt: skip
     if stats is not None:
         check_partial(stats, max_bad)
 
@@ -99,6 +99,22 @@ def invoice_summary(invoice: dict, output: str, stats=None) -> dict:
             "integrity_sources_used": invoice["parameters"].get("integrity_sources_used"),
             "policy_used": invoice["parameters"].get("policy_used"), "findings": len((invoice.get("findings") or {}).get("items") or []),
             "skipped_lines": int(stats.skipped) if stats is not None else 0}
+
+
+def _checks_said(invoice: dict) -> str:
+    """How many evidence positions of the charged lines each check confirmed (the policy's checks only)."""
+    evidence = sum(len(line.get("evidence", [])) for line in invoice["lines"] if "checks" in line)
+    if not evidence:
+        return ""
+    confirmed: dict[str, int] = {}
+    for line in invoice["lines"]:
+        for check, n in (line.get("checks") or {}).get("confirmed", {}).items():
+            confirmed[check] = confirmed.get(check, 0) + n
+    policy = (invoice.get("parameters") or {}).get("policy_used", "")
+    checks = sorted({*confirmed, *(["speed"] if policy in ("raim+speed", "all") else []),
+                     *(["map_matching"] if policy in ("raim+mm", "all") else [])})  # fmt: skip
+    said = ", ".join(f"{check.replace('_', ' ')} {confirmed.get(check, 0)}" for check in checks)
+    return f"; of {evidence} evidence positions the checks confirmed: {said} (the rest: the RAIM's verdict alone, see each line's checks)"
 
 
 def _why_not(invoice: dict) -> str:

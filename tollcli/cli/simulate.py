@@ -97,6 +97,8 @@ def simulate(
     lateral_bias: Annotated[float, typer.Option("--lateral-bias", help="A receiver-level position offset to the right of travel, m (negative: left); invisible to RAIM.")] = 0.0,
     lateral_bias_at: Annotated[Optional[str], typer.Option("--lateral-bias-at", help="Comma-separated start times of the offset, s.")] = None,
     lateral_bias_duration: Annotated[float, typer.Option("--lateral-bias-duration", help="How long each offset lasts, s.", min=0.0)] = 60.0,
+    stop_at: Annotated[Optional[str], typer.Option("--stop-at", help="Comma-separated times the vehicle stops in traffic, s from the start (it brakes and pulls away at 1.5 m/s²).")] = None,
+    stop_duration: Annotated[float, typer.Option("--stop-duration", help="How long each stop lasts, s.", min=0.0)] = 180.0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every random draw: the same seed gives the same files.")] = 0,
     json_summary: opt.JsonSummary = False,
     quiet: opt.Quiet = False,
@@ -123,13 +125,16 @@ def simulate(
         raise UsageError(f"--fault-sv {fault_sv!r}: like G05 or E11")
     if (path_from is None) != (path_to is None) or (path_from and (via or not route)):
         raise UsageError("--from and --to go together, with an OpenStreetMap --route and without --via")
+    stops = [(at, stop_duration) for at in _floats(stop_at, "--stop-at")] if stop_at else []
+    if any(at < 0 for at, _ in stops):
+        raise UsageError(f"--stop-at {stop_at!r}: times from the start, s ≥ 0")
     if route:
-        trajectory = along_route(_route_lines(route, via, path_from, path_to), speed, rate, duration)
+        trajectory = along_route(_route_lines(route, via, path_from, path_to), speed, rate, duration, stops=stops)
     else:
         lat_lon = _floats(start, "--start")
         if len(lat_lon) != 2 or not (-90 <= lat_lon[0] <= 90 and -180 <= lat_lon[1] <= 180):
             raise UsageError(f"--start {start!r}: LAT,LON in degrees")
-        trajectory = straight(lat_lon[0], lat_lon[1], heading, speed, 600.0 if duration is None else duration, rate)
+        trajectory = straight(lat_lon[0], lat_lon[1], heading, speed, 600.0 if duration is None else duration, rate, stops=stops)
     faults = FaultPlan(bias_m=fault_bias, at_s=_floats(fault_at, "--fault-at") if fault_at else [], p_fault=fault_prob,
                        duration_s=fault_duration, sv=fault_sv.upper() if fault_sv else None)  # fmt: skip
     config = SimConfig(constellations=names, env=env, iono=iono, cn0_dbhz=cn0, tc_s=tc, faults=faults, seed=seed,

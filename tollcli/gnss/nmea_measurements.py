@@ -13,8 +13,12 @@
 * The receiver's own integrity outputs (GBS, the GST ellipse) ride along as
   :class:`~tollcli.gnss.receiver_outputs.ReceiverOutputs` for the integrity verdicts.
 * σ: the named model per used satellite; under the nominal model an epoch whose fix the receiver says is
-  differential (GGA quality 2, u-blox ``diffSoln``, gpsd status DGPS: SBAS or ground corrections) gets the
-  corrected ionosphere's σ (``iono="sbas"``, paper 004's σ_UIRE) — the RAIM's and the ``model`` level's σ alike.
+  corrected (:data:`CORRECTED_QUALITIES`: GGA quality 2 DGNSS/SBAS, 4 RTK fixed, 5 RTK float, 9 SBAS; u-blox
+  ``diffSoln``/``carrSoln``, gpsd DGPS/RTK, RTKLIB fix/float/DGPS map onto them) gets the corrected ionosphere's σ
+  (``iono="sbas"``, paper 004's σ_UIRE) — the RAIM's and the ``model`` level's σ alike, a fixed solution the same
+  as a float one (at least the corrected σ: no weaker). The ``model`` level keeps that σ where no residual measured
+  the environment (:func:`tollcli.integrity.environment.with_environment`): a receiver holding corrections, or
+  carrier-phase ambiguities, on its satellites is not the unknown street the urban σ assumes.
 * Duplicated satellites in an epoch are counted once.
 """
 
@@ -29,6 +33,15 @@ from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.gnss.wls import observation_matrix
 
 MAX_ANGLE_AGE_S = 30.0
+#: GGA fix qualities of a corrected solution: 2 DGNSS/SBAS, 4 RTK fixed, 5 RTK float, 9 SBAS (some makes)
+CORRECTED_QUALITIES = (2, 4, 5, 9)
+
+
+def corrected_fixes(epochs: pd.DataFrame) -> np.ndarray:
+    """Per epoch: the receiver says its fix is corrected (:data:`CORRECTED_QUALITIES`)."""
+    if "fix_quality" not in epochs:
+        return np.zeros(len(epochs), bool)
+    return np.isin(pd.to_numeric(epochs["fix_quality"], errors="coerce").to_numpy(float), CORRECTED_QUALITIES)
 
 
 class AngleCarry:
@@ -185,7 +198,7 @@ def nmea_measurements(
         constellation=const, lat_deg=np.nan_to_num(lat), lon_deg=np.nan_to_num(lon), sigma_const_m=sigma_m, nominal=nominal,
     )  # fmt: skip
     quality = epochs["fix_quality"].to_numpy()[row] if "fix_quality" in epochs else np.zeros(row.size, np.int64)
-    sbas = (quality == 2) & (sigma_model == "nominal")  # DGNSS/SBAS fix (GGA quality, u-blox diffSoln, gpsd status)
+    sbas = np.isin(quality, CORRECTED_QUALITIES) & (sigma_model == "nominal")  # a corrected fix (DGNSS/SBAS, RTK)
     if sbas.any() and (nominal or NominalModel()).iono == "single":  # the corrected ionosphere: paper 004's σ_UIRE
         from dataclasses import replace as _with
 
@@ -208,4 +221,5 @@ def nmea_measurements(
     reported = np.isin(epoch_ids, satellites["epoch"].to_numpy()) if n_epochs else np.zeros(0, bool)
     return Measurements(H, sigma, mask, labels, residual_m=np.where(have_grs[:, None], residual, np.nan),
                         test_stat_override=gst_stat, test_stat_source=source, satellites_reported=reported,
-                        receiver=receiver, cn0_dbhz=pad(used["cn0_dbhz"].to_numpy(float), row, slot, shape, np.nan))  # fmt: skip
+                        receiver=receiver, cn0_dbhz=pad(used["cn0_dbhz"].to_numpy(float), row, slot, shape, np.nan),
+                        corrected_fix=corrected_fixes(epochs))  # fmt: skip

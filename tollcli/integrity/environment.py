@@ -22,7 +22,8 @@ from the satellites' geometry alone, :mod:`tollcli.integrity.model_bound`) gets 
 residuals measured, and the urban σ where nothing measured one: a receiver that reports only its satellites
 shows no sign of a street canyon, so its bound cannot assume open country — ``--environment open`` declares
 it (a motorway network in open country) and the nominal σ then holds (shown on the GSDC drives, not on
-Potsdamer Platz: docs/integrity.md).
+Potsdamer Platz: docs/integrity.md). An epoch whose fix the receiver says is corrected (DGNSS/SBAS, RTK fixed
+or float: :attr:`Measurements.corrected_fix`) keeps its corrected σ where nothing measured the environment.
 
 Measured (``benchmarks/integrity_truth.py``, docs/integrity.md): f is 1.53–9.95 on the Potsdamer Platz drive
 (median 3.96; the epochs the nominal σ would let through have 2.2 or more), 0.03–0.72 on the simulator's
@@ -145,5 +146,7 @@ def with_environment(meas: Measurements, time_s: np.ndarray, setting: str = "aut
         return replace(meas, model_sigma_m=meas.sigma_m, model_open=open_sky), env, factor
     urban_sigma = np.where(meas.mask, np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)), meas.sigma_m)
     sigma = np.where(urban[:, None], urban_sigma, meas.sigma_m) if urban.any() else meas.sigma_m
-    model = np.where(open_sky[:, None], meas.sigma_m, urban_sigma)  # unknown: the urban σ (no residual says open)
-    return replace(meas, sigma_m=sigma, model_sigma_m=model, model_open=open_sky), env, factor
+    corrected = (env == "") & (meas.corrected_fix if meas.corrected_fix is not None else np.zeros(env.shape, bool))
+    keep = open_sky | corrected  # unknown: the urban σ (no residual says open), but for a corrected fix
+    model = np.where(keep[:, None], meas.sigma_m, urban_sigma)
+    return replace(meas, sigma_m=sigma, model_sigma_m=model, model_open=keep), env, factor

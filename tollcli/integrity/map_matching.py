@@ -107,6 +107,28 @@ def load_roads(path: str, connect_tol_m: float = 1.0) -> Roads:
     return Roads(np.array(ids, dtype=object), np.array(tolled), np.array(oneway), lines, crs, tree, pairs)
 
 
+def roads_of_geoobjects(roads: Roads, geo_ids: np.ndarray) -> np.ndarray:
+    """Per geo-object id: the id of its road in the network — the same id, else the id before a section suffix
+    ``/k`` (``geoobjects build`` names the sections of road ``C`` ``C/1``, ``C/2``) — or '' when there is none."""
+    known = set(roads.ids.astype(str).tolist())
+    ids = np.asarray(geo_ids, dtype=object).astype(str)
+    base = np.array([g.rsplit("/", 1)[0] if "/" in g else "" for g in ids.tolist()], dtype=object)
+    return np.where(np.isin(ids, list(known)), ids, np.where(np.isin(base, list(known)), base, "")).astype(object)
+
+
+def distance_to_road_m(roads: Roads, road_id: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray) -> np.ndarray:
+    """Per position: its distance (m) to the road of the network whose id is ``road_id`` (NaN: no such road)."""
+    index = pd.Series(np.arange(len(roads.ids)), index=pd.Index(roads.ids.astype(str)))
+    index = index[~index.index.duplicated()]
+    i = index.reindex(np.asarray(road_id, dtype=object).astype(str)).to_numpy(float)
+    out = np.full(i.size, np.nan)
+    have = np.flatnonzero(np.isfinite(i) & np.isfinite(lat_deg) & np.isfinite(lon_deg))
+    if have.size:
+        x, y = (np.asarray(v, float) for v in wgs84_to(roads.crs).transform(lon_deg[have], lat_deg[have]))
+        out[have] = shapely.distance(shapely.points(x, y), roads.lines[i[have].astype(np.int64)])
+    return out
+
+
 def _heading_at(lines: np.ndarray, along: np.ndarray) -> np.ndarray:
     """Direction of each line at distance ``along`` (degrees clockwise from grid north)."""
     length = shapely.length(lines)

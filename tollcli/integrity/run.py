@@ -176,9 +176,10 @@ def model_hpl(meas: Measurements, geometry: Geometry, p_md: float) -> np.ndarray
     if meas.model_sigma_m is not None:
         sigma = meas.model_sigma_m
         open_sky = meas.model_open if meas.model_open is not None else np.zeros(meas.mask.shape[0], bool)
-    else:
-        sigma = np.where(meas.mask, np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)), meas.sigma_m)
-        open_sky = np.zeros(meas.mask.shape[0], bool)
+    else:  # nothing measured the environment: the urban σ, but for a corrected fix (its corrected σ)
+        open_sky = meas.corrected_fix if meas.corrected_fix is not None else np.zeros(meas.mask.shape[0], bool)
+        sigma = np.where(meas.mask & ~open_sky[:, None], np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)),
+                         meas.sigma_m)  # fmt: skip
     same = sigma is meas.sigma_m or np.array_equal(np.where(meas.mask, sigma, 0.0), np.where(meas.mask, meas.sigma_m, 0.0))
     own = geometry if same else wls_geometry(meas.H, sigma, meas.mask)
     hpl = model_hpl_m(own, sigma, p_md)

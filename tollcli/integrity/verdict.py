@@ -6,17 +6,32 @@ between consecutive raw fixes, summed over the window), ΔS = |D_map/T − avera
 (km/h), Δθ from the matching; the Sugeno scale of :mod:`tollcli.integrity.fuzzy_mm`; ``mm_status``
 ``ok`` (scale ≥ 71), ``alarm``, or ``unmatched`` (no road within reach).
 
-Policies (``--policy``): which checks a position must pass to count in charging.
+Policies (``--policy``): which checks may veto a position that counts in charging.
 
 =============  ==========================================================================
 ``raim``       the RAIM verdict only
-``raim+speed`` and the speed check (``ok``)
-``raim+mm``    and map-matching integrity ``ok`` with the position matched to the geo-object's road
+``raim+speed`` and the speed check's fault verdict (``speed_inconsistent``)
+``raim+mm``    and map matching's fault verdicts (``mm_off_road``, ``mm_other_road``)
 ``all``        all three (the default when the log has speeds and a road network is given)
 =============  ==========================================================================
 
-The default is the strictest the inputs support: ``all`` with speeds and roads, ``raim+mm``
-with roads only, ``raim+speed`` with speeds only, else ``raim``.
+**A check vetoes only on evidence of a fault.** The speed check vetoes a position whose positions disagree
+with the Doppler velocity (:mod:`tollcli.integrity.speed`); a slow, stopped, accelerating or turning vehicle
+is not checked (``speed_low_speed``, ``speed_unavailable``, ``speed_no_data``) and keeps the RAIM's verdict.
+Map matching vetoes where its matching is trusted (fuzzy scale ≥ 71) and the position's own bound (its HPL,
+else the geo-object's HAL, plus ``ROAD_HALF_WIDTH_M`` for lanes) excludes a road: ``mm_off_road`` — the road
+the matching holds (topology: the vehicle cannot have left it) lies beyond the bound, the position jumped off
+the network; ``mm_other_road`` — the matching holds another road and the geo-object's own road lies beyond
+the bound. An alarm of the fuzzy scale (``mm_alarm``: the matching is not trusted, e.g. at a join between
+two segments of one street), no road within reach (``mm_unmatched``) and another road while the geo-object's
+road is within the bound (``mm_nearby_road``: the next segment at a join) are not checked.
+
+Where a check passes it **confirms** the position: ``speed`` (consistent at ≥ 2 m/s), ``map_matching``
+(trusted match onto the geo-object's own road, within the bound). The invoice lists, per passage, the
+checks that confirmed its evidence and why the others did not check.
+
+The default is the strictest **fault detection** the inputs support: ``all`` with speeds and roads,
+``raim+speed`` with speeds only, else ``raim`` (map matching reads speed and heading).
 """
 
 from __future__ import annotations
@@ -32,7 +47,7 @@ from tollcli.integrity.map_matching import (
     Roads,
     match_with_trace,
 )
-from tollcli.integrity.speed import SpeedParams, speed_integrity, trapezoid_average
+from tollcli.integrity.speed import SPEED_FAULTS, SpeedParams, speed_integrity, trapezoid_average
 
 POLICIES = {"raim": (), "raim+speed": ("speed",), "raim+mm": ("mm",), "all": ("speed", "mm")}
 
@@ -101,12 +116,51 @@ def epoch_checks_traced(epochs: pd.DataFrame, roads: Roads | None, speed_params:
 
 
 def failed_check(checks: pd.DataFrame, policy: str) -> np.ndarray:
-    """Per epoch, the first non-RAIM check that fails under the policy ('' when all pass)."""
+    """Per epoch, the epoch-level check that found a fault under the policy ('' when none did): the speed check's
+    ``speed_inconsistent``. Map matching's faults depend on the geo-object (:func:`map_matching_pair_checks`)."""
     why = np.full(len(checks), "", dtype=object)
-    if "mm" in POLICIES[policy]:
-        s = checks["mm_status"].astype(str).to_numpy()
-        why = np.where(s != "ok", "mm_" + s, why)
     if "speed" in POLICIES[policy]:
         s = checks["speed_status"].astype(str).to_numpy()
-        why = np.where(s != "ok", "speed_" + s, why)
+        why = np.where(np.isin(s, SPEED_FAULTS), "speed_" + s, why)
     return why
+
+
+#: how far a vehicle on a road may be from the road's line: lanes, a carriageway's width (m)
+ROAD_HALF_WIDTH_M = 7.5
+#: what map matching's not-checked and fault verdicts mean (the invoice's notes)
+MM_MEANINGS = {
+    "mm_off_road": ("map matching holds the vehicle on a road (it cannot have left it: no connecting road) that lies "
+                    "further from the position than the position's bound allows: the position jumped off the road "
+                    "network, a position fault; not charged on"),
+    "mm_other_road": ("map matching holds the vehicle on another road, and the geo-object's road lies further from the "
+                      "position than the position's bound allows: the vehicle was not on it; not charged on"),
+    "mm_alarm": ("not checked: map matching did not trust its own match here (fuzzy integrity below 71, e.g. at a join "
+                 "between two segments of one street); the RAIM's verdict stands"),
+    "mm_unmatched": "not checked: no road of the network within reach; the RAIM's verdict stands",
+    "mm_nearby_road": ("not checked: map matching holds another road (e.g. the next segment at a join) but the "
+                       "geo-object's road is within the position's bound; the RAIM's verdict stands"),
+}  # fmt: skip
+
+
+def map_matching_pair_checks(geo_road: np.ndarray, matched_road: np.ndarray, mm_status: np.ndarray, match_dist_m: np.ndarray,
+                             geo_road_dist_m: np.ndarray, bound_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Per (position, geo-object): map matching's veto ('' or ``mm_off_road``/``mm_other_road``), whether it confirms
+    the position, and why it did not check ('' or ``mm_alarm``/``mm_unmatched``/``mm_nearby_road``).
+
+    ``geo_road``: the geo-object's road in the network ('' when none); ``bound_m``: the position's bound (its HPL for
+    that geo-object's HAL); ``geo_road_dist_m``: the position's distance to the geo-object's road (NaN where the
+    network has none: no ``mm_other_road``)."""
+    geo_road = np.asarray(geo_road, dtype=object).astype(str)
+    road = np.asarray(matched_road, dtype=object).astype(str)
+    status = np.asarray(mm_status, dtype=object).astype(str)
+    reach = np.asarray(bound_m, float) + ROAD_HALF_WIDTH_M
+    trusted = status == "ok"
+    same = (road == geo_road) & (geo_road != "")
+    with np.errstate(invalid="ignore"):
+        off = trusted & (np.asarray(match_dist_m, float) > reach)
+        other = trusted & ~off & ~same & (np.asarray(geo_road_dist_m, float) > reach)
+    veto = np.where(off, "mm_off_road", np.where(other, "mm_other_road", "")).astype(object)
+    confirmed = trusted & ~off & same
+    why_not = np.where(status == "unmatched", "mm_unmatched", np.where(~trusted, "mm_alarm", "mm_nearby_road"))
+    not_checked = np.where((veto == "") & ~confirmed, why_not, "").astype(object)
+    return veto, confirmed, not_checked

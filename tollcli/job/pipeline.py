@@ -43,7 +43,7 @@ from tollcli.io.sources import INPUT_KINDS, printable_path, sniff_format
 from tollcli.job.log_integrity import measured_environment
 from tollcli.job.osnma_evidence import OsnmaEvidence, failure_findings, fixes_before, osnma_evidence, record_in_invoice
 from tollcli.job.osnma_evidence import inputs_record as osnma_inputs
-from tollcli.job.streaming import TailCharger, choose_policy, has_speeds
+from tollcli.job.streaming import TailCharger, choose_policy, has_speeds, policy_columns, with_geo_roads
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_usable
@@ -202,12 +202,14 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         params = settle_sources(params, meas)
         per_epoch = run_raim(meas, replace(epoch_raim, sources=params.sources))
         pairs = inside_pairs(epochs, meas, geo_objects, params)
-        policy, why, matched = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
+        policy, why, checks, road_net = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
+        if checks is not None and "matched_road" in checks and pairs["epoch_row"].size:
+            pairs = with_geo_roads(pairs, road_net, geo_objects, epochs, pairs["epoch_row"])
         if settings.require_authenticated:  # a pseudorange log carries no Galileo pages: nothing is authenticated
             why = require_authenticated(why, np.full(len(epochs), "not_checked", dtype=object))
             auth_counts["not_checked"] = len(epochs)
         positions = positions_from_pairs(pairs, epochs["time_utc"], geo_objects, tc_s=settings.tc_s, epoch_why=why,
-                                         matched_road=matched)  # fmt: skip
+                                         checks=checks)  # fmt: skip
         found = trip_findings(epochs, None, per_epoch, geo_objects, finding_settings)
         table, details = charges(positions, settings.n_th), None
         dated = epochs["time_utc"].dropna()
@@ -250,18 +252,22 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     if osnma is not None or settings.require_authenticated:
         record_in_invoice(invoice, osnma, auth_counts, settings.require_authenticated)
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
-    _speed_notes(invoice, period, step_s)
+    _check_notes(invoice, period, step_s)
     explain_not_charged(invoice)
     return seal(invoice), stats
 
 
-def _speed_notes(invoice: dict, period, step_s: float | None) -> None:
-    """Why positions failed the speed check, in the invoice's ``status_notes`` (a short log says it is short)."""
+def _check_notes(invoice: dict, period, step_s: float | None) -> None:
+    """What the speed and map-matching verdicts an invoice shows mean — the faults that kept positions out and why a
+    check did not check — in its ``status_notes`` (a log shorter than the speed window says it is short)."""
     from tollcli.integrity.speed import SpeedParams, speed_status_notes
+    from tollcli.integrity.verdict import MM_MEANINGS
 
     seen = {status for passage in (*invoice["lines"], *invoice["not_charged"]) for status in passage["statuses"]}
+    seen |= {why for line in invoice["lines"] for why in (line.get("checks") or {}).get("not_checked", {})}
     duration = (pd.Timestamp(period[1]) - pd.Timestamp(period[0])).total_seconds() if period else None
     notes = speed_status_notes(seen, duration, step_s, SpeedParams())
+    notes.update({k: v for k, v in MM_MEANINGS.items() if k in seen})
     if notes:
         invoice["status_notes"] = {**(invoice.get("status_notes") or {}), **notes}
 
@@ -334,16 +340,17 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
 
 
 def _policy_checks(epochs, settings: ChargeSettings, roads: str | None):
-    """The policy in force, each epoch's failed check ('' when none) and matched road (None without roads)."""
+    """The policy in force, each epoch's fault ('' when none), the policy's check columns and the road network
+    (None, None without checks / without roads)."""
     from tollcli.integrity.map_matching import load_roads
     from tollcli.integrity.verdict import epoch_checks, failed_check
 
     policy, needs = choose_policy(has_speeds(epochs), settings.policy, roads)
     if not needs:
-        return policy, None, None
-    checks = epoch_checks(epochs, load_roads(roads) if "mm" in needs else None)
-    matched = checks["matched_road"].astype(str).to_numpy(dtype=object) if "mm" in needs else None
-    return policy, failed_check(checks, policy), matched
+        return policy, None, None, None
+    network = load_roads(roads) if "mm" in needs else None
+    checks = epoch_checks(epochs, network)
+    return policy, failed_check(checks, policy), policy_columns(checks, needs), network
 
 
 def settings_from_invoice(invoice: dict) -> ChargeSettings:

@@ -78,6 +78,22 @@ def choose_policy(has_speed: bool, policy: str | None, roads: str | None) -> tup
     return policy, needs
 
 
+def policy_columns(checks: pd.DataFrame, needs: tuple[str, ...]) -> pd.DataFrame:
+    """The check columns :func:`~tollcli.charging.recognition.pair_verdicts` reads, for the checks a policy needs."""
+    cols = (("speed_status",) if "speed" in needs else ()) + (("matched_road", "mm_status", "match_dist_m") if "mm" in needs else ())
+    return checks[list(cols)].reset_index(drop=True)
+
+
+def with_geo_roads(pairs: dict[str, np.ndarray], roads, geo, epochs: pd.DataFrame, rows: np.ndarray) -> dict[str, np.ndarray]:
+    """``pairs`` with each geo-object's road in the network (``geo_road``, '' when none) and the position's (epoch
+    ``rows``) distance to it (``geo_road_dist_m``, NaN when none): what map matching's veto weighs."""
+    from tollcli.integrity.map_matching import distance_to_road_m, roads_of_geoobjects
+
+    road = roads_of_geoobjects(roads, geo.ids)[pairs["obj"]]
+    lat, lon = epochs["lat_deg"].to_numpy(float)[rows], epochs["lon_deg"].to_numpy(float)[rows]
+    return {**pairs, "geo_road": road, "geo_road_dist_m": distance_to_road_m(roads, road, lat, lon)}
+
+
 def has_speeds(epochs: pd.DataFrame) -> bool:
     """More than half of the epochs carry a speed over ground."""
     return "speed_mps" in epochs and bool(np.isfinite(epochs["speed_mps"].to_numpy(float)).mean() > 0.5)
@@ -210,8 +226,8 @@ class TailCharger:
             from tollcli.integrity.speed import nominal_step_s
 
             self.step_s = nominal_step_s(t)
-        why, matched, trace = self._checks(epochs, raim)
-        self._commit_positions(epochs, done, frontier, final, why, matched)
+        why, checks, trace = self._checks(epochs, raim)
+        self._commit_positions(epochs, done, frontier, final, why, checks)
         self.increasing = self.increasing and times_increase(t)
         found = trip_findings(epochs, None, raim, self.geo, self.finding_settings, cn0=cn0, keep_rows=True,
                               times_increase=self.increasing)  # fmt: skip
@@ -233,7 +249,8 @@ class TailCharger:
             self.start += keep
 
     def _checks(self, epochs: pd.DataFrame, raim: pd.DataFrame):
-        """Per tail row: the policy's failed check ('' when none), the matched road, and the matching trace."""
+        """Per tail row: the fault an epoch-level check found ('' when none), the policy's check columns (None
+        without checks: :func:`~tollcli.charging.recognition.pair_verdicts`), and the matching trace."""
         if not self.needs:
             return self._authenticated(None, epochs), None, None
         from tollcli.integrity.verdict import epoch_checks_traced, failed_check
@@ -241,8 +258,7 @@ class TailCharger:
         epochs = epochs.assign(raim_status=raim["raim_status"].to_numpy())
         checks, trace = epoch_checks_traced(epochs, self.roads if "mm" in self.needs else None, step_s=self.step_s,
                                             match_state=self.match_state)  # fmt: skip
-        matched = checks["matched_road"].astype(str).to_numpy(dtype=object) if "mm" in self.needs else None
-        return self._authenticated(failed_check(checks, self.policy), epochs), matched, trace
+        return self._authenticated(failed_check(checks, self.policy), epochs), policy_columns(checks, self.needs), trace
 
     def _authenticated(self, why, epochs: pd.DataFrame):
         """``why`` with authenticated navigation data as one more condition when the settings require it."""
@@ -252,7 +268,7 @@ class TailCharger:
 
         return require_authenticated(why, epochs["nav_auth"].to_numpy(object))
 
-    def _commit_positions(self, epochs: pd.DataFrame, done: int, frontier: int, final: bool, why, matched) -> None:
+    def _commit_positions(self, epochs: pd.DataFrame, done: int, frontier: int, final: bool, why, checks) -> None:
         if self.any_pairs and self.undated:
             raise DataError("some epochs have no date (a log without RMC/ZDA): give --date")
         pending = concat_pairs(self.pending) if self.pending else {}
@@ -265,10 +281,12 @@ class TailCharger:
                 self.pending.append({k: v[~now] for k, v in pending.items()})
             if now.any():
                 pairs = {k: v[now] for k, v in pending.items()}
-                valid, verdict = pair_verdicts(pairs, self.geo, why, matched, row_offset=self.start)
                 rows = pairs["epoch_row"] - self.start
+                if checks is not None and "matched_road" in checks:
+                    pairs = with_geo_roads(pairs, self.roads, self.geo, epochs, rows)
+                verdicts = pair_verdicts(pairs, self.geo, why, checks, row_offset=self.start)
                 times = epochs["time_utc"].array[rows]
-                cols = {**{k: pairs[k] for k in (*PAIR_COLUMNS, "hpl_m", "separation_ratio", "part") if k in pairs}, "valid": valid, "verdict": verdict,
+                cols = {**{k: pairs[k] for k in (*PAIR_COLUMNS, "hpl_m", "separation_ratio", "part") if k in pairs}, **verdicts,
                         "t_s": utc_seconds_or_nan(times), "time_utc": times}  # fmt: skip
                 if "nav_auth" in epochs:  # whether the position's navigation data were authenticated (OSNMA)
                     cols["nav_auth"] = epochs["nav_auth"].to_numpy(object)[rows]

@@ -177,7 +177,7 @@ def _chunk(lo, t, start, traj, sl, names, svid, group, view, used, cn0, sigma, e
     sq = np.where(used, residual, 0.0) ** 2
     n_res = used.sum(axis=1)
     rms = np.where(n_res > 0, np.sqrt(sq.sum(axis=1) / np.maximum(n_res, 1)), np.nan)
-    speed = traj.speed_mps[sl] + config.speed_sigma_mps * rng["speed"].standard_normal(n)
+    speed = np.abs(traj.speed_mps[sl] + config.speed_sigma_mps * rng["speed"].standard_normal(n))  # a speed is ≥ 0
     course = (traj.heading_deg[sl] + config.course_sigma_deg * rng["speed"].standard_normal(n)) % 360.0
     times = start + pd.to_timedelta(np.round(t * 1000).astype(np.int64), unit="ms")
     nan = np.nan

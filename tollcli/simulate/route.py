@@ -3,8 +3,9 @@
 A route is a polyline in WGS-84: the LineString(s) of a GeoJSON file (``--route``),
 optionally the road features named by ``via`` ids chained in that order (each
 reversed when that joins it better to the previous one), or a straight line from a
-start point along a heading. The vehicle drives it at constant speed; the
-trajectory gives per epoch the time, position, arc length, heading and speed.
+start point along a heading. The vehicle drives it at constant speed, except where it
+stops (``stops``: start time and length of each stop in traffic; it brakes and pulls away at
+``ACCEL_MPS2``); the trajectory gives per epoch the time, position, arc length, heading and speed.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from tollcli.geodesy import enu_shift2geodetic
 from tollcli.spatial import feature_geometry, metric_crs, project, read_features
 
 PERPIGNAN = (42.0 + 41.0 / 60.0, 2.0 + 53.0 / 60.0)  # the thesis's user location [42°41', 2°53']
+#: braking and pulling away at a stop, m/s² (town traffic)
+ACCEL_MPS2 = 1.5
 
 
 @dataclass(frozen=True)
@@ -39,15 +42,42 @@ def epoch_times(duration_s: float, rate_hz: float) -> np.ndarray:
     return np.arange(n) / rate_hz
 
 
+def speed_profile(t_s: np.ndarray, speed_mps: float, stops: list[tuple[float, float]] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """(arc length m, speed m/s) at times ``t_s``: ``speed_mps`` but around each stop (start s, length s), where the
+    vehicle brakes to a standstill at the start (at ``ACCEL_MPS2``), stands, then pulls away at ``ACCEL_MPS2``."""
+    t = np.asarray(t_s, float)
+    if not stops:
+        return speed_mps * t, np.full(t.shape, float(speed_mps))
+    ramp = speed_mps / ACCEL_MPS2
+
+    def speed_at(x: np.ndarray) -> np.ndarray:
+        v = np.full(x.shape, float(speed_mps))
+        for start, length in stops:
+            v = np.where((x >= start - ramp) & (x < start), np.minimum(v, ACCEL_MPS2 * (start - x)), v)
+            v = np.where((x >= start) & (x <= start + length), 0.0, v)
+            v = np.where((x > start + length) & (x < start + length + ramp), np.minimum(v, ACCEL_MPS2 * (x - start - length)), v)
+        return v
+
+    fine = np.arange(0.0, t.max(initial=0.0) + 0.02, 0.01)  # the speed integrated on a 0.01 s grid
+    vf = speed_at(fine)
+    arc = np.concatenate([[0.0], np.cumsum(0.5 * (vf[1:] + vf[:-1]) * 0.01)])
+    return np.interp(t, fine, arc), speed_at(t)
+
+
+def stopped_time_s(speed_mps: float, stops: list[tuple[float, float]]) -> float:
+    """How much longer a route takes with ``stops`` than at constant speed (s)."""
+    return sum(length + speed_mps / ACCEL_MPS2 for _, length in stops)
+
+
 def straight(lat_deg: float, lon_deg: float, heading_deg: float, speed_mps: float, duration_s: float,
-             rate_hz: float = 1.0, height_m: float = 50.0) -> Trajectory:  # fmt: skip
+             rate_hz: float = 1.0, height_m: float = 50.0, stops: list[tuple[float, float]] = ()) -> Trajectory:  # fmt: skip
     """A straight drive from a start point (local east-north plane: fine for tens of kilometres)."""
     t = epoch_times(duration_s, rate_hz)
-    s = speed_mps * t
+    s, v = speed_profile(t, speed_mps, list(stops))
     h = np.radians(heading_deg)
     lat, lon = enu_shift2geodetic(lat_deg, lon_deg, s * np.sin(h), s * np.cos(h))
     n = t.size
-    return Trajectory(t, lat, lon, np.full(n, height_m), s, np.full(n, heading_deg % 360.0), np.full(n, speed_mps))
+    return Trajectory(t, lat, lon, np.full(n, height_m), s, np.full(n, heading_deg % 360.0), v)
 
 
 def stationary(lat_deg: float, lon_deg: float, heading_deg: float, speed_mps: float, duration_s: float,
@@ -103,9 +133,27 @@ def _chain(metric_lines: list) -> np.ndarray:
     return coords
 
 
+def _true_heading_deg(s: np.ndarray, cum: np.ndarray, xy: np.ndarray, crs: str) -> np.ndarray:
+    """The direction of travel at arc lengths ``s`` from true north (what a receiver's course is): the bearing between
+    the route's points 0.5 m behind and ahead, taken back to latitude and longitude (the metric frame's grid north
+    is off true north by the meridian convergence, over a degree in a UTM zone's edge)."""
+    from tollcli.geodesy import geodetic2enu_shift
+
+    k = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(cum) - 2)
+    d = np.diff(xy, axis=0)[k]
+    unit = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+    x, y = np.interp(s, cum, xy[:, 0]), np.interp(s, cum, xy[:, 1])
+    ends = project(shapely.points(np.r_[x - 0.5 * unit[:, 0], x + 0.5 * unit[:, 0]], np.r_[y - 0.5 * unit[:, 1], y + 0.5 * unit[:, 1]]),
+                   crs, inverse=True)  # fmt: skip
+    lon, lat = shapely.get_x(ends), shapely.get_y(ends)
+    n = s.size
+    east, north = geodetic2enu_shift(lat[:n], lon[:n], lat[n:], lon[n:])
+    return np.degrees(np.arctan2(east, north)) % 360.0
+
+
 def along_route(lines_wgs84: list, speed_mps: float, rate_hz: float = 1.0, duration_s: float | None = None,
-                height_m: float = 50.0) -> Trajectory:  # fmt: skip
-    """Drive the polyline once at constant speed (or for ``duration_s``, stopping at its end)."""
+                height_m: float = 50.0, stops: list[tuple[float, float]] = ()) -> Trajectory:  # fmt: skip
+    """Drive the polyline once at constant speed but for ``stops`` (or for ``duration_s``, stopping at its end)."""
     crs = metric_crs(lines_wgs84)
     metric = list(project(np.asarray(lines_wgs84, dtype=object), crs))
     xy = _chain(metric)
@@ -116,15 +164,16 @@ def along_route(lines_wgs84: list, speed_mps: float, rate_hz: float = 1.0, durat
     length = cum[-1]
     if length <= 0:
         raise DataError("the route has no length")
-    total = length / speed_mps if duration_s is None else min(duration_s, length / speed_mps)
+    whole = length / speed_mps + stopped_time_s(speed_mps, list(stops))
+    total = whole if duration_s is None else min(duration_s, whole)
     t = epoch_times(total, rate_hz)
-    s = speed_mps * t
+    s, v = speed_profile(t, speed_mps, list(stops))
+    inside = s <= length
+    t, s, v = t[inside], s[inside], v[inside]
     x = np.interp(s, cum, xy[:, 0])
     y = np.interp(s, cum, xy[:, 1])
-    k = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg[seg > 0]) - 1)
-    d = np.diff(xy, axis=0)[k]
-    heading = np.degrees(np.arctan2(d[:, 0], d[:, 1])) % 360.0
     pts = project(shapely.points(x, y), crs, inverse=True)
     lon, lat = shapely.get_x(pts), shapely.get_y(pts)
+    heading = _true_heading_deg(s, cum, xy, crs)
     n = t.size
-    return Trajectory(t, lat, lon, np.full(n, height_m), s, heading, np.full(n, speed_mps))
+    return Trajectory(t, lat, lon, np.full(n, height_m), s, heading, v)
