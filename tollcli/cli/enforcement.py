@@ -35,6 +35,7 @@ from tollcli.enforcement.roadside import (
 )
 from tollcli.errors import UsageError
 from tollcli.integrity.raim import RaimParams
+from tollcli.io.log_run import LogRun
 from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for, write_text_atomic
 from tollcli.job.log_integrity import iter_integrity
@@ -45,9 +46,9 @@ from tollcli.readers.nmea.reader import check_usable
 VehicleClass = Annotated[str, typer.Option("--vehicle-class", help=f"Vehicle class, sets the top speed: {', '.join(CLASS_MAX_SPEED_MPS)}.")]
 
 
-def _trip(log: str, hal: float, strict: bool, date=None) -> tuple[pd.DataFrame, pd.DataFrame | None]:
-    """The whole trip's integrity table and satellite table."""
-    kind = sniff_format(log)
+def _trip(log, hal: float, strict: bool, date=None) -> tuple[pd.DataFrame, pd.DataFrame | None]:
+    """The whole trip's integrity table and satellite table (``log``: a path, or its LogRun: read once)."""
+    kind = log.kind if isinstance(log, LogRun) else sniff_format(log)
     stats = ReadStats()
     tables, sats = [], []
     for chunk in iter_integrity(log, kind, RaimParams(hal_m=hal), strict=strict, stats=stats, date=date.date() if date else None):
@@ -149,11 +150,12 @@ def findings(
     if max_speed is not None:  # the given top speed serves any class name
         overrides["max_speed_mps"] = max_speed
     settings = FindingSettings.for_class(vehicle_class, **overrides)
-    table, sats = _trip(log, hal, strict, date)
-    items = trip_findings(table, sats, table, load_geoobjects(geo) if geo else None, settings) if not table.empty else []
     from tollcli.job.osnma_evidence import failure_findings, osnma_evidence
 
-    evidence = osnma_evidence(log, sniff_format(log), osnma_merkle, osnma_public_key, strict=strict)
+    with LogRun(log) as run:  # the log opened once: the OSNMA pages and the trip read the same bytes
+        evidence = osnma_evidence(log, run.kind, osnma_merkle, osnma_public_key, strict=strict, run=run)
+        table, sats = _trip(run, hal, strict, date)
+    items = trip_findings(table, sats, table, load_geoobjects(geo) if geo else None, settings) if not table.empty else []
     if evidence is not None and not table.empty:
         items = sorted([*items, *failure_findings(evidence, table)], key=lambda f: (f["start_utc"], f["kind"]))
     doc = {"log": log, "settings": settings.__dict__, "findings": items}

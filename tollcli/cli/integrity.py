@@ -18,7 +18,7 @@ from tollcli.gnss.sigma_models import SIGMA_MODELS, NominalModel
 from tollcli.integrity.environment import ENVIRONMENTS
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
-from tollcli.io.sources import sniff_format
+from tollcli.io.log_run import LogRun
 from tollcli.io.writers import TableWriter, format_for
 from tollcli.job.log_integrity import iter_integrity
 from tollcli.readers.navigation import NAVIGATION_KINDS
@@ -95,28 +95,30 @@ def integrity(
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     nominal = NominalModel(iono=iono)
-    kind = sniff_format(log) if fmt == "auto" else fmt
-    day = date.date() if date else None
-    counts: Counter[str] = Counter()
-    writer = TableWriter(output, format_for(output, fmt=out_fmt))
-    stats = ReadStats()
-    with writer:
-        if checks or roads:
-            tables = [c.table for c in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav,
-                                                      date=day, environment=environment)]
-            if kind in NAVIGATION_KINDS:
-                check_usable(stats)  # a log without one epoch: the data error, before any check runs
-            table = with_checks(pd.concat(tables, ignore_index=True), roads)
-            _tally(table, counts)
-            writer.write(table)
-        elif kind in NAVIGATION_KINDS:
-            _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
-        else:
-            table = _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal, environment, strict)
-            counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
-            _tally(table, counts)
-            writer.write(table)
-        writer.commit()
+    run = LogRun(log, fmt)  # the log opened once (io.log_run)
+    kind = run.kind
+    with run:
+        day = date.date() if date else None
+        counts: Counter[str] = Counter()
+        writer = TableWriter(output, format_for(output, fmt=out_fmt))
+        stats = ReadStats()
+        with writer:
+            if checks or roads:
+                tables = [c.table for c in iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav,
+                                                          date=day, environment=environment)]
+                if kind in NAVIGATION_KINDS:
+                    check_usable(stats)  # a log without one epoch: the data error, before any check runs
+                table = with_checks(pd.concat(tables, ignore_index=True), roads)
+                _tally(table, counts)
+                writer.write(table)
+            elif kind in NAVIGATION_KINDS:
+                _nmea(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
+            else:
+                table = _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment, strict)
+                counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
+                _tally(table, counts)
+                writer.write(table)
+            writer.commit()
     statuses = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "status"}
     sources = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "source"}
     ignored = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "note" and k[1]}
@@ -178,10 +180,10 @@ def with_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
     return pd.concat([table.reset_index(drop=True), extra, k[["hit_m"]]], axis=1)
 
 
-def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto",
+def _nmea(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto",
           kind="nmea") -> None:
-    with progress(f"checking {log}", quiet, log=log) as advance:
-        for chunk in iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, stats, date=day,
+    with progress(f"checking {run.name}", quiet, log=run.log) as advance:
+        for chunk in iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, stats, date=day,
                                     environment=environment):
             writer.write(chunk.table)
             _tally(chunk.table, counts)
@@ -190,5 +192,5 @@ def _nmea(log, writer, params, sigma_model, sigma, nominal, strict, quiet, count
     warn(stats.summary(), quiet)
 
 
-def _pseudoranges(log, kind, nav, params, sigma_model, sigma, nominal, environment="auto", strict=False) -> pd.DataFrame:
-    return next(iter_integrity(log, kind, params, sigma_model, sigma, nominal, strict, nav=nav, environment=environment)).table
+def _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment="auto", strict=False) -> pd.DataFrame:
+    return next(iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, nav=nav, environment=environment)).table

@@ -42,7 +42,11 @@ def osnma(
 
     if as_json and output == "-":
         output = ""
-    check = check_osnma(log, merkle, public_key, sync_bound_s, strict)
+    from tollcli.io.log_run import LogRun
+
+    with LogRun(log) as run:  # opened once: pages, satellites and fixes read the same bytes
+        with run.named_errors():
+            check = check_osnma(log, merkle, public_key, sync_bound_s, strict, data=run.replay_path(), kind=run.kind)
     tables = [(output, check.epochs), (satellites, check.satellites.drop(columns=["gst_s"])), (tags, check.result.tags),
               (failures, check.result.failures)]  # fmt: skip
     writers = [(TableWriter(path, format_for(path, fmt=out_fmt)), table) for path, table in tables if path]

@@ -35,16 +35,23 @@ def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
     return table.assign(raim_lat_deg=lat, raim_lon_deg=lon)
 
 
-def iter_integrity(log: str, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
+def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
                    nominal: NominalModel | None = None, strict: bool = False, stats: ReadStats | None = None,
                    nav: str | None = None, date: dt.date | None = None, environment: str = "auto") -> Iterator[IntegrityChunk]:  # fmt: skip
     """Integrity tables of ``log`` (``kind``: a navigation kind — nmea, ubx-nav, gpsd-json — streamed in chunks, or a
-    pseudorange format).
+    pseudorange format). ``log``: a path, or the log's :class:`~tollcli.io.log_run.LogRun` (read through it: opened once).
 
     ``date``: the UTC date of the first epoch, for NMEA logs without RMC/ZDA dates. ``environment``: auto
     (each epoch's class from its residuals, :mod:`tollcli.integrity.environment`), open or urban.
     """
+    from tollcli.io.log_run import LogRun
+
     nominal = nominal or NominalModel()
+    if isinstance(log, LogRun):
+        with log.named_errors():
+            yield from iter_integrity(log.replay_path() if kind not in NAVIGATION_KINDS else log.source(), kind, params, sigma_model,
+                                      sigma_m, nominal, strict, stats, nav, date, environment)  # fmt: skip
+        return
     if kind not in NAVIGATION_KINDS:
         epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
         meas, env_columns = measured_environment(epochs, meas, environment)

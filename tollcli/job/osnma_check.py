@@ -47,10 +47,15 @@ def key_files(log: str, merkle: str | None, public_keys: list[str] | None) -> tu
     return merkle, public_keys
 
 
-def _log_satellites(log: str, pages: pd.DataFrame) -> pd.DataFrame:
+#: an empty per-epoch satellite table (a check without per-epoch tables)
+NO_SATELLITES = pd.DataFrame({"epoch": np.zeros(0, np.int64), "time_utc": pd.to_datetime([], utc=True), "constellation": np.zeros(0, object),
+                              "svid": np.zeros(0, np.int64), "used": np.zeros(0, bool)})  # fmt: skip
+
+
+def _log_satellites(log: str, pages: pd.DataFrame, kind: str | None = None) -> pd.DataFrame:
     from tollcli.io.sources import sniff_format
 
-    if sniff_format(log) in ("ubx-nav", "ubx"):
+    if (kind or sniff_format(log)) in ("ubx-nav", "ubx"):
         from tollcli.readers.ubx_nav import iter_ubx_nav_tables
 
         chunks = [t.satellites for t in iter_ubx_nav_tables(log)]
@@ -65,17 +70,24 @@ def _log_satellites(log: str, pages: pd.DataFrame) -> pd.DataFrame:
 
 
 def check_osnma(log: str, merkle: str | None = None, public_keys: list[str] | None = None, sync_bound_s: float = 30.0,
-                strict: bool = False, p_fa: float = 5e-3, positions: bool = True) -> OsnmaCheck:  # fmt: skip
+                strict: bool = False, p_fa: float = 5e-3, positions: bool = True, data: str | None = None,
+                kind: str | None = None, per_epoch: bool = True) -> OsnmaCheck:  # fmt: skip
     """Verify the OSNMA of a log (u-blox or ICD test-vector CSV) and join it with the log's epochs
-    (``positions``: with the authenticated satellites' own position per epoch, :func:`authenticated_fixes`)."""
+    (``positions``: with the authenticated satellites' own position per epoch, :func:`authenticated_fixes`).
+    ``data``: where the log's bytes are read (a :class:`~tollcli.io.log_run.LogRun`'s replay; default the log), ``kind``
+    its format when known. ``per_epoch`` False: no per-epoch tables (``satellites``/``epochs`` empty) — a charge
+    joins the verification with its own chunks' satellites (:meth:`~tollcli.job.osnma_evidence.OsnmaEvidence.authenticated_for`)
+    instead of reading the log's satellites a second time."""
     merkle, public_keys = key_files(log, merkle, public_keys)
     tree = read_merkle_tree(merkle)
     keys = [read_public_key(path, tree) for path in public_keys]
-    pages = read_pages(log, strict=strict)
+    data = data or log
+    pages = read_pages(data, strict=strict)
     result = run_osnma(pages.table, OsnmaSettings(tree, keys, sync_bound_s=sync_bound_s))
-    status = satellite_status(result, _log_satellites(log, pages.table))
+    sats = _log_satellites(data, pages.table, kind) if per_epoch else NO_SATELLITES
+    status = satellite_status(result, sats)
     epochs = epoch_counts(status)
-    positions = authenticated_fixes(log, status, p_fa) if positions and len(status) else None
+    positions = authenticated_fixes(data, status, p_fa, kind) if positions and len(status) else None
     if positions is not None:
         epochs = epochs.merge(positions.drop(columns=["n_used_slots", "n_used_authenticated"]), on="time_utc", how="left")
     summary = summarize(log, result, epochs, keys, pages.n_dropped)
@@ -84,13 +96,13 @@ def check_osnma(log: str, merkle: str | None = None, public_keys: list[str] | No
     return OsnmaCheck(result, status, epochs, summary)
 
 
-def authenticated_fixes(log: str, status: pd.DataFrame, p_fa: float = 5e-3) -> pd.DataFrame | None:
+def authenticated_fixes(log: str, status: pd.DataFrame, p_fa: float = 5e-3, kind: str | None = None) -> pd.DataFrame | None:
     """Per epoch of a u-blox log: the receiver's fix, the position from the satellites with authenticated data
     alone and its distance to the fix (:func:`tollcli.integrity.nav_authentication.authenticated_positions`);
     None for a page file without fixes."""
     from tollcli.io.sources import sniff_format
 
-    if sniff_format(log) not in ("ubx-nav", "ubx"):
+    if (kind or sniff_format(log)) not in ("ubx-nav", "ubx"):
         return None
     from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
     from tollcli.integrity.nav_authentication import authenticated_satellites, epoch_authentication

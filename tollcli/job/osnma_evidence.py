@@ -33,9 +33,15 @@ class OsnmaEvidence:
     """A log's OSNMA check, the satellites it authenticated per epoch, and the key files it used."""
 
     check: object  # tollcli.job.osnma_check.OsnmaCheck
-    authenticated: pd.DataFrame  # time_utc, sv: the satellites whose data were authenticated at each epoch
     merkle: str
     public_keys: list[str]
+
+    def authenticated_for(self, satellites: pd.DataFrame) -> pd.DataFrame:
+        """(``time_utc``, ``sv``) of the rows of a chunk's satellite table (``time_utc``, ``constellation``, ``svid``)
+        whose navigation data were authenticated by then: what the chunk's positions look up."""
+        from tollcli.gnss.osnma.satellite_status import satellite_status
+
+        return authenticated_satellites(satellite_status(self.check.result, satellites))
 
     @property
     def failure_times(self) -> pd.Series:
@@ -44,15 +50,17 @@ class OsnmaEvidence:
 
 
 def osnma_evidence(log: str, kind: str, merkle: str | None = None, public_keys: list[str] | None = None,
-                   auto: bool = True, required: bool = False, strict: bool = False) -> OsnmaEvidence | None:  # fmt: skip
+                   auto: bool = True, required: bool = False, strict: bool = False, run=None) -> OsnmaEvidence | None:  # fmt: skip
     """The log's OSNMA evidence, or None when it has none (module docstring).
 
     ``merkle`` given: the log must carry pages (UsageError otherwise). ``auto``: look for the tree beside the
-    log. ``required`` (--require-authenticated) on a u-blox log without a tree anywhere: UsageError.
+    log. ``required`` (--require-authenticated) on a u-blox log without a tree anywhere: UsageError. ``run``: the
+    log's :class:`~tollcli.io.log_run.LogRun` (the pages are read from its replay, the log is not opened again; a log
+    on stdin is checked with the key files given).
     """
     from tollcli.job.osnma_check import check_osnma, key_files
 
-    if kind not in PAGE_KINDS or log == "-":
+    if kind not in PAGE_KINDS or (log == "-" and (run is None or merkle is None)):
         if merkle is not None:
             raise UsageError(f"{log}: --osnma-merkle needs a u-blox log file with Galileo I/NAV pages (RXM-SFRBX)")
         return None
@@ -63,9 +71,14 @@ def osnma_evidence(log: str, kind: str, merkle: str | None = None, public_keys: 
                 raise UsageError(f"{log}: --require-authenticated needs the OSNMA Merkle tree (--osnma-merkle; "
                                  "or OSNMA_MerkleTree.xml beside the log)")  # fmt: skip
             return None
-    merkle, public_keys = key_files(log, merkle, public_keys)
-    check = check_osnma(log, merkle, public_keys, SYNC_BOUND_S, strict, positions=False)  # process computes them per chunk
-    return OsnmaEvidence(check, authenticated_satellites(check.satellites), merkle, public_keys)
+    merkle, public_keys = key_files(log, merkle, public_keys if public_keys is not None or log != "-" else [])
+    if run is None:
+        check = check_osnma(log, merkle, public_keys, SYNC_BOUND_S, strict, positions=False, per_epoch=False)
+    else:
+        with run.named_errors():
+            check = check_osnma(log, merkle, public_keys, SYNC_BOUND_S, strict, positions=False, data=run.replay_path(), kind=kind,
+                                per_epoch=False)  # the charge joins the result with its own chunks' satellites
+    return OsnmaEvidence(check, merkle, public_keys)
 
 
 def inputs_record(evidence: OsnmaEvidence) -> dict:

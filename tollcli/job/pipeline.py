@@ -39,10 +39,11 @@ from tollcli.integrity.raim import MODES, RaimParams
 from tollcli.integrity.run import level_name, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
-from tollcli.io.sources import INPUT_KINDS, printable_path, sniff_format
+from tollcli.io.sources import INPUT_KINDS, printable_path
 from tollcli.job.log_integrity import measured_environment
 from tollcli.job.osnma_evidence import OsnmaEvidence, failure_findings, fixes_before, osnma_evidence, record_in_invoice
 from tollcli.job.osnma_evidence import inputs_record as osnma_inputs
+from tollcli.io.log_run import LogRun
 from tollcli.job.streaming import TailCharger, choose_policy, has_speeds, policy_columns, with_geo_roads
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
@@ -181,50 +182,54 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     check_settings(settings, tariff_doc)
     geo_objects = load_geoobjects(geo, sha256=geo_sha256)
     tariff_doc.check_against(geo_objects.ids, geo_objects.road_class, geo)
-    kind = sniff_format(log) if settings.input_format == "auto" else settings.input_format
-    osnma = osnma_evidence(log, kind, osnma_merkle, osnma_public_keys, auto=osnma_auto, required=settings.require_authenticated,
-                           strict=settings.strict)  # fmt: skip
-    auth_counts: dict[str, int] = {}
-    failure_fixes: list[pd.DataFrame] = []  # the fixes the OSNMA failures are placed at (a few rows per chunk)
-    stats = None
-    nominal = NominalModel()
-    epoch_raim = replace(params, fde=False)
-    finding_settings = FindingSettings.for_class(settings.vehicle_class)
-    if kind in NAVIGATION_KINDS:
-        charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
-        stats, params = _read_nmea_chunks(log, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table, kind,
-                                          osnma, auth_counts, failure_fixes)  # fmt: skip
-        policy, table, details, found, period = charger.finish()
-        positions, step_s = None, charger.step_s
-    else:
-        epochs, meas = pseudorange_epochs(log, kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
-        meas, env_columns = measured_environment(epochs, meas, settings.environment)
-        params = settle_sources(params, meas)
-        per_epoch = run_raim(meas, replace(epoch_raim, sources=params.sources))
-        pairs = inside_pairs(epochs, meas, geo_objects, params)
-        policy, why, checks, road_net = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
-        if checks is not None and "matched_road" in checks and pairs["epoch_row"].size:
-            pairs = with_geo_roads(pairs, road_net, geo_objects, epochs, pairs["epoch_row"])
-        if settings.require_authenticated:  # a pseudorange log carries no Galileo pages: nothing is authenticated
-            why = require_authenticated(why, np.full(len(epochs), "not_checked", dtype=object))
-            auth_counts["not_checked"] = len(epochs)
-        positions = positions_from_pairs(pairs, epochs["time_utc"], geo_objects, tc_s=settings.tc_s, epoch_why=why,
-                                         checks=checks)  # fmt: skip
-        found = trip_findings(epochs, None, per_epoch, geo_objects, finding_settings)
-        table, details = charges(positions, settings.n_th), None
-        dated = epochs["time_utc"].dropna()
-        period = (dated.min(), dated.max()) if len(dated) else None
-        from tollcli.integrity.speed import nominal_step_s
-        from tollcli.times import epoch_seconds
+    with LogRun(log, settings.input_format) as run:  # the log opened once, hashed as it is read (io.log_run)
+        kind = run.kind
+        osnma = osnma_evidence(log, kind, osnma_merkle, osnma_public_keys, auto=osnma_auto, required=settings.require_authenticated,
+                               strict=settings.strict, run=run)  # fmt: skip
+        auth_counts: dict[str, int] = {}
+        failure_fixes: list[pd.DataFrame] = []  # the fixes the OSNMA failures are placed at (a few rows per chunk)
+        stats = None
+        nominal = NominalModel()
+        epoch_raim = replace(params, fde=False)
+        finding_settings = FindingSettings.for_class(settings.vehicle_class)
+        if kind in NAVIGATION_KINDS:
+            charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
+            with run.named_errors():
+                stats, params = _read_nmea_chunks(run, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table,
+                                                  kind, osnma, auth_counts, failure_fixes)  # fmt: skip
+            policy, table, details, found, period = charger.finish()
+            positions, step_s = None, charger.step_s
+        else:
+            with run.named_errors():
+                epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
+            meas, env_columns = measured_environment(epochs, meas, settings.environment)
+            params = settle_sources(params, meas)
+            per_epoch = run_raim(meas, replace(epoch_raim, sources=params.sources))
+            pairs = inside_pairs(epochs, meas, geo_objects, params)
+            policy, why, checks, road_net = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
+            if checks is not None and "matched_road" in checks and pairs["epoch_row"].size:
+                pairs = with_geo_roads(pairs, road_net, geo_objects, epochs, pairs["epoch_row"])
+            if settings.require_authenticated:  # a pseudorange log carries no Galileo pages: nothing is authenticated
+                why = require_authenticated(why, np.full(len(epochs), "not_checked", dtype=object))
+                auth_counts["not_checked"] = len(epochs)
+            positions = positions_from_pairs(pairs, epochs["time_utc"], geo_objects, tc_s=settings.tc_s, epoch_why=why,
+                                             checks=checks)  # fmt: skip
+            found = trip_findings(epochs, None, per_epoch, geo_objects, finding_settings)
+            table, details = charges(positions, settings.n_th), None
+            dated = epochs["time_utc"].dropna()
+            period = (dated.min(), dated.max()) if len(dated) else None
+            from tollcli.integrity.speed import nominal_step_s
+            from tollcli.times import epoch_seconds
 
-        step_s = nominal_step_s(epoch_seconds(epochs)) if len(epochs) > 1 else None
-        if epoch_table is not None:
-            epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), env_columns,
-                                          per_epoch], axis=1))  # fmt: skip
+            step_s = nominal_step_s(epoch_seconds(epochs)) if len(epochs) > 1 else None
+            if epoch_table is not None:
+                epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), env_columns,
+                                              per_epoch], axis=1))  # fmt: skip
+        log_sha256 = run.sha256
     inputs = {"log": printable_path(log), "geoobjects": printable_path(geo), "tariff": printable_path(tariff),
               "geoobjects_sha256": geo_objects.source_sha256 or file_sha256(geo), "tariff_sha256": file_sha256(tariff)}  # fmt: skip
-    if log != "-":
-        inputs["log_sha256"] = file_sha256(log)
+    if log != "-":  # (a log read from stdin cannot be found again: its invoice records no digest to verify against)
+        inputs["log_sha256"] = log_sha256
     if nav is not None:
         inputs.update(nav=printable_path(nav), nav_sha256=file_sha256(nav))
     if osnma is not None:
@@ -285,7 +290,7 @@ BLOCK_BYTES = SOURCE_BLOCK_BYTES
 STREAM_ROUNDS = True
 
 
-def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams,
+def _read_nmea_chunks(run: LogRun, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams,
                       nominal: NominalModel, charger: TailCharger,
                       epoch_table: list | None = None, kind: str = "nmea", osnma: OsnmaEvidence | None = None,
                       auth_counts: dict | None = None, failure_fixes: list | None = None) -> tuple[ReadStats, RaimParams]:  # fmt: skip
@@ -302,7 +307,8 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
     carry, env_carry = AngleCarry(), EnvironmentCarry()
     table_parts = []
     offset = 0
-    for chunk in iter_navigation_tables(log, kind, strict=settings.strict, date=date, stats=stats, chunk_epochs=CHUNK_EPOCHS,
+    source = run.source()
+    for chunk in iter_navigation_tables(source, kind, strict=settings.strict, date=date, stats=stats, chunk_epochs=CHUNK_EPOCHS,
                                   block_bytes=BLOCK_BYTES):  # fmt: skip
         epochs = chunk.epochs
         if epochs.empty:
@@ -318,7 +324,8 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
         kept = epochs[list(KEPT_EPOCH_COLUMNS)]
         auth = None
         if osnma is not None or settings.require_authenticated:
-            auth = not_checked(len(epochs)) if osnma is None else epoch_authentication(meas, epochs, osnma.authenticated, settings.p_fa)
+            auth = not_checked(len(epochs)) if osnma is None else epoch_authentication(meas, epochs, osnma.authenticated_for(chunk.satellites),
+                                                                                                        settings.p_fa)
             kept = kept.assign(nav_auth=auth["nav_auth"].to_numpy())
             if osnma is not None and failure_fixes is not None:
                 failure_fixes.append(fixes_before(epochs, osnma.failure_times))
@@ -333,7 +340,7 @@ def _read_nmea_chunks(log: str, settings: ChargeSettings, geo, params: RaimParam
         del chunk, epochs, meas, geometry, raim, pairs, cn0  # freed before the next chunk is read, not after
     check_usable(stats)
     if offset == 0:
-        raise DataError(f"{log}: no epoch with a time of day")
+        raise DataError(f"{run.name}: no epoch with a time of day")
     if epoch_table is not None:
         epoch_table.append(pd.concat(table_parts, ignore_index=True))
     return stats, params

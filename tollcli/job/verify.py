@@ -47,12 +47,18 @@ def verify_invoice(path: str) -> dict:
         file = inputs[key]
         if file == "-":
             raise VerifyFailed(f"{path}: the {label} was read from stdin and cannot be read again")
-        found[key] = locate_input(path, str(file), inputs.get(f"{key}_sha256"), label)
+        # the log is hashed as it is charged (opened once): its digest is checked against the invoice's below
+        found[key] = locate_input(path, str(file), inputs.get(f"{key}_sha256"), label, hash_single=key != "log")
     merkle, keys = _osnma_keys(path, inputs)
     again, _ = charge_log(found["log"], found["geoobjects"], found["tariff"], settings_from_invoice(invoice), found.get("nav"),
                           found.get("roads"), as_recorded={**{k: inputs[k] for k in found}, **({k: inputs[k] for k in ("osnma_merkle", "osnma_public_keys")} if merkle else {})},
                           osnma_merkle=merkle,
                           osnma_public_keys=keys, osnma_auto=False)  # fmt: skip
+    recorded_log = inputs.get("log_sha256")
+    if again["inputs"].get("log_sha256") != recorded_log:
+        actual = str(again["inputs"].get("log_sha256"))
+        raise VerifyFailed(f"{path}: log {found['log']} changed since the invoice was made "
+                           f"(sha256 {actual[:12]}… ≠ recorded {str(recorded_log)[:12]}…)")  # fmt: skip
     original = invoice_json(invoice)
     fresh = invoice_json(again)
     if fresh != original:
@@ -74,12 +80,17 @@ def _osnma_keys(path: str, inputs: dict) -> tuple[str | None, list[str] | None]:
     return found, [locate_input(path, str(k), s, "OSNMA public key") for k, s in zip(keys, sums)]
 
 
-def locate_input(invoice_path: str, file: str, recorded, label: str) -> str:
-    """Where the input the invoice names is: the first candidate place whose SHA-256 is the recorded one."""
+def locate_input(invoice_path: str, file: str, recorded, label: str, hash_single: bool = True) -> str:
+    """Where the input the invoice names is: the first candidate place whose SHA-256 is the recorded one.
+
+    ``hash_single`` False: a single candidate is returned unhashed (the caller checks its digest as it reads it)."""
     here = os.path.dirname(os.path.abspath(invoice_path))
     candidates = [file] if os.path.isabs(file) else [file, os.path.join(here, file)]
     candidates.append(os.path.join(here, os.path.basename(file)))
     present = [c for c in dict.fromkeys(candidates) if os.path.isfile(c)]
+    distinct = {os.path.realpath(c) for c in present}
+    if not hash_single and len(distinct) == 1:
+        return present[0]
     for candidate in present:
         if file_sha256(candidate) == recorded:
             return candidate
