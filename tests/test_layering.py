@@ -74,3 +74,18 @@ def test_long_modules_say_why_at_the_top():
         if text.count("\n") > LONG_LINES and "Why this file is long:" not in (ast.get_docstring(ast.parse(text)) or ""):
             unexplained.append(f"{path.relative_to(PACKAGE)}: {text.count(chr(10))} lines")
     assert not unexplained, "over ~400 lines without 'Why this file is long:' in the module docstring: " + ", ".join(unexplained)
+
+
+def test_no_cli_module_computes():
+    """The CLI parses options and calls the rooms below: no command module imports numpy or scipy (the arithmetic
+    lives in the rooms below), and none reads a log itself (through io.log_run or a job function)."""
+    import ast
+
+    cli = Path(__file__).resolve().parent.parent / "tollcli" / "cli"
+    for module in sorted(cli.glob("*.py")):
+        tree = ast.parse(module.read_text(encoding="utf-8"))
+        imported = {alias.name.split(".")[0] for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
+        imported |= {(node.module or "").split(".")[0] for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+        assert not imported & {"numpy", "scipy"}, f"{module.name} computes: it imports {sorted(imported & {'numpy', 'scipy'})}"
+        called = {node.func.id for node in ast.walk(tree) if isinstance(node, ast.Call) and isinstance(node.func, ast.Name)}
+        assert not called & {"iter_navigation_tables", "pseudorange_epochs", "read_nmea"}, f"{module.name} reads a log itself"

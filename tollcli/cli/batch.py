@@ -9,52 +9,29 @@ from typing import Annotated, Optional
 import typer
 
 from tollcli.cli import options as opt
+from tollcli.cli.charge_options import ChargeOptions, charge_options
 from tollcli.cli.console import progress, warn
 from tollcli.cli.settings_file import Config
 from tollcli.errors import DataError, PartialError, SomeFailedError, UsageError
 from tollcli.job.batch import run_batch
 from tollcli.job.log_files import expand_inputs
-from tollcli.job.pipeline import ChargeSettings
 
 
+@charge_options
 def batch(
     inputs: Annotated[list[str], typer.Argument(metavar="INPUTS...", help="Logs: paths, globs, folders, or @FILE listing one path per line.", show_default=False)],
-    geo: Annotated[str, typer.Option("--geo", help="Geo-objects (GeoJSON from 'tollcli geoobjects build').")],
-    tariff: Annotated[str, typer.Option("--tariff", help="Tariff (TOML).")],
     output: Annotated[str, typer.Option("-o", "--output", help="Output folder (invoices/, epochs/, failed/, summary.json).")],
     workers: Annotated[int, typer.Option("--workers", help="Local worker processes (default: the CPU count).", min=1)] = max(os.cpu_count() or 1, 1),
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Address of a Dask distributed scheduler to run on instead (tcp://host:8786).")] = None,
     force: Annotated[bool, typer.Option("--force", help="Process logs again even when their invoice is up to date.")] = False,
-    vehicle_class: opt.TariffVehicleClass = "car",
     vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id of every log (a vehicle's logs of a day; default: each log's own, else its file name).")] = None,
-    vehicle_attr: opt.VehicleAttr = None,
     fleet: Annotated[Optional[str], typer.Option("--fleet", help="Fleet CSV: vehicle,vehicle_class,<attribute>… per vehicle id; each log is charged as its vehicle (one not listed fails).")] = None,
-    roads: Annotated[Optional[str], typer.Option("--roads", help="Road network for map-matching integrity.")] = None,
-    input_format: opt.InputFormat = "auto",
-    nav: opt.Nav = None,
-    policy: Annotated[Optional[str], typer.Option("--policy", help="Checks that may veto a position, on evidence of a fault only: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")] = None,
-    integrity_sources: opt.IntegritySources = "auto",
-    raim: opt.RaimMode = "ss",
-    environment: opt.Environment = "auto",
-    p_sat: opt.PSat = 1e-5,
-    p_const: opt.PConst = 1e-8,
-    p_md: opt.PMd = 5e-5,
-    p_fa: opt.PFa = 5e-3,
-    fde: opt.Fde = False,
-    sigma_model: opt.SigmaModel = "nominal",
-    sigma: opt.Sigma = 5.0,
-    tc: opt.Tc = 5.0,
-    n_th: opt.NTh = 1,
-    require_authenticated: opt.RequireAuthenticated = False,
-    osnma_merkle: opt.OsnmaMerkle = None,
-    osnma_public_key: opt.OsnmaPublicKey = None,
-    strict: opt.Strict = False,
-    date: opt.DateOpt = None,
-    max_bad: opt.MaxBad = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
     quiet: opt.Quiet = False,
     fmt: Annotated[Optional[str], typer.Option("--format", hidden=True)] = None,
     config: Config = None,
+    *,
+    charge: ChargeOptions,
 ) -> None:
     """Charge many logs: one invoice and one epoch table per log, a Parquet dataset partitioned by date and vehicle, a summary.
 
@@ -68,24 +45,19 @@ def batch(
     A mixed fleet: --fleet FILE.csv gives each vehicle id its class and per-km
     tariff attributes (docs/tariffs.md).
     """
-    if fleet is not None and vehicle_attr:
+    if fleet is not None and charge.vehicle_attr:
         raise UsageError("--fleet gives every vehicle its attributes: leave out --vehicle-attr")
-    _, input_format = opt.split_format(fmt, input_format)  # --format: the input's, as before --input-format
+    _, input_format = opt.split_format(fmt, charge.input_format)  # --format: the input's, as before --input-format
     passed_over: list[str] = []
     logs = expand_inputs(inputs, passed_over)
     if passed_over:
         warn(f"  passed over {len(passed_over)} files that are not receiver logs: {', '.join(passed_over[:5])}"
              + (" …" if len(passed_over) > 5 else ""), quiet)  # fmt: skip
-    settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), vehicle=vehicle, raim=raim, p_md=p_md, p_fa=p_fa, policy=policy,
-                              environment=environment, p_sat=p_sat, p_const=p_const,
-                              fde=fde, sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
-                              date=date.date().isoformat() if date else None,
-                              integrity_sources=integrity_sources, input_format=input_format,
-                              require_authenticated=require_authenticated)  # fmt: skip
+    settings = charge.settings(vehicle, input_format)
     with progress(f"batch of {len(logs)} logs", quiet, total=len(logs), unit="logs") as advance:
-        summary = run_batch(logs, geo, tariff, settings, output, workers=workers, scheduler=scheduler, force=force,
-                            roads=roads, nav=nav, progress=advance, fleet=fleet, osnma_merkle=osnma_merkle,
-                            osnma_public_keys=osnma_public_key)  # fmt: skip
+        summary = run_batch(logs, charge.geo, charge.tariff, settings, output, workers=workers, scheduler=scheduler, force=force,
+                            roads=charge.roads, nav=charge.nav, progress=advance, fleet=fleet, osnma_merkle=charge.osnma_merkle,
+                            osnma_public_keys=charge.osnma_public_key)  # fmt: skip
     line = (f"{output}: {summary['logs']} logs: {summary['done']} done, {summary['skipped']} up to date, {summary['failed']} failed; "
             + ", ".join(f"{v} {k}" for k, v in summary["totals"].items()))  # fmt: skip
     if as_json:
@@ -102,7 +74,7 @@ def batch(
         message = (f"{summary['failed']} of {summary['logs']} logs failed (see {os.path.join(output, 'failed')}); "
                    f"first: {first}")  # fmt: skip
         raise (DataError if summary["failed"] == summary["logs"] else SomeFailedError)(message)
-    over = [o for o in summary["outcomes"] if max_bad is not None and o.get("skipped_lines", 0) > max_bad]
+    over = [o for o in summary["outcomes"] if charge.max_bad is not None and o.get("skipped_lines", 0) > charge.max_bad]
     if over:
-        raise PartialError(f"{len(over)} logs skipped more lines than --max-bad {max_bad} (first: {over[0]['log']}, "
+        raise PartialError(f"{len(over)} logs skipped more lines than --max-bad {charge.max_bad} (first: {over[0]['log']}, "
                            f"{over[0]['skipped_lines']} lines); outputs were written")

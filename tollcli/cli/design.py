@@ -6,7 +6,6 @@ import json
 import math
 from typing import Annotated, Optional
 
-import numpy as np
 import typer
 
 from tollcli.errors import UsageError
@@ -42,7 +41,7 @@ def design(
             out.update(threshold=th, lambda_det=lam, p_fa=float(d.false_alarm_probability(th, dof)), p_md=p_md)
         elif p_fa is not None:
             out.update(threshold=float(d.classic_threshold(p_fa, dof)),
-                       lambda_det=float(d.classic_lambda_det(p_fa, p_md, np.array([dof]))[0]), p_fa=p_fa, p_md=p_md)  # fmt: skip
+                       lambda_det=float(d.classic_lambda_det(p_fa, p_md, [dof])[0]), p_fa=p_fa, p_md=p_md)  # fmt: skip
         else:
             raise UsageError("--dof with --p-md needs --p-fa (classic) or --hal-over-slope (ETC)")
     if invoice_share is not None or invoice_error is not None:

@@ -34,31 +34,11 @@ from tollcli.enforcement.roadside import (
     read_reads,
 )
 from tollcli.errors import UsageError
-from tollcli.integrity.raim import RaimParams
 from tollcli.io.log_run import LogRun
-from tollcli.io.sources import sniff_format
 from tollcli.io.writers import TableWriter, format_for, write_text_atomic
-from tollcli.job.log_integrity import iter_integrity
-from tollcli.readers.navigation import NAVIGATION_KINDS
-from tollcli.readers.nmea import ReadStats
-from tollcli.readers.nmea.reader import check_usable
+from tollcli.job.log_integrity import trip_tables
 
 VehicleClass = Annotated[str, typer.Option("--vehicle-class", help=f"Vehicle class, sets the top speed: {', '.join(CLASS_MAX_SPEED_MPS)}.")]
-
-
-def _trip(log, hal: float, strict: bool, date=None) -> tuple[pd.DataFrame, pd.DataFrame | None]:
-    """The whole trip's integrity table and satellite table (``log``: a path, or its LogRun: read once)."""
-    kind = log.kind if isinstance(log, LogRun) else sniff_format(log)
-    stats = ReadStats()
-    tables, sats = [], []
-    for chunk in iter_integrity(log, kind, RaimParams(hal_m=hal), strict=strict, stats=stats, date=date.date() if date else None):
-        tables.append(chunk.table)
-        if chunk.satellites is not None:
-            sats.append(chunk.satellites)
-    if kind in NAVIGATION_KINDS:
-        check_usable(stats)
-    table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
-    return table, (pd.concat(sats, ignore_index=True) if sats else None)
 
 
 def _vehicles(logs: list[str], vehicle: str | None) -> list[str]:
@@ -89,7 +69,7 @@ def locate(
     named_by_file = [not vehicle and vehicle_from_log(p) is None for p in logs]
     per_log, spans = [], []
     for log in logs:
-        table, _ = _trip(log, hal, strict, date)
+        table, _ = trip_tables(log, hal, strict, date)
         dated = table["time_utc"].dropna() if "time_utc" in table else pd.Series(dtype=object)
         spans.append((dated.min(), dated.max()) if len(dated) else None)
         if table.empty:
@@ -122,17 +102,17 @@ def findings(
     log: opt.LogArg,
     geo: Annotated[Optional[str], typer.Option("--geo", help="Geo-objects: a gap lists those it could have crossed.")] = None,
     vehicle_class: VehicleClass = "car",
-    max_speed: Annotated[Optional[float], typer.Option("--max-speed", help="Top speed, m/s (overrides --vehicle-class).", min=1.0)] = None,
-    gap_min: Annotated[float, typer.Option("--gap-min", help="A gap lasts at least this long, s.", min=1.0)] = 60.0,
-    gap_min_distance: Annotated[float, typer.Option("--gap-min-distance", help="…and ends at least this far away, m.", min=0.0)] = 500.0,
     hal: opt.Hal = 50.0,
     osnma_merkle: opt.OsnmaMerkle = None,
     osnma_public_key: opt.OsnmaPublicKey = None,
     output: opt.FindingsOutput = "-",
     out_fmt: opt.FindingsFormat = None,
+    max_speed: Annotated[Optional[float], typer.Option("--max-speed", help="Top speed, m/s (overrides --vehicle-class).", min=1.0)] = None,
     strict: opt.Strict = False,
     date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
+    gap_min: Annotated[float, typer.Option("--gap-min", help="A gap lasts at least this long, s.", min=1.0)] = 60.0,
+    gap_min_distance: Annotated[float, typer.Option("--gap-min-distance", help="…and ends at least this far away, m.", min=0.0)] = 500.0,
     as_json: opt.JsonSummary = False,
 ) -> None:
     """Tamper and evasion findings of one trip (gaps, jamming signs, spoofing signs), with times, positions and evidence.
@@ -154,7 +134,7 @@ def findings(
 
     with LogRun(log) as run:  # the log opened once: the OSNMA pages and the trip read the same bytes
         evidence = osnma_evidence(log, run.kind, osnma_merkle, osnma_public_key, strict=strict, run=run)
-        table, sats = _trip(run, hal, strict, date)
+        table, sats = trip_tables(run, hal, strict, date)
     items = trip_findings(table, sats, table, load_geoobjects(geo) if geo else None, settings) if not table.empty else []
     if evidence is not None and not table.empty:
         items = sorted([*items, *failure_findings(evidence, table)], key=lambda f: (f["start_utc"], f["kind"]))
@@ -175,12 +155,13 @@ def enforce(
     out_fmt: opt.FindingsFormat = None,
     strict: opt.Strict = False,
     date: opt.DateOpt = None,
+    hal: opt.Hal = 50.0,
     quiet: opt.Quiet = False,
     as_json: opt.JsonSummary = False,
 ) -> None:
     """Cross-check RFID/DSRC gantry reads with the GNSS trip: reads where the trip was elsewhere or silent, gantries passed without a read."""
     kind = _findings_format(output, out_fmt, as_json)
-    table, _ = _trip(log, 50.0, strict, date)
+    table, _ = trip_tables(log, hal, strict, date)
     ids, geoms, crs = read_gantries(gantries)
     items = cross_check(table, read_reads(reads), ids, geoms, crs, tag, RoadsideSettings(time_tol, distance_tol, pass_dist))
     doc = {"log": log, "tag": tag, "settings": {"time_tol_s": time_tol, "distance_tol_m": distance_tol, "pass_dist_m": pass_dist},

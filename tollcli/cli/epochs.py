@@ -10,10 +10,10 @@ import typer
 from tollcli.cli import options as opt
 from tollcli.cli.console import progress, warn
 from tollcli.errors import UsageError
-from tollcli.io.sources import sniff_format
+from tollcli.io.log_run import LogRun
 from tollcli.io.writers import TableWriter, format_for
-from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
-from tollcli.readers.nmea import ReadStats, iter_nmea_tables
+from tollcli.job.log_integrity import iter_epoch_tables
+from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_partial, check_usable
 
 
@@ -52,14 +52,8 @@ def epochs(
     epoch_writer = TableWriter(output, format_for(output, fmt=out_fmt))
     sat_writer = TableWriter(satellites, _sat_format(satellites, out_fmt)) if satellites else None
     with epoch_writer, (sat_writer or _Null()):
-        with progress(f"reading {log}", quiet, log=log) as advance:
-            day = date.date() if date else None
-            kind = sniff_format(log)
-            if kind not in NAVIGATION_KINDS or kind == "nmea":  # NMEA (and what is nothing else: its errors say why)
-                chunks = iter_nmea_tables(log, strict=strict, date=day, stats=stats, engine=reader)
-            else:
-                chunks = iter_navigation_tables(log, kind, strict=strict, stats=stats)
-            for chunk in chunks:
+        with progress(f"reading {log}", quiet, log=log) as advance, LogRun(log) as run:  # the log opened once
+            for chunk in iter_epoch_tables(run, strict=strict, date=date.date() if date else None, stats=stats, engine=reader):
                 epoch_writer.write(chunk.epochs)
                 if sat_writer is not None:
                     sat_writer.write(chunk.satellites)

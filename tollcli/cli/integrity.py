@@ -6,7 +6,6 @@ import json
 from collections import Counter
 from typing import Annotated, Optional
 
-import numpy as np
 import pandas as pd
 import typer
 
@@ -20,7 +19,7 @@ from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.io.log_run import LogRun
 from tollcli.io.writers import TableWriter, format_for
-from tollcli.job.log_integrity import iter_integrity
+from tollcli.job.log_integrity import iter_integrity, with_epoch_checks
 from tollcli.readers.navigation import NAVIGATION_KINDS
 from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_partial, check_usable
@@ -108,7 +107,7 @@ def integrity(
                                                           date=day, environment=environment)]
                 if kind in NAVIGATION_KINDS:
                     check_usable(stats)  # a log without one epoch: the data error, before any check runs
-                table = with_checks(pd.concat(tables, ignore_index=True), roads)
+                table = with_epoch_checks(pd.concat(tables, ignore_index=True), roads)
                 _tally(table, counts)
                 writer.write(table)
             elif kind in NAVIGATION_KINDS:
@@ -155,29 +154,6 @@ def _tally(table: pd.DataFrame, counts: Counter) -> None:
     for kind, column in (("status", "raim_status"), ("source", "integrity_source"), ("note", "gst_rms_note"),
                          ("environment", "environment")):
         counts.update((kind, v) for v in table[column].astype(str))
-
-
-def with_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
-    """The speed, map-matching and HIT columns added to a whole trip's integrity table."""
-    from tollcli.geodesy import enu_rotation, geodetic2ecef
-    from tollcli.integrity.kalman_hit import hit
-    from tollcli.integrity.map_matching import load_roads
-    from tollcli.integrity.verdict import epoch_checks
-    from tollcli.times import epoch_seconds
-
-    if table.empty:
-        return table
-    if "speed_mps" not in table:
-        table = table.assign(speed_mps=np.nan)
-    extra = epoch_checks(table, load_roads(roads) if roads else None)
-    lat, lon = table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float)
-    ok = np.isfinite(lat) & np.isfinite(lon)
-    lat0, lon0 = (lat[ok][0], lon[ok][0]) if ok.any() else (0.0, 0.0)
-    d = np.stack(geodetic2ecef(np.where(ok, lat, lat0), np.where(ok, lon, lon0), 0.0), -1) - np.stack(geodetic2ecef(lat0, lon0, 0.0), -1)
-    enu = np.einsum("ij,ej->ei", enu_rotation(lat0, lon0), d)
-    sigma = table["sigma_major_m"].to_numpy(float) if "sigma_major_m" in table else None
-    k = hit(np.where(ok, enu[:, 0], np.nan), np.where(ok, enu[:, 1], np.nan), table["speed_mps"].to_numpy(float), epoch_seconds(table), sigma)
-    return pd.concat([table.reset_index(drop=True), extra, k[["hit_m"]]], axis=1)
 
 
 def _nmea(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto",

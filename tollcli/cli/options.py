@@ -11,27 +11,18 @@ LogArg = Annotated[
     str,
     typer.Argument(metavar="LOG", help="Receiver log: a path, a .gz path, or - for stdin.", show_default=False),
 ]
-Output = Annotated[
-    str,
-    typer.Option("-o", "--output", help="Output file; the format follows -f or the extension (.csv, .parquet, .geojson, .geojsonl, .json); - is stdout (CSV unless -f)."),
-]
-JsonOutput = Annotated[
-    str,
-    typer.Option("-o", "--output", help="Output file, JSON (.json); - is stdout."),
-]
-InvoiceOutput = Annotated[
-    str,
-    typer.Option("-o", "--output", help="Invoice file: .json (the sealed invoice) or .csv (its lines, one row each); - is stdout (JSON unless -f csv)."),
-]
 
-FindingsOutput = Annotated[
-    str,
-    typer.Option("-o", "--output", help="Findings file: .json (the document), .csv, .geojson or .geojsonl (one per finding); - is stdout (JSON unless -f)."),
-]
-GeoJsonOutput = Annotated[
-    str,
-    typer.Option("-o", "--output", help="Geo-object file, GeoJSON (.geojson or .json); - is stdout."),
-]
+
+def output_option(help_text: str):
+    """A command's ``-o/--output`` option with its own help."""
+    return Annotated[str, typer.Option("-o", "--output", help=help_text)]
+
+
+Output = output_option("Output file; the format follows -f or the extension (.csv, .parquet, .geojson, .geojsonl, .json); - is stdout (CSV unless -f).")
+JsonOutput = output_option("Output file, JSON (.json); - is stdout.")
+InvoiceOutput = output_option("Invoice file: .json (the sealed invoice) or .csv (its lines, one row each); - is stdout (JSON unless -f csv).")
+FindingsOutput = output_option("Findings file: .json (the document), .csv, .geojson or .geojsonl (one per finding); - is stdout (JSON unless -f).")
+GeoJsonOutput = output_option("Geo-object file, GeoJSON (.geojson or .json); - is stdout.")
 
 
 def require_json(output: str) -> str:

@@ -10,48 +10,26 @@ import typer
 
 from tollcli.charging.invoice import invoice_csv, invoice_json
 from tollcli.cli import options as opt
+from tollcli.cli.charge_options import ChargeOptions, charge_options
 from tollcli.cli.console import invoice_tables, show, warn
 from tollcli.cli.settings_file import Config
 from tollcli.errors import UsageError
 from tollcli.io.writers import format_for, write_text_atomic
-from tollcli.job.pipeline import ChargeSettings, charge_log
+from tollcli.job.pipeline import charge_log
 from tollcli.readers.nmea.reader import check_partial
 
 
+@charge_options
 def process(
     log: opt.LogArg,
-    geo: Annotated[str, typer.Option("--geo", help="Geo-objects (GeoJSON from 'tollcli geoobjects build').")],
-    tariff: Annotated[str, typer.Option("--tariff", help="Tariff (TOML).")],
-    vehicle_class: opt.TariffVehicleClass = "car",
-    vehicle_attr: opt.VehicleAttr = None,
     vehicle: Annotated[Optional[str], typer.Option("--vehicle", help="Vehicle id (default: the log's file name).")] = None,
     output: opt.InvoiceOutput = "-",
     out_fmt: opt.InvoiceFormat = None,
-    input_format: opt.InputFormat = "auto",
-    nav: opt.Nav = None,
-    roads: Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings, tolled and free) for map-matching integrity.")] = None,
-    policy: Annotated[Optional[str], typer.Option("--policy", help="Checks that may veto a position, on evidence of a fault only: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")] = None,
-    integrity_sources: opt.IntegritySources = "auto",
-    raim: opt.RaimMode = "ss",
-    environment: opt.Environment = "auto",
-    p_sat: opt.PSat = 1e-5,
-    p_const: opt.PConst = 1e-8,
-    p_md: opt.PMd = 5e-5,
-    p_fa: opt.PFa = 5e-3,
-    fde: opt.Fde = False,
-    sigma_model: opt.SigmaModel = "nominal",
-    sigma: opt.Sigma = 5.0,
-    tc: opt.Tc = 5.0,
-    n_th: opt.NTh = 1,
-    require_authenticated: opt.RequireAuthenticated = False,
-    osnma_merkle: opt.OsnmaMerkle = None,
-    osnma_public_key: opt.OsnmaPublicKey = None,
-    strict: opt.Strict = False,
-    date: opt.DateOpt = None,
     quiet: opt.Quiet = False,
-    max_bad: opt.MaxBad = None,
     as_json: opt.JsonSummary = False,
     config: Config = None,
+    *,
+    charge: ChargeOptions,
 ) -> None:
     """Charge a trip: valid, independent positions inside geo-objects → invoice lines with evidence.
 
@@ -66,17 +44,12 @@ def process(
     each position and line says whether its navigation data were authenticated,
     each OSNMA failure is an osnma_failure finding (see docs/osnma.md).
     """
-    out_fmt, fmt = opt.split_format(out_fmt, input_format)
+    out_fmt, fmt = opt.split_format(out_fmt, charge.input_format)
     kind = format_for(output, "json", out_fmt, ("json", "csv"))
     if as_json and output == "-":
         raise UsageError("--json prints the summary on stdout: give the invoice a file with -o")
-    settings = ChargeSettings(vehicle_class=vehicle_class, vehicle_attrs=opt.vehicle_attrs(vehicle_attr), vehicle=vehicle, raim=raim, p_md=p_md, p_fa=p_fa, fde=fde,
-                              environment=environment, p_sat=p_sat, p_const=p_const,
-                              sigma_model=sigma_model, sigma_m=sigma, tc_s=tc, n_th=n_th, strict=strict,
-                              date=date.date().isoformat() if date else None, policy=policy,
-                              integrity_sources=integrity_sources, input_format=opt.check_input_format(fmt),
-                              require_authenticated=require_authenticated)  # fmt: skip
-    invoice, stats = charge_log(log, geo, tariff, settings, nav, roads, osnma_merkle=osnma_merkle, osnma_public_keys=osnma_public_key)
+    invoice, stats = charge_log(log, charge.geo, charge.tariff, charge.settings(vehicle, fmt), charge.nav, charge.roads,
+                                osnma_merkle=charge.osnma_merkle, osnma_public_keys=charge.osnma_public_key)  # fmt: skip
     if output == "-" and out_fmt is None and sys.stdout.isatty():
         show(lambda: invoice_tables(invoice), False, to_stdout=True)
     else:
@@ -88,7 +61,7 @@ def process(
         warn(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged{_why_not(invoice)}, "
              f"total {invoice['total']} {invoice['currency']}{_checks_said(invoice)}", quiet)  # fmt: skip
     if stats is not None:
-        check_partial(stats, max_bad)
+        check_partial(stats, charge.max_bad)
 
 
 def invoice_summary(invoice: dict, output: str, stats=None) -> dict:

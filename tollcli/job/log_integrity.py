@@ -81,3 +81,65 @@ def measured_environment(epochs: pd.DataFrame, meas, setting: str, carry: Enviro
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     return meas, pd.DataFrame({"environment": pd.array(env, dtype="string"), "variance_factor": factor})
+
+
+def with_epoch_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
+    """The speed, map-matching and HIT columns added to a whole trip's integrity table (``integrity --checks``)."""
+    import numpy as np
+
+    from tollcli.geodesy import enu_rotation, geodetic2ecef
+    from tollcli.integrity.kalman_hit import hit
+    from tollcli.integrity.map_matching import load_roads
+    from tollcli.integrity.verdict import epoch_checks
+    from tollcli.times import epoch_seconds
+
+    if table.empty:
+        return table
+    if "speed_mps" not in table:
+        table = table.assign(speed_mps=np.nan)
+    extra = epoch_checks(table, load_roads(roads) if roads else None)
+    lat, lon = table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float)
+    ok = np.isfinite(lat) & np.isfinite(lon)
+    lat0, lon0 = (lat[ok][0], lon[ok][0]) if ok.any() else (0.0, 0.0)
+    d = np.stack(geodetic2ecef(np.where(ok, lat, lat0), np.where(ok, lon, lon0), 0.0), -1) - np.stack(geodetic2ecef(lat0, lon0, 0.0), -1)
+    enu = np.einsum("ij,ej->ei", enu_rotation(lat0, lon0), d)
+    sigma = table["sigma_major_m"].to_numpy(float) if "sigma_major_m" in table else None
+    k = hit(np.where(ok, enu[:, 0], np.nan), np.where(ok, enu[:, 1], np.nan), table["speed_mps"].to_numpy(float), epoch_seconds(table), sigma)
+    return pd.concat([table.reset_index(drop=True), extra, k[["hit_m"]]], axis=1)
+
+
+def trip_tables(log, hal: float, strict: bool, date=None) -> tuple[pd.DataFrame, pd.DataFrame | None]:
+    """The whole trip's integrity table and satellite table (``log``: a path, or its LogRun: read once), for
+    ``locate``, ``findings`` and ``enforce``."""
+    from tollcli.io.log_run import LogRun
+    from tollcli.readers.nmea.reader import check_usable
+
+    if not isinstance(log, LogRun):
+        with LogRun(log) as run:
+            return trip_tables(run, hal, strict, date)
+    kind = log.kind
+    stats = ReadStats()
+    tables, sats = [], []
+    for chunk in iter_integrity(log, kind, RaimParams(hal_m=hal), strict=strict, stats=stats, date=date.date() if date else None):
+        tables.append(chunk.table)
+        if chunk.satellites is not None:
+            sats.append(chunk.satellites)
+    if kind in NAVIGATION_KINDS:
+        check_usable(stats)
+    table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
+    return table, (pd.concat(sats, ignore_index=True) if sats else None)
+
+
+def iter_epoch_tables(run, strict: bool = False, date: dt.date | None = None, stats: ReadStats | None = None,
+                      engine: str = "bulk"):  # fmt: skip
+    """A log's epoch and satellite tables, chunk by chunk, through its :class:`~tollcli.io.log_run.LogRun` (``epochs``):
+    NMEA (and what is nothing else: its errors say why) by the NMEA reader's ``engine``, the other receiver solutions
+    by their readers."""
+    from tollcli.readers.nmea import iter_nmea_tables
+
+    stats = stats if stats is not None else ReadStats()
+    with run.named_errors():
+        if run.kind not in NAVIGATION_KINDS or run.kind == "nmea":
+            yield from iter_nmea_tables(run.stream(), strict=strict, date=date, stats=stats, engine=engine)
+        else:
+            yield from iter_navigation_tables(run.stream(), run.kind, strict=strict, stats=stats)
