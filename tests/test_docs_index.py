@@ -26,3 +26,22 @@ def test_every_document_is_in_the_index_and_every_link_resolves():
     readme = (REPO / "README.md").read_text(encoding="utf-8")
     for target in re.findall(r"\]\(([^)#]+)", readme):
         assert (REPO / target).exists(), target
+
+
+def test_every_module_is_named_in_the_layout_and_every_named_module_exists():
+    """docs/architecture.md's layout names every module of the package, and names no file that is not there; each
+    package's own description names only files it holds."""
+    package = REPO / "tollcli"
+    text = (REPO / "docs" / "architecture.md").read_text(encoding="utf-8")
+    layout = text[text.index("## Layout"):]
+    modules = [p for p in package.rglob("*.py") if p.name != "__init__.py" and "__pycache__" not in p.parts]
+    unnamed = sorted(str(p.relative_to(REPO)) for p in modules if f"`{p.name}`" not in layout and f"{p.name}`" not in layout
+                     and f"`{p.parent.name}/{p.name}`" not in layout)  # fmt: skip
+    assert not unnamed, f"not named in docs/architecture.md's layout: {unnamed}"
+    names = {p.name for p in modules} | {"_bulk_kernels.c"}
+    for named in set(re.findall(r"`(?:[\w/]+/)?(\w+\.(?:py|c))`", layout)) - {"test_layering.py", "layering.py"}:
+        assert named in names, f"docs/architecture.md names {named}, which is not in the package"
+    for init in package.rglob("__init__.py"):
+        held = {p.name for p in init.parent.rglob("*.py")} | {"_bulk_kernels.c"}
+        for named in set(re.findall(r"``?(\w+\.py)``?", init.read_text(encoding="utf-8"))):
+            assert named in held or named.startswith("test_"), f"{init.relative_to(REPO)} names {named}, which it does not hold"

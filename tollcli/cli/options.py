@@ -94,7 +94,7 @@ DateOpt = Annotated[
 ]
 
 RaimMode = Annotated[str, typer.Option("--raim", help="RAIM: ss (solution separation over every satellite and constellation left out: several faults at once, HPL from the fault modes; the default), etc (paper 001's toll RAIM: HPL = HAL, P_FA per epoch, one fault) or classic (paper 001's civil-aviation RAIM: fixed P_FA, HPL ≤ HAL, one fault).")]
-Environment = Annotated[str, typer.Option("--environment", help="Error model's environment: auto (urban where the residuals of the last 30 s exceed the nominal model twofold: C/N0-weighted urban σ there), open (the nominal model throughout) or urban (the urban σ throughout).")]
+Environment = Annotated[str, typer.Option("--environment", help="Error model's environment: auto (urban where the residuals of the last 30 s exceed the nominal model 1.5-fold: C/N0-weighted urban σ there), open (the nominal model throughout) or urban (the urban σ throughout).")]
 PSat = Annotated[float, typer.Option("--p-sat", help="--raim ss: prior probability of a satellite fault.")]
 PConst = Annotated[float, typer.Option("--p-const", help="--raim ss: prior probability of a constellation-wide fault.")]
 Hal = Annotated[float, typer.Option("--hal", help="Horizontal alert limit, m.", min=0.0)]
