@@ -283,3 +283,14 @@ def test_terminal_tables_never_cut_the_times():
         screen.print(table)
     text = screen.file.getvalue()
     assert "2024-05-06T08:00:00.000Z" in text and "2024-05-06T08:01:26.000Z" in text
+
+
+def test_every_command_takes_quiet_and_json():
+    """-q/--quiet and --json on every command (what a script passes to any of them)."""
+    from tollcli.cli.app import COMMANDS
+
+    names = [n for n in COMMANDS if n != "geoobjects"] + [f"geoobjects {s}" for s in ("build", "check", "info", "compile")]
+    for name in names:
+        proc = run_cli(*name.split(), "--help")
+        text = proc.stdout.decode()
+        assert proc.returncode == 0 and "--quiet" in text and "--json" in text, name

@@ -8,6 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
+from tollcli.cli import options as opt
 from tollcli.errors import UsageError
 from tollcli.integrity import design as d
 
@@ -21,6 +22,7 @@ def design(
     invoice_error: Annotated[Optional[float], typer.Option("--invoice-error", help="M_e: invoice error, %.")] = None,
     n_potential: Annotated[Optional[int], typer.Option("--n-potential", help="N_PFGoR: segments that could be falsely recognised.", min=1)] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON object instead of a table.")] = False,
+    quiet: opt.Quiet = False,
 ) -> None:
     """Derive thresholds and probabilities (paper 001 eqs. 16–24; thesis eqs. 5.5, 5.10).
 

@@ -130,6 +130,7 @@ def check(
     hal_max: Annotated[Optional[float], typer.Option("--hal-max", hidden=True, help="Before the design HAL: the largest HAL (now --hal 25-M).", min=0.1)] = None,
     hal_min: Annotated[float, typer.Option("--hal-min", help="Smallest acceptable HAL, m.", min=0.0)] = 5.0,
     as_json: Annotated[bool, typer.Option("--json", help="Findings as JSON on stdout.")] = False,
+    quiet: opt.Quiet = False,
 ) -> None:
     """Report invalid geometry, missing or duplicate ids, overlaps, HAL below a minimum, wrong CRS (exit 1 if any)."""
     from tollcli.charging.geoobject_check import check_geoobjects
@@ -149,6 +150,7 @@ def info(
     path: Annotated[str, typer.Argument(metavar="FILE", help="Geo-object file (from 'tollcli geoobjects build').")],
     min_hal: Annotated[float, typer.Option("--min-hal", help="Also give the tolled length covered by geo-objects of at least this HAL, m.", min=0.0)] = 25.0,
     as_json: Annotated[bool, typer.Option("--json", help="Everything as JSON on stdout.")] = False,
+    quiet: opt.Quiet = False,
 ) -> None:
     """What a geo-object file holds: counts, HAL histogram, the share of the tolled length covered, and for each
     geo-object its HAL, design, parts, what holds its HAL and the nearest road kept clear of (and how far away it is)."""

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from tollcli.cli import options as opt
 from tollcli.errors import UsageError
 
 
@@ -14,6 +15,7 @@ def info(
     path: Annotated[str, typer.Argument(metavar="LOG|GEOOBJECTS|INVOICE", help="A receiver log (any kind the tool reads, .gz too), a geo-object file or an invoice.", show_default=False)],
     min_hal: Annotated[float, typer.Option("--min-hal", help="Geo-objects: also give the tolled length covered by geo-objects of at least this HAL, m.", min=0.0)] = 25.0,
     as_json: Annotated[bool, typer.Option("--json", help="Everything as JSON on stdout.")] = False,
+    quiet: opt.Quiet = False,
 ) -> None:
     """What a file holds, before anything is charged on it.
 

@@ -8,6 +8,7 @@ from typing import Annotated, Optional
 import typer
 
 from tollcli.cli import options as opt
+from tollcli.cli.console import warn
 
 
 def osnma(
@@ -21,6 +22,7 @@ def osnma(
     public_key: Annotated[Optional[list[str]], typer.Option("--public-key", help="An OSNMA public key file (GSC XML), repeatable; default: OSNMA_PublicKey*.xml beside the log. Without one the key is taken from the signal (DSM-PKR).")] = None,
     sync_bound_s: Annotated[float, typer.Option("--sync-bound-s", help="How far the receiver's clock may be from Galileo system time, s: up to 30 every tag is used, up to 330 only slow-MAC (ADKD 12) tags, beyond none.", min=0.0)] = 30.0,
     strict: opt.Strict = False,
+    quiet: opt.Quiet = False,
     as_json: opt.JsonSummary = False,
 ) -> None:
     """Verify Galileo OSNMA (navigation message authentication) in a log.
@@ -62,8 +64,8 @@ def osnma(
     if as_json:
         typer.echo(json.dumps(s, sort_keys=True, default=str))
         return
-    typer.echo(f"{log}: {s['pages']} pages; {s['kroots_authenticated']} root keys, {s['tesla_keys_verified']} TESLA keys, "
-               f"{s['tags_authenticated']} tags and {s['data_authenticated']} data sets authenticated; "
-               f"first authenticated fix {s['first_authenticated_fix_gst']}; {s['failures']} failures", err=True)  # fmt: skip
+    warn(f"{log}: {s['pages']} pages; {s['kroots_authenticated']} root keys, {s['tesla_keys_verified']} TESLA keys, "
+         f"{s['tags_authenticated']} tags and {s['data_authenticated']} data sets authenticated; "
+         f"first authenticated fix {s['first_authenticated_fix_gst']}; {s['failures']} failures", quiet)  # fmt: skip
     for f in s["first_failures"]:
-        typer.echo(f"osnma failure at {f['gst']}: E{int(f['svid']):02d} {f['kind']}: {f['detail']}", err=True)
+        warn(f"osnma failure at {f['gst']}: E{int(f['svid']):02d} {f['kind']}: {f['detail']}", quiet)
