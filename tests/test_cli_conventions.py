@@ -294,3 +294,21 @@ def test_every_command_takes_quiet_and_json():
         proc = run_cli(*name.split(), "--help")
         text = proc.stdout.decode()
         assert proc.returncode == 0 and "--quiet" in text and "--json" in text, name
+
+
+def test_the_parsers_choices_are_the_rooms_own():
+    """The choices the parser checks (cli/options.py) are the tuples the rooms below accept, and a value outside them is a
+    usage error in one line, naming the choices."""
+    from tollcli.cli import options as opt
+    from tollcli.gnss.sigma_models import SIGMA_MODELS
+    from tollcli.integrity.environment import ENVIRONMENTS
+    from tollcli.integrity.raim import MODES
+    from tollcli.integrity.sources import LEVEL_CHOICES
+    from tollcli.integrity.verdict import POLICIES
+    from tollcli.io.sources import INPUT_KINDS
+
+    assert opt.RAIM_MODES == MODES and opt.ENVIRONMENTS == ENVIRONMENTS and opt.INTEGRITY_LEVELS == LEVEL_CHOICES
+    assert opt.SIGMA_MODELS == SIGMA_MODELS and opt.INPUT_KINDS == INPUT_KINDS and opt.POLICIES == tuple(POLICIES)
+    proc = run_cli("integrity", SAMPLE, "--raim", "raimy", "-o", "-")
+    assert proc.returncode == 2 and proc.stderr.decode().count("\n") == 1
+    assert "'raimy' is not one of 'ss', 'etc', 'classic'" in proc.stderr.decode() and "Value error" not in proc.stderr.decode()

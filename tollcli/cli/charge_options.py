@@ -10,7 +10,7 @@ from __future__ import annotations
 import functools
 import inspect
 from dataclasses import dataclass
-from typing import Annotated, Optional
+from typing import Annotated, Literal, Optional
 
 import typer
 
@@ -20,7 +20,7 @@ from tollcli.job.pipeline import ChargeSettings
 Geo = Annotated[str, typer.Option("--geo", help="Geo-objects (GeoJSON from 'tollcli geoobjects build').")]
 Tariff = Annotated[str, typer.Option("--tariff", help="Tariff (TOML).")]
 Roads = Annotated[Optional[str], typer.Option("--roads", help="Road network (GeoJSON LineStrings, tolled and free) for map-matching integrity.")]
-Policy = Annotated[Optional[str], typer.Option("--policy", help="Checks that may veto a position, on evidence of a fault only: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")]
+Policy = Annotated[Optional[Literal[opt.POLICIES]], typer.Option("--policy", help="Checks that may veto a position, on evidence of a fault only: raim, raim+speed, raim+mm, all (default: the strictest the inputs support).")]
 
 _REQUIRED = inspect.Parameter.empty
 #: (parameter, annotation, default), in the order ``--help`` lists them

@@ -54,7 +54,8 @@ def main(argv: list[str] | None = None) -> None:
             sys.stderr.write(exc.format_message() + "\n")
             sys.exit(EXIT_USAGE)
         where = ctx.command_path if ctx is not None else "tollcli"
-        _fail(f"{exc.format_message()} (see '{where} --help')", exc.exit_code or EXIT_USAGE)
+        message = exc.format_message().replace(": Value error, ", ": ")  # (pydantic's words for a choice not made)
+        _fail(f"{message} (see '{where} --help')", exc.exit_code or EXIT_USAGE)
     except typer.Exit as exc:
         sys.exit(exc.exit_code)
     except typer.Abort as exc:

@@ -3,9 +3,19 @@
 from __future__ import annotations
 
 import datetime as _dt
-from typing import Annotated, Optional
+from typing import Annotated, Literal, Optional
 
 import typer
+
+#: the choices of the options below, checked by the parser (tests/test_cli_conventions.py holds them equal to the
+#: rooms' own tuples: RAIM modes, environments, integrity levels, σ models, ionosphere models, input kinds, policies)
+RAIM_MODES = ("ss", "etc", "classic")
+ENVIRONMENTS = ("auto", "open", "urban")
+INTEGRITY_LEVELS = ("auto", "residual", "receiver", "covariance", "model")
+SIGMA_MODELS = ("nominal", "urban", "rural", "constant", "input")
+IONO_MODELS = ("single", "sbas", "iono-free")
+INPUT_KINDS = ("auto", "nmea", "ubx-nav", "gpsd-json", "rtklib-pos", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
+POLICIES = ("raim", "raim+speed", "raim+mm", "all")
 
 LogArg = Annotated[
     str,
@@ -33,7 +43,7 @@ def require_json(output: str) -> str:
     if not is_stream(output) and not output.lower().endswith(".json"):
         raise UsageError(f"{output}: this command writes JSON: name the file .json (or - for stdout)")
     return output
-InputFormat = Annotated[str, typer.Option("--input-format", help="Input: auto, nmea, ubx-nav (u-blox NAV-PVT/SOL/POSLLH, NAV-SAT/SVINFO with prRes, NAV-DOP, NAV-PL, HNR-PVT), gpsd-json (gpspipe -w, gpsdecode: TPV, SKY, GST), rtklib-pos (RTKLIB .pos solutions: Q, sdn/sde/sdne), gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX), librsf (libRSF text: smartLoc pseudorange3/odom3).")]
+InputFormat = Annotated[Literal[INPUT_KINDS], typer.Option("--input-format", help="Input: auto, nmea, ubx-nav (u-blox NAV-PVT/SOL/POSLLH, NAV-SAT/SVINFO with prRes, NAV-DOP, NAV-PL, HNR-PVT), gpsd-json (gpspipe -w, gpsdecode: TPV, SKY, GST), rtklib-pos (RTKLIB .pos solutions: Q, sdn/sde/sdne), gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX), librsf (libRSF text: smartLoc pseudorange3/odom3).")]
 Nav = Annotated[Optional[str], typer.Option("--nav", help="Navigation file, RINEX 2 or 3 (GPS, Galileo): the orbits for rinex and gnsslogger input; replaces the file's own satellites for device-gnss and ubx.")]
 
 
@@ -93,15 +103,15 @@ DateOpt = Annotated[
     typer.Option("--date", formats=["%Y-%m-%d"], help="UTC date of the first epoch, for logs without RMC/ZDA dates (YYYY-MM-DD)."),
 ]
 
-RaimMode = Annotated[str, typer.Option("--raim", help="RAIM: ss (solution separation over every satellite and constellation left out: several faults at once, HPL from the fault modes; the default), etc (paper 001's toll RAIM: HPL = HAL, P_FA per epoch, one fault) or classic (paper 001's civil-aviation RAIM: fixed P_FA, HPL ≤ HAL, one fault).")]
-Environment = Annotated[str, typer.Option("--environment", help="Error model's environment: auto (urban where the residuals of the last 30 s exceed the nominal model 1.5-fold: C/N0-weighted urban σ there), open (the nominal model throughout) or urban (the urban σ throughout).")]
+RaimMode = Annotated[Literal[RAIM_MODES], typer.Option("--raim", help="RAIM: ss (solution separation over every satellite and constellation left out: several faults at once, HPL from the fault modes; the default), etc (paper 001's toll RAIM: HPL = HAL, P_FA per epoch, one fault) or classic (paper 001's civil-aviation RAIM: fixed P_FA, HPL ≤ HAL, one fault).")]
+Environment = Annotated[Literal[ENVIRONMENTS], typer.Option("--environment", help="Error model's environment: auto (urban where the residuals of the last 30 s exceed the nominal model 1.5-fold: C/N0-weighted urban σ there), open (the nominal model throughout) or urban (the urban σ throughout).")]
 PSat = Annotated[float, typer.Option("--p-sat", help="--raim ss: prior probability of a satellite fault.")]
 PConst = Annotated[float, typer.Option("--p-const", help="--raim ss: prior probability of a constellation-wide fault.")]
 Hal = Annotated[float, typer.Option("--hal", help="Horizontal alert limit, m.", min=0.0)]
 PMd = Annotated[float, typer.Option("--p-md", help="Probability of missed detection.")]
 PFa = Annotated[float, typer.Option("--p-fa", help="Probability of false alarm: classic RAIM's design value; under ETC an alarm at a higher per-epoch P_FA reads probable_false_alarm.")]
 IntegritySources = Annotated[
-    str,
+    Literal[INTEGRITY_LEVELS],
     typer.Option("--integrity-sources", help="Which integrity sources may validate a position: residual (GRS residuals, "
                  "pseudoranges), receiver (and the receiver's own RAIM, GBS), covariance (and the GST error ellipse), or "
                  "auto: the strictest the log supports (decided at its first epoch with any source). A fault or an "
@@ -109,13 +119,13 @@ IntegritySources = Annotated[
 ]
 Fde = Annotated[bool, typer.Option("--fde", help="Fault detection and exclusion: drop one satellite when exactly one subset passes.")]
 SigmaModel = Annotated[
-    str,
+    Literal[SIGMA_MODELS],
     typer.Option("--sigma-model", help="Pseudorange error model: nominal (thesis; alias urban, rural), constant (--sigma), input (σ from the log)."),
 ]
 Sigma = Annotated[float, typer.Option("--sigma", help="σ of every pseudorange for --sigma-model constant, m.", min=0.0)]
 Tc = Annotated[float, typer.Option("--tc", help="Correlation time: independent positions are at least this far apart, s (≥ 0.1).", min=0.1)]
 NTh = Annotated[int, typer.Option("--n-th", help="Charge when at least this many valid independent positions fell inside.", min=1)]
-Iono = Annotated[str, typer.Option("--iono", help="Nominal model ionosphere: single (single frequency), sbas, iono-free.")]
+Iono = Annotated[Literal[IONO_MODELS], typer.Option("--iono", help="Nominal model ionosphere: single (single frequency), sbas, iono-free.")]
 MaxBad = Annotated[
     Optional[int],
     typer.Option("--max-bad", help="Exit 3 (partial) when more than this many lines were skipped; outputs are still written.", min=0),
