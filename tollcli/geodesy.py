@@ -62,6 +62,14 @@ def enu_shift2geodetic(lat_deg, lon_deg, east_m, north_m):
     return lat_deg + np.degrees(north_m / m), lon_deg + np.degrees(east_m / (n * np.cos(lat)))
 
 
+def geodetic2enu(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m):
+    """East, north, up (m) of positions from a reference position (pymap3d's ``geodetic2enu``; broadcasts: one
+    reference for all, or one per position)."""
+    d = np.stack(geodetic2ecef(lat_deg, lon_deg, alt_m), -1) - np.stack(geodetic2ecef(lat0_deg, lon0_deg, alt0_m), -1)
+    enu = np.einsum("...ij,...j->...i", enu_rotation(lat0_deg, lon0_deg), d)
+    return enu[..., 0], enu[..., 1], enu[..., 2]
+
+
 def geodetic2enu_shift(lat0_deg, lon0_deg, lat_deg, lon_deg):
     """The small horizontal shift (east, north; m) from one position to another: the inverse of
     :func:`enu_shift2geodetic`, with the radii of curvature at the mean latitude (exact to mm over km)."""

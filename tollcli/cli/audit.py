@@ -24,7 +24,7 @@ from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
 from tollcli.charging.truth_passages import is_id_list, truth_passages, truth_trajectory
 from tollcli.cli import options as opt
-from tollcli.cli.console import audit_tables, show, warn
+from tollcli.cli.console import audit_tables, note, show
 from tollcli.errors import DataError, UsageError
 from tollcli.integrity.truth_check import check_against_truth
 from tollcli.io.sources import read_table
@@ -184,7 +184,7 @@ def _emit(report: dict, summary: str, output: str, quiet: bool, as_json: bool = 
         typer.echo(json.dumps({"output": output, "mode": report["mode"], "summary": summary,
                                **{k: report[k] for k in AUDIT_SUMMARY_KEYS if k in report}}, sort_keys=True, default=str))
     else:
-        warn(summary, quiet)
+        note(summary, quiet)
 
 
 #: the report's figures ``--json`` repeats on stdout

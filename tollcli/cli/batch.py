@@ -10,7 +10,7 @@ import typer
 
 from tollcli.cli import options as opt
 from tollcli.cli.charge_options import ChargeOptions, charge_options
-from tollcli.cli.console import progress, warn
+from tollcli.cli.console import note, progress
 from tollcli.cli.settings_file import Config
 from tollcli.errors import DataError, PartialError, SomeFailedError, UsageError
 from tollcli.job.batch import run_batch
@@ -51,7 +51,7 @@ def batch(
     passed_over: list[str] = []
     logs = expand_inputs(inputs, passed_over)
     if passed_over:
-        warn(f"  passed over {len(passed_over)} files that are not receiver logs: {', '.join(passed_over[:5])}"
+        note(f"  passed over {len(passed_over)} files that are not receiver logs: {', '.join(passed_over[:5])}"
              + (" …" if len(passed_over) > 5 else ""), quiet)  # fmt: skip
     settings = charge.settings(vehicle, input_format)
     with progress(f"batch of {len(logs)} logs", quiet, total=len(logs), unit="logs") as advance:
@@ -62,13 +62,13 @@ def batch(
             + ", ".join(f"{v} {k}" for k, v in summary["totals"].items()))  # fmt: skip
     if as_json:
         typer.echo(json.dumps({k: v for k, v in summary.items() if k != "outcomes"}, sort_keys=True))
-    warn(line, quiet)
+    note(line, quiet)
     if summary["overlapping"]:
-        warn(f"  warning: {summary['overlapping']} logs overlap in time another log of the same vehicle (each is charged: "
+        note(f"  warning: {summary['overlapping']} logs overlap in time another log of the same vehicle (each is charged: "
              f"the same drive twice?); their outcomes in {os.path.join(output, 'summary.json')} name the others", quiet)  # fmt: skip
     for o in summary["outcomes"]:
         if o["status"] == "failed":
-            warn(f"  failed: {o['error']}", quiet)
+            note(f"  failed: {o['error']}", quiet)
     if summary["failed"]:  # one line even with --quiet: an exit code ≠ 0 always says why
         first = next(o["error"] for o in summary["outcomes"] if o["status"] == "failed")
         message = (f"{summary['failed']} of {summary['logs']} logs failed (see {os.path.join(output, 'failed')}); "

@@ -11,8 +11,8 @@ from rich.console import Console
 err = Console(stderr=True, highlight=False, no_color=bool(os.environ.get("NO_COLOR")))
 
 
-def warn(message: str, quiet: bool = False) -> None:
-    """A one-line note on stderr (kept even with --quiet only for errors, never here)."""
+def note(message: str, quiet: bool = False) -> None:
+    """A line for the user on stderr: a summary, a reason, a warning (silent with --quiet; errors are never notes)."""
     if not quiet:
         err.print(message, markup=False, soft_wrap=True)
 

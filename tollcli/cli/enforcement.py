@@ -12,7 +12,7 @@ import typer
 
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.cli import options as opt
-from tollcli.cli.console import warn
+from tollcli.cli.console import note
 from tollcli.enforcement.findings import (
     CLASS_MAX_SPEED_MPS,
     FindingSettings,
@@ -73,16 +73,16 @@ def locate(
         dated = table["time_utc"].dropna() if "time_utc" in table else pd.Series(dtype=object)
         spans.append((dated.min(), dated.max()) if len(dated) else None)
         if table.empty:
-            warn(f"{log}: no epochs", quiet)
+            note(f"{log}: no epochs", quiet)
             per_log.append(None)
             continue
         found = locate_in(table, at_utc)
         if found["any"] is None:
-            warn(f"{log}: no position{' before ' + str(at_utc) if at_utc is not None else ''}", quiet)
+            note(f"{log}: no position{' before ' + str(at_utc) if at_utc is not None else ''}", quiet)
         per_log.append(found)
     vehicles, notes = separate_simultaneous(vehicles, named_by_file, logs, spans)
     for note in notes:
-        warn(note, quiet)
+        note(note, quiet)
     rows = [row for log, vid, found in zip(logs, vehicles, per_log) if found is not None for row in located_rows(vid, log, found)]
     rows = latest_per_vehicle(rows)
     frame = pd.DataFrame(rows, columns=list(COLUMNS))
@@ -95,7 +95,7 @@ def locate(
             writer.write(frame)
             writer.commit()
     trusted = sum(r["which"] == "last_trusted" for r in rows)
-    warn(f"{len(logs)} logs: {trusted} vehicles with a trusted position, {len(rows) - trusted} later untrusted positions", quiet)
+    note(f"{len(logs)} logs: {trusted} vehicles with a trusted position, {len(rows) - trusted} later untrusted positions", quiet)
 
 
 def findings(
@@ -196,4 +196,4 @@ def _findings_summary(log: str, output: str, items: list, what: str, quiet: bool
     if as_json:
         typer.echo(json.dumps({"log": log, "output": output, "findings": len(items), "kinds": dict(sorted(kinds.items()))}, sort_keys=True))
         return
-    warn(f"{log}: {len(items)} {what}" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)
+    note(f"{log}: {len(items)} {what}" + (": " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) if items else ""), quiet)

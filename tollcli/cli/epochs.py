@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 import typer
 
 from tollcli.cli import options as opt
-from tollcli.cli.console import progress, warn
+from tollcli.cli.console import note, progress
 from tollcli.errors import UsageError
 from tollcli.io.log_run import LogRun
 from tollcli.io.writers import TableWriter, format_for
@@ -71,7 +71,7 @@ def epochs(
     if as_json:
         typer.echo(json.dumps(stats.as_dict(), sort_keys=True))
     else:
-        warn(stats.summary(), quiet)
+        note(stats.summary(), quiet)
     check_partial(stats, max_bad)
 
 

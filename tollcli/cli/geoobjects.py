@@ -11,7 +11,7 @@ import typer
 from tollcli.charging.design_hal import HAL_FLOOR_M
 from tollcli.charging.geoobjects import CONNECT_TOL_M, TRIM_FACTOR
 from tollcli.cli import options as opt
-from tollcli.cli.console import warn
+from tollcli.cli.console import note
 from tollcli.errors import DataError, UsageError
 from tollcli.io.writers import is_stream, write_text_atomic
 
@@ -111,17 +111,17 @@ def _tell(roads: str, doc: dict, below: list[dict], skipped: list[dict], design:
     tolled, covered, _ = covered_lengths_m(props, skipped)
     more = f", {len(below)} below their design HAL" if below else ""
     more += f", {len(skipped)} sections skipped" if skipped else ""
-    warn(f"{roads}: {len(hals)} geo-objects, HAL {min(hals):g}–{max(hals):g} m (design {design}), covering "
+    note(f"{roads}: {len(hals)} geo-objects, HAL {min(hals):g}–{max(hals):g} m (design {design}), covering "
          f"{covered / 1000:.3f} of {tolled / 1000:.3f} tolled km ({100 * covered / tolled:.1f} %), {len(frames)} metric "
          f"frame{'s' if len(frames) > 1 else ''}{more}", quiet)  # fmt: skip
     by_id = {p["id"]: p for p in props}
     for b in below:
         p = by_id[b["id"]]
         near = f" (cut around {', '.join(p['crossings'])})" if p.get("crossings") else ""
-        warn(f"{roads}: {b['id']}: HAL {b['hal_m']:g} m, below its design {b['design_hal_m'][0]:g} m: no stretch of it is "
+        note(f"{roads}: {b['id']}: HAL {b['hal_m']:g} m, below its design {b['design_hal_m'][0]:g} m: no stretch of it is "
              f"clear of other roads by {2 * b['design_hal_m'][0]:g} m{near}", quiet)  # fmt: skip
     for s in skipped:
-        warn(f"{roads}: {s['id']}: skipped: {s['reason']}", quiet)
+        note(f"{roads}: {s['id']}: skipped: {s['reason']}", quiet)
 
 
 @app.command("check")
@@ -209,4 +209,4 @@ def compile_store(
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
     else:
-        warn(f"{path}: {len(geo.ids)} geo-objects in {geo.store} ({size / 1e6:.1f} MB, {seconds:.1f} s)", quiet)
+        note(f"{path}: {len(geo.ids)} geo-objects in {geo.store} ({size / 1e6:.1f} MB, {seconds:.1f} s)", quiet)

@@ -10,7 +10,7 @@ import pandas as pd
 import typer
 
 from tollcli.cli import options as opt
-from tollcli.cli.console import progress, warn
+from tollcli.cli.console import note, progress
 from tollcli.cli.settings_file import Config
 from tollcli.errors import UsageError
 from tollcli.gnss.sigma_models import SIGMA_MODELS, NominalModel
@@ -111,7 +111,7 @@ def integrity(
                 _tally(table, counts)
                 writer.write(table)
             elif kind in NAVIGATION_KINDS:
-                _nmea(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
+                _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
             else:
                 table = _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment, strict)
                 counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
@@ -144,7 +144,7 @@ def integrity(
         if ignored:
             text += f"; GST RMS ignored on {sum(ignored.values())} epochs (no range-residual RMS: " + ", ".join(
                 f"{n} {k}" for k, n in ignored.items()) + ")"
-        warn(text, quiet)
+        note(text, quiet)
     if kind in NAVIGATION_KINDS:
         check_partial(stats, max_bad)
 
@@ -156,7 +156,7 @@ def _tally(table: pd.DataFrame, counts: Counter) -> None:
         counts.update((kind, v) for v in table[column].astype(str))
 
 
-def _nmea(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto",
+def _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto",
           kind="nmea") -> None:
     with progress(f"checking {run.name}", quiet, log=run.log) as advance:
         for chunk in iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, stats, date=day,
@@ -165,7 +165,7 @@ def _nmea(run, writer, params, sigma_model, sigma, nominal, strict, quiet, count
             _tally(chunk.table, counts)
             advance(len(chunk.table), int(chunk.table["line"].max()) if len(chunk.table) and "line" in chunk.table else None)
     check_usable(stats)
-    warn(stats.summary(), quiet)
+    note(stats.summary(), quiet)
 
 
 def _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment="auto", strict=False) -> pd.DataFrame:

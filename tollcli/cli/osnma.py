@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 import typer
 
 from tollcli.cli import options as opt
-from tollcli.cli.console import warn
+from tollcli.cli.console import note
 
 
 def osnma(
@@ -64,8 +64,8 @@ def osnma(
     if as_json:
         typer.echo(json.dumps(s, sort_keys=True, default=str))
         return
-    warn(f"{log}: {s['pages']} pages; {s['kroots_authenticated']} root keys, {s['tesla_keys_verified']} TESLA keys, "
+    note(f"{log}: {s['pages']} pages; {s['kroots_authenticated']} root keys, {s['tesla_keys_verified']} TESLA keys, "
          f"{s['tags_authenticated']} tags and {s['data_authenticated']} data sets authenticated; "
          f"first authenticated fix {s['first_authenticated_fix_gst']}; {s['failures']} failures", quiet)  # fmt: skip
     for f in s["first_failures"]:
-        warn(f"osnma failure at {f['gst']}: E{int(f['svid']):02d} {f['kind']}: {f['detail']}", quiet)
+        note(f"osnma failure at {f['gst']}: E{int(f['svid']):02d} {f['kind']}: {f['detail']}", quiet)

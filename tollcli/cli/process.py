@@ -11,7 +11,7 @@ import typer
 from tollcli.charging.invoice import invoice_csv, invoice_json
 from tollcli.cli import options as opt
 from tollcli.cli.charge_options import ChargeOptions, charge_options
-from tollcli.cli.console import invoice_tables, show, warn
+from tollcli.cli.console import invoice_tables, note, show
 from tollcli.cli.settings_file import Config
 from tollcli.errors import UsageError
 from tollcli.io.writers import format_for, write_text_atomic
@@ -58,7 +58,7 @@ def process(
     if as_json:
         typer.echo(json.dumps(invoice_summary(invoice, output, stats), sort_keys=True))
     else:
-        warn(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged{_why_not(invoice)}, "
+        note(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged{_why_not(invoice)}, "
              f"total {invoice['total']} {invoice['currency']}{_checks_said(invoice)}", quiet)  # fmt: skip
     if stats is not None:
         check_partial(stats, charge.max_bad)

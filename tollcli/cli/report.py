@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 import typer
 
 from tollcli.cli import options as opt
-from tollcli.cli.console import warn
+from tollcli.cli.console import note
 from tollcli.errors import UsageError
 from tollcli.io.writers import write_text_atomic
 
@@ -35,7 +35,7 @@ def plot(
     if as_json:
         typer.echo(json.dumps({"run": run, "output": output, "format": fmt, "figures": paths}, sort_keys=True))
     else:
-        warn(f"{run}: " + ", ".join(paths), quiet)
+        note(f"{run}: " + ", ".join(paths), quiet)
 
 
 def report(
@@ -63,4 +63,4 @@ def report(
         typer.echo(json.dumps({"run": run, "output": output, "epochs": int(len(data.epochs)), "truth": truth,
                                "tiles": tiles}, sort_keys=True))
     else:
-        warn(f"{run}: report written to {output}", quiet)
+        note(f"{run}: report written to {output}", quiet)

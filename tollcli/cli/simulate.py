@@ -10,7 +10,7 @@ from typing import Annotated, Optional
 import typer
 
 from tollcli.cli import options as opt
-from tollcli.cli.console import progress, warn
+from tollcli.cli.console import note, progress
 from tollcli.errors import UsageError
 from tollcli.simulate.drive import SimConfig
 from tollcli.simulate.errors import FaultPlan
@@ -146,7 +146,7 @@ def simulate(
     with progress("simulating", quiet) as advance:
         manifest = write_drive(trajectory, config, output, geo=geo, command=command, progress=advance)
     counts = manifest["counts"]
-    warn(f"{output}: {counts['epochs']} epochs, {counts['fixes']} fixes, {counts['faulty_epochs']} faulty, "
+    note(f"{output}: {counts['epochs']} epochs, {counts['fixes']} fixes, {counts['faulty_epochs']} faulty, "
          f"≥ 5 satellites {manifest['visible_satellites']['ge5']:.1%}", quiet)  # fmt: skip
     if json_summary:
         typer.echo(json.dumps({"output": output, **manifest}, sort_keys=True))

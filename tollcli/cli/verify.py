@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from tollcli.cli import options as opt
-from tollcli.cli.console import warn
+from tollcli.cli.console import note
 from tollcli.job.verify import verify_invoice
 
 
@@ -25,4 +25,4 @@ def verify(
     summary = verify_invoice(invoice)
     if as_json:
         typer.echo(json.dumps({"reproduced": True, **summary}, sort_keys=True))
-    warn(f"{invoice}: reproduced byte for byte (content {summary['content_sha256'][:12]}…)", quiet)
+    note(f"{invoice}: reproduced byte for byte (content {summary['content_sha256'][:12]}…)", quiet)

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError
-from tollcli.geodesy import enu_rotation, geodetic2ecef
+from tollcli.geodesy import geodetic2enu
 from tollcli.times import nearest_index
 
 VALID_STATUSES = ("valid", "excluded_valid")
@@ -27,10 +27,9 @@ VALID_STATUSES = ("valid", "excluded_valid")
 
 def horizontal_error_m(lat_deg, lon_deg, true_lat_deg, true_lon_deg) -> np.ndarray:
     """Horizontal distance (m) between estimated and true positions (local east-north)."""
-    est = np.stack(geodetic2ecef(np.asarray(lat_deg, float), np.asarray(lon_deg, float), 0.0), -1)
-    tru = np.stack(geodetic2ecef(np.asarray(true_lat_deg, float), np.asarray(true_lon_deg, float), 0.0), -1)
-    enu = np.einsum("eij,ej->ei", enu_rotation(true_lat_deg, true_lon_deg), est - tru)
-    return np.hypot(enu[:, 0], enu[:, 1])
+    east, north, _ = geodetic2enu(np.asarray(lat_deg, float), np.asarray(lon_deg, float), 0.0, np.asarray(true_lat_deg, float),
+                                  np.asarray(true_lon_deg, float), 0.0)  # fmt: skip
+    return np.hypot(east, north)
 
 
 def _times_ms(column: pd.Series, what: str) -> np.ndarray:

@@ -87,7 +87,7 @@ def with_epoch_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
     """The speed, map-matching and HIT columns added to a whole trip's integrity table (``integrity --checks``)."""
     import numpy as np
 
-    from tollcli.geodesy import enu_rotation, geodetic2ecef
+    from tollcli.geodesy import geodetic2enu
     from tollcli.integrity.kalman_hit import hit
     from tollcli.integrity.map_matching import load_roads
     from tollcli.integrity.verdict import epoch_checks
@@ -101,10 +101,9 @@ def with_epoch_checks(table: pd.DataFrame, roads: str | None) -> pd.DataFrame:
     lat, lon = table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float)
     ok = np.isfinite(lat) & np.isfinite(lon)
     lat0, lon0 = (lat[ok][0], lon[ok][0]) if ok.any() else (0.0, 0.0)
-    d = np.stack(geodetic2ecef(np.where(ok, lat, lat0), np.where(ok, lon, lon0), 0.0), -1) - np.stack(geodetic2ecef(lat0, lon0, 0.0), -1)
-    enu = np.einsum("ij,ej->ei", enu_rotation(lat0, lon0), d)
+    east, north, _ = geodetic2enu(np.where(ok, lat, lat0), np.where(ok, lon, lon0), 0.0, lat0, lon0, 0.0)
     sigma = table["sigma_major_m"].to_numpy(float) if "sigma_major_m" in table else None
-    k = hit(np.where(ok, enu[:, 0], np.nan), np.where(ok, enu[:, 1], np.nan), table["speed_mps"].to_numpy(float), epoch_seconds(table), sigma)
+    k = hit(np.where(ok, east, np.nan), np.where(ok, north, np.nan), table["speed_mps"].to_numpy(float), epoch_seconds(table), sigma)
     return pd.concat([table.reset_index(drop=True), extra, k[["hit_m"]]], axis=1)
 
 

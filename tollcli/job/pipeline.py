@@ -195,7 +195,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         if kind in NAVIGATION_KINDS:
             charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
             with run.named_errors():
-                stats, params = _read_nmea_chunks(run, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table,
+                stats, params = _read_navigation_chunks(run, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table,
                                                   kind, osnma, auth_counts, failure_fixes)  # fmt: skip
             policy, table, details, found, period = charger.finish()
             positions, step_s = None, charger.step_s
@@ -290,7 +290,7 @@ BLOCK_BYTES = SOURCE_BLOCK_BYTES
 STREAM_ROUNDS = True
 
 
-def _read_nmea_chunks(run: LogRun, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams,
+def _read_navigation_chunks(run: LogRun, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams,
                       nominal: NominalModel, charger: TailCharger,
                       epoch_table: list | None = None, kind: str = "nmea", osnma: OsnmaEvidence | None = None,
                       auth_counts: dict | None = None, failure_fixes: list | None = None) -> tuple[ReadStats, RaimParams]:  # fmt: skip
