@@ -81,8 +81,8 @@ def locate(
             note(f"{log}: no position{' before ' + str(at_utc) if at_utc is not None else ''}", quiet)
         per_log.append(found)
     vehicles, notes = separate_simultaneous(vehicles, named_by_file, logs, spans)
-    for note in notes:
-        note(note, quiet)
+    for line in notes:
+        note(line, quiet)
     rows = [row for log, vid, found in zip(logs, vehicles, per_log) if found is not None for row in located_rows(vid, log, found)]
     rows = latest_per_vehicle(rows)
     frame = pd.DataFrame(rows, columns=list(COLUMNS))

@@ -100,5 +100,5 @@ def _why_not(invoice: dict) -> str:
     if not counts:
         return ""
     top = max(sorted(counts), key=counts.get)
-    note = (invoice.get("status_notes") or {}).get(top, "")
-    return f" (mostly {top}{': ' + note.split('. ')[0] if note else ''})"
+    meaning = (invoice.get("status_notes") or {}).get(top, "")
+    return f" (mostly {top}{': ' + meaning.split('. ')[0] if meaning else ''})"
