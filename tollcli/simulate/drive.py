@@ -131,7 +131,9 @@ def simulate(traj: Trajectory, config: SimConfig) -> Iterator[SimChunk]:
         rows = np.flatnonzero(faulty & (fault_col >= 0))
         bias[rows, fault_col[rows]] = config.faults.bias_m
         pr = view["range_m"] + config.clock_bias_m + error + bias
-        yield _chunk(lo, t, start, traj, sl, names, svid, group, view, used, cn0, sigma, error, bias, pr, faulty, fault_col, config, rng)
+        measured = ChunkMeasurements(first_epoch=lo, t_s=t, rows=sl, view=view, used=used, cn0_dbhz=cn0, sigma_m=sigma, error_m=error,
+                                     bias_m=bias, pr_m=pr, faulty=faulty, fault_col=fault_col)  # fmt: skip
+        yield _receiver_output(measured, Satellites(names, svid, group), traj, start, config, rng)
 
 
 def _fault_column(plan: FaultPlan, names: np.ndarray, svid: np.ndarray, slope: np.ndarray, used: np.ndarray) -> np.ndarray:
@@ -147,7 +149,40 @@ def _fault_column(plan: FaultPlan, names: np.ndarray, svid: np.ndarray, slope: n
     return np.where(np.isfinite(finite.max(axis=1, initial=-np.inf)), col, -1)
 
 
-def _chunk(lo, t, start, traj, sl, names, svid, group, view, used, cn0, sigma, error, bias, pr, faulty, fault_col, config, rng) -> SimChunk:  # noqa: PLR0913
+@dataclass(frozen=True)
+class Satellites:
+    """The simulated satellites (one entry each): constellation name, PRN, receiver clock group."""
+
+    names: np.ndarray
+    svid: np.ndarray
+    group: np.ndarray
+
+
+@dataclass(frozen=True)
+class ChunkMeasurements:
+    """What the receiver measured over a stretch of epochs (arrays epochs × satellites)."""
+
+    first_epoch: int  # the stretch's first epoch number in the drive
+    t_s: np.ndarray  # its epochs' times, s from the start
+    rows: slice  # its epochs in the trajectory
+    view: dict  # the sky: satellite ECEF at transmission, ranges, elevations, azimuths
+    used: np.ndarray  # received and used in the fix
+    cn0_dbhz: np.ndarray
+    sigma_m: np.ndarray
+    error_m: np.ndarray  # the nominal (correlated) error
+    bias_m: np.ndarray  # the fault bias
+    pr_m: np.ndarray  # the pseudorange the receiver measured
+    faulty: np.ndarray  # per epoch: a fault episode is on
+    fault_col: np.ndarray  # per epoch: the faulty satellite's column (−1: none)
+
+
+def _receiver_output(m: ChunkMeasurements, sats: Satellites, traj: Trajectory, start: pd.Timestamp, config: SimConfig,
+                     rng: dict) -> SimChunk:  # fmt: skip
+    """What the receiver reports of a stretch: its WLS fix, residuals, DOPs, error ellipse, speed and course."""
+    lo, t, sl = m.first_epoch, m.t_s, m.rows
+    names, svid, group = sats.names, sats.svid, sats.group
+    view, used, cn0, sigma, error, bias, pr = m.view, m.used, m.cn0_dbhz, m.sigma_m, m.error_m, m.bias_m, m.pr_m
+    faulty, fault_col = m.faulty, m.fault_col
     n = t.size
     n_groups = int(group.max()) + 1
     clock_index = np.broadcast_to(group, used.shape)
