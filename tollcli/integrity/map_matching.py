@@ -110,10 +110,10 @@ def load_roads(path: str, connect_tol_m: float = 1.0) -> Roads:
 def roads_of_geoobjects(roads: Roads, geo_ids: np.ndarray) -> np.ndarray:
     """Per geo-object id: the id of its road in the network — the same id, else the id before a section suffix
     ``/k`` (``geoobjects build`` names the sections of road ``C`` ``C/1``, ``C/2``) — or '' when there is none."""
-    known = set(roads.ids.astype(str).tolist())
+    known = roads.ids.astype(str)
     ids = np.asarray(geo_ids, dtype=object).astype(str)
-    base = np.array([g.rsplit("/", 1)[0] if "/" in g else "" for g in ids.tolist()], dtype=object)
-    return np.where(np.isin(ids, list(known)), ids, np.where(np.isin(base, list(known)), base, "")).astype(object)
+    base = np.array([g.rpartition("/")[0] for g in ids.tolist()], dtype=object)  # the id before a '/k' suffix ('' none)
+    return np.where(np.isin(ids, known), ids, np.where(np.isin(base, known), base, "")).astype(object)
 
 
 def distance_to_road_m(roads: Roads, road_id: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray) -> np.ndarray:

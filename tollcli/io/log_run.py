@@ -26,8 +26,8 @@ import tempfile
 import zlib
 from typing import BinaryIO
 
-from tollcli.errors import DataError, TollError, UsageError
-from tollcli.io.sources import GZIP_MAGIC, SNIFF_BYTES, format_of_head, printable_path
+from tollcli.errors import DataError, TollError
+from tollcli.io.sources import GZIP_MAGIC, SNIFF_BYTES, format_of_head, open_raw, printable_path, read_block
 
 #: bytes copied at a time into a replay
 COPY_BYTES = 1 << 20
@@ -66,7 +66,7 @@ class LogRun:
     def __init__(self, log: str, kind: str = "auto"):
         self.log = log
         self.name = printable_path(log)
-        raw = _open_raw(log)
+        raw = open_raw(log)
         self._hashing = _HashingReader(raw, self.name)
         buffered = io.BufferedReader(self._hashing, buffer_size=COPY_BYTES)
         self.compressed = buffered.peek(2)[:2] == GZIP_MAGIC
@@ -143,8 +143,10 @@ class LogRun:
         self.close()
 
     def _sniff(self) -> str:
+        if not hasattr(self._stream, "peek"):
+            return format_of_head(b"")
         try:
-            head = self._stream.peek(SNIFF_BYTES)[:SNIFF_BYTES] if hasattr(self._stream, "peek") else b""
+            head = self._stream.peek(SNIFF_BYTES)[:SNIFF_BYTES]
         except (OSError, EOFError, zlib.error) as exc:
             raise DataError(f"{self.name}: cannot read compressed data ({exc})") from None
         return format_of_head(head)
@@ -177,26 +179,7 @@ class _Named(io.BufferedIOBase):
         pass
 
 
-def _open_raw(log: str) -> BinaryIO:
-    if log == "-":
-        return sys.stdin.buffer
-    if not os.path.exists(log):
-        raise UsageError(f"{printable_path(log)}: no such file")
-    if os.path.isdir(log):
-        raise UsageError(f"{printable_path(log)}: is a directory, expected a log file")
-    try:
-        return open(log, "rb")  # noqa: SIM115 - the run closes it
-    except OSError as exc:
-        raise UsageError(f"{printable_path(log)}: cannot open ({exc.strerror})") from None
-
-
 def _copy(stream: BinaryIO, out: BinaryIO, name: str) -> None:
     """Copy ``stream`` to ``out``: a read that fails is the log's (DataError), a write that fails the disk's (OSError)."""
-    while True:
-        try:
-            block = stream.read(COPY_BYTES)
-        except (OSError, EOFError, zlib.error) as exc:
-            raise DataError(f"{name}: cannot read compressed data ({exc})") from None
-        if not block:
-            return
+    while block := read_block(stream, name, COPY_BYTES):
         out.write(block)

@@ -30,30 +30,38 @@ def source_name(source: str | os.PathLike | BinaryIO) -> str:
     return getattr(source, "name", "<stream>")
 
 
+def open_raw(path: str) -> BinaryIO:
+    """The raw bytes of a log path (``-``: stdin), opened once; UsageError for a missing path or a directory."""
+    if path == "-":
+        return sys.stdin.buffer
+    if not os.path.exists(path):
+        raise UsageError(f"{printable_path(path)}: no such file")
+    if os.path.isdir(path):
+        raise UsageError(f"{printable_path(path)}: is a directory, expected a log file")
+    try:
+        return open(path, "rb")  # noqa: SIM115 - closed by the caller
+    except OSError as exc:
+        raise UsageError(f"{printable_path(path)}: cannot open ({exc.strerror})") from None
+
+
 def open_binary(source: str | os.PathLike | BinaryIO) -> BinaryIO:
     """A binary stream for ``source``, transparently gunzipped.
 
     Raises :class:`UsageError` for a missing path or a directory.
     """
-    if isinstance(source, (str, os.PathLike)):
-        path = os.fspath(source)
-        if path == "-":
-            raw: BinaryIO = sys.stdin.buffer
-        else:
-            if not os.path.exists(path):
-                raise UsageError(f"{path}: no such file")
-            if os.path.isdir(path):
-                raise UsageError(f"{path}: is a directory, expected a log file")
-            try:
-                raw = open(path, "rb")  # noqa: SIM115 - closed by the caller
-            except OSError as exc:
-                raise UsageError(f"{path}: cannot open ({exc.strerror})") from None
-    else:
-        raw = source
+    raw: BinaryIO = open_raw(os.fspath(source)) if isinstance(source, (str, os.PathLike)) else source
     buffered = raw if hasattr(raw, "peek") else io.BufferedReader(raw)  # type: ignore[arg-type]
     if buffered.peek(2)[:2] == GZIP_MAGIC:
         return gzip.GzipFile(fileobj=buffered, mode="rb")  # type: ignore[return-value]
     return buffered  # type: ignore[return-value]
+
+
+def read_block(stream: BinaryIO, name: str, size: int) -> bytes:
+    """Up to ``size`` bytes of a (possibly gunzipping) stream; a damaged compressed stream is a DataError naming ``name``."""
+    try:
+        return stream.read(size)
+    except (OSError, EOFError, zlib.error) as exc:
+        raise DataError(f"{name}: cannot read compressed data ({exc})") from None
 
 
 _CR_BEFORE_LF = re.compile(rb"\r+(?=\n)")
@@ -85,10 +93,7 @@ def iter_byte_blocks(stream: BinaryIO, name: str, block_bytes: int = BLOCK_BYTES
     """
     rest = b""
     while True:
-        try:
-            block = stream.read(block_bytes)
-        except (OSError, EOFError, zlib.error) as exc:
-            raise DataError(f"{name}: cannot read compressed data ({exc})") from None
+        block = read_block(stream, name, block_bytes)
         if not block:
             break
         data = normalize_line_ends(rest + block)  # a CR at the very end waits in ``rest`` for what follows it
@@ -164,9 +169,7 @@ def read_head(log: str) -> bytes:
     """The first ``SNIFF_BYTES`` of a log (decompressed)."""
     stream = open_binary(log)
     try:
-        return stream.read(SNIFF_BYTES)
-    except (OSError, EOFError, zlib.error) as exc:
-        raise DataError(f"{log}: cannot read compressed data ({exc})") from None
+        return read_block(stream, log, SNIFF_BYTES)
     finally:
         stream.close()
 

@@ -89,7 +89,8 @@ def with_geo_roads(pairs: dict[str, np.ndarray], roads, geo, epochs: pd.DataFram
     ``rows``) distance to it (``geo_road_dist_m``, NaN when none): what map matching's veto weighs."""
     from tollcli.integrity.map_matching import distance_to_road_m, roads_of_geoobjects
 
-    road = roads_of_geoobjects(roads, geo.ids)[pairs["obj"]]
+    objs, which = np.unique(pairs["obj"], return_inverse=True)  # the geo-objects these positions are in, not the network's
+    road = roads_of_geoobjects(roads, geo.ids[objs])[which]
     lat, lon = epochs["lat_deg"].to_numpy(float)[rows], epochs["lon_deg"].to_numpy(float)[rows]
     return {**pairs, "geo_road": road, "geo_road_dist_m": distance_to_road_m(roads, road, lat, lon)}
 
