@@ -37,7 +37,7 @@ import numpy as np
 import pandas as pd
 from tollcli.geodesy import enu_shift2geodetic
 from tollcli.gnss.measurements import Measurements, sv_labels
-from tollcli.gnss.wls import wls_geometry
+from tollcli.gnss.wls import Geometry, wls_geometry
 
 NAV_AUTH_STATUSES = ("authenticated", "authenticated_subset", "subset_disagrees", "unauthenticated", "not_checked")
 ACCEPTED = ("authenticated", "authenticated_subset")
@@ -61,11 +61,12 @@ def authenticated_satellites(status: pd.DataFrame) -> pd.DataFrame:
                          "sv": sv_labels(auth["constellation"].to_numpy(object), auth["svid"].to_numpy())})  # fmt: skip
 
 
-def epoch_authentication(meas: Measurements, epochs: pd.DataFrame, authenticated: pd.DataFrame, p_fa: float = 5e-3) -> pd.DataFrame:
+def epoch_authentication(meas: Measurements, epochs: pd.DataFrame, authenticated: pd.DataFrame, p_fa: float = 5e-3,
+                         geometry: Geometry | None = None) -> pd.DataFrame:  # fmt: skip
     """:func:`authenticated_positions` of ``epochs`` (``time_utc``, ``lat_deg``, ``lon_deg``; the rows of ``meas``)
-    with the satellites :func:`authenticated_satellites` lists."""
+    with the satellites :func:`authenticated_satellites` lists (``geometry``: the full solution's, when at hand)."""
     auth = authenticated_slots(meas.sv, epochs["time_utc"], authenticated)
-    return authenticated_positions(meas, auth, epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float), p_fa)
+    return authenticated_positions(meas, auth, epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float), p_fa, geometry)
 
 
 def authenticated_slots(sv: np.ndarray, time_utc: pd.Series, authenticated: pd.DataFrame) -> np.ndarray:
@@ -96,17 +97,17 @@ def _horizontal_major_sigma(cov: np.ndarray) -> np.ndarray:
 
 
 def authenticated_positions(meas: Measurements, auth: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray,
-                            p_fa: float = 5e-3) -> pd.DataFrame:  # fmt: skip
+                            p_fa: float = 5e-3, geometry: Geometry | None = None) -> pd.DataFrame:  # fmt: skip
     """Per epoch: ``nav_auth``, ``n_used_slots``, ``n_used_authenticated``, the authenticated-only position
     (``auth_lat_deg``, ``auth_lon_deg``), its horizontal distance to the full solution ``auth_sep_m`` and the
     no-fault bound on that distance ``auth_sep_threshold_m`` (module docstring). ``auth``: (E, N) from
-    :func:`authenticated_slots`; ``lat_deg``/``lon_deg``: the receiver's fixes (the full solution)."""
-    from scipy.stats import chi2  # only for a log with OSNMA evidence (a plain process imports no scipy.special)
+    :func:`authenticated_slots`; ``lat_deg``/``lon_deg``: the receiver's fixes (the full solution); ``geometry``: the
+    full solution's :func:`~tollcli.gnss.wls.wls_geometry` when the caller has it."""
 
     mask = meas.mask
     sub = mask & auth
     n_used, n_auth = mask.sum(axis=1), sub.sum(axis=1)
-    full_geom = wls_geometry(meas.H, meas.sigma_m, mask)
+    full_geom = geometry if geometry is not None else wls_geometry(meas.H, meas.sigma_m, mask)
     sub_geom = wls_geometry(meas.H, meas.sigma_m, sub)
     r = meas.residual_m if meas.residual_m is not None else np.full(mask.shape, np.nan)
     have_r = ~(mask & ~np.isfinite(r)).any(axis=1) & mask.any(axis=1)
@@ -115,7 +116,7 @@ def authenticated_positions(meas: Measurements, auth: np.ndarray, lat_deg: np.nd
     var = np.where(sub, meas.sigma_m, 0.0) ** 2
     var_full = np.where(mask, meas.sigma_m, 0.0) ** 2
     cov = np.einsum("eun,en,evn->euv", sub_geom.A, var, sub_geom.A) - np.einsum("eun,en,evn->euv", full_geom.A, var_full, full_geom.A)
-    threshold = _horizontal_major_sigma(cov) * np.sqrt(chi2.isf(p_fa, 2))
+    threshold = _horizontal_major_sigma(cov) * np.sqrt(-2.0 * np.log(p_fa))  # χ²₂'s (1 − p_fa) quantile, in closed form
     computable = (n_auth >= MIN_AUTHENTICATED) & ~sub_geom.singular & have_r
     sep_m = np.where(computable, np.hypot(sep[:, 0], sep[:, 1]), np.nan)
     threshold = np.where(computable, threshold, np.nan)

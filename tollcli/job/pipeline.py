@@ -325,7 +325,7 @@ def _read_navigation_chunks(run: LogRun, settings: ChargeSettings, geo, params: 
         auth = None
         if osnma is not None or settings.require_authenticated:
             auth = not_checked(len(epochs)) if osnma is None else epoch_authentication(meas, epochs, osnma.authenticated_for(chunk.satellites),
-                                                                                                        settings.p_fa)
+                                                                                                        settings.p_fa, geometry)
             kept = kept.assign(nav_auth=auth["nav_auth"].to_numpy())
             if osnma is not None and failure_fixes is not None:
                 failure_fixes.append(fixes_before(epochs, osnma.failure_times))

@@ -198,7 +198,7 @@ class ReedSolomonRecovery:
         return self._decode()
 
     def _decode(self) -> dict[int, str]:
-        import reedsolo
+        from tollcli.gnss.osnma.reed_solomon import erasure_decode
 
         info = ["0"] * (58 * 8)
         if self.ced[0] is not None:
@@ -226,11 +226,15 @@ class ReedSolomonRecovery:
                 erasures.extend(range(58 + 15 * k, 58 + 15 * (k + 1)))
         swapped = code[:58][::-1] + code[58:][::-1]  # the library's order: each vector reversed
         positions = [57 - i if i <= 57 else 175 - i for i in erasures]
-        try:
-            _, full, _ = _CODEC(reedsolo).decode(bytearray(swapped), erase_pos=positions)
-        except reedsolo.ReedSolomonError as exc:
-            raise ValueError(f"Reed-Solomon decoding failed: {exc}") from None
-        full = bytes(full)
+        full = erasure_decode(swapped, positions)  # the fast path: no symbol received in error
+        if full is None:  # a symbol received in error, or beyond the fast path: errors and erasures by reedsolo
+            import reedsolo
+
+            try:
+                _, full, _ = _CODEC(reedsolo).decode(bytearray(swapped), erase_pos=positions)
+            except reedsolo.ReedSolomonError as exc:
+                raise ValueError(f"Reed-Solomon decoding failed: {exc}") from None
+            full = bytes(full)
         full = full[:58][::-1] + full[58:][::-1]
         bits = "".join(format(b, "08b") for b in full)
         iod = bits[8:16] + bits[6:8]

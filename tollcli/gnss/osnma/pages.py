@@ -132,43 +132,85 @@ def ubx_page_bits(words: np.ndarray) -> np.ndarray:
 
 
 def read_ubx(path: str | os.PathLike, strict: bool = False) -> Pages:
-    """The Galileo I/NAV pages of a u-blox log (RXM-SFRBX), timed by NAV-TIMEGAL."""
+    """The Galileo I/NAV pages of a u-blox log (RXM-SFRBX), timed by NAV-TIMEGAL.
+
+    A page is labelled with the last valid NAV-TIMEGAL before it (its time of week rounded down to the page's
+    even second, and its week); one page per satellite and signal is kept per label, and pages before the first
+    label or repeated within one are counted as dropped. The frames are read block by block and selected with
+    array operations (:func:`~tollcli.readers.ubx_nav.iter_frame_blocks`)."""
     from tollcli.io.sources import open_binary
     from tollcli.readers.nmea.line_reader import ReadStats
-    from tollcli.readers.ubx_nav import iter_frames
+    from tollcli.readers.ubx_nav import iter_frame_blocks
 
-    rows: list[tuple] = []
-    words: list[tuple] = []
-    tow = wn = None
-    seen: set[tuple[int, int]] = set()
-    dropped = n = 0
+    parts: list[dict] = []
     stats = ReadStats()
     try:
         with open_binary(str(path)) as stream:
-            for cls, ident, payload, n in iter_frames(stream, str(path), stats, strict):
-                if (cls, ident) == _TIMEGAL and len(payload) >= 16:  # iTOW, galTow, fGalTow, galWno, leapS, valid, tAcc
-                    gal_tow, gal_wno = struct.unpack_from("<I", payload, 4)[0], struct.unpack_from("<h", payload, 12)[0]
-                    label = gal_tow - (3 - gal_tow % 2)
-                    if payload[15] & 0x03 == 0x03 and (tow, wn) != (label, gal_wno):  # galTowValid, galWnoValid
-                        tow, wn, seen = label, gal_wno, set()
-                elif (cls, ident) == _SFRBX and len(payload) >= 8 + 32 and payload[0] == 2:
-                    signal = _UBX_SIGNAL.get(payload[2] if payload[6] >= 2 else 1)
-                    if signal is None:
-                        continue
-                    key = (payload[1], payload[2])
-                    if tow is None or key in seen:
-                        dropped += 1
-                        continue
-                    seen.add(key)
-                    rows.append((payload[1], wn, tow, signal, n))
-                    words.append(struct.unpack_from("<8I", payload, 8))
+            for block in iter_frame_blocks(stream, str(path), stats, strict):
+                parts.append(_block_rows(block))
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
-    if n == 0:
+    if stats.sentences == 0:
         raise DataError(f"{path}: no UBX messages")
-    bits = ubx_page_bits(np.array(words, np.uint64).reshape(len(words), 8))
-    cols = list(zip(*rows)) if rows else [[], [], [], [], []]
-    return Pages(_table(cols[0], cols[1], cols[2], cols[3], bits, cols[4]), dropped, str(path))
+    rows = {k: np.concatenate([p[k] for p in parts]) if parts else np.zeros(0, np.int64) for k in _ROW_KEYS}
+    if not parts:
+        rows["words"] = np.zeros((0, 8), np.uint64)
+    return _pages_of_rows(rows, str(path))
+
+
+_ROW_KEYS = ("is_time", "tow", "wn", "valid", "svid", "sig", "sig_byte", "signal_ok", "line", "words")
+
+
+def _block_rows(block) -> dict:
+    """The NAV-TIMEGAL and RXM-SFRBX (Galileo) frames of a block, in file order, as arrays."""
+    data = np.frombuffer(block.buf, np.uint8)
+    cls, ident = block.classes, block.ids
+    length = block.ends - block.starts - 8
+    payload = block.starts + 6
+    is_time = (cls == _TIMEGAL[0]) & (ident == _TIMEGAL[1]) & (length >= 16)
+    is_page = (cls == _SFRBX[0]) & (ident == _SFRBX[1]) & (length >= 40)
+    is_page[is_page] = data[payload[is_page]] == 2  # gnssId: Galileo
+    keep = np.flatnonzero(is_time | is_page)
+    at = payload[keep]
+    time_row = is_time[keep]
+
+    def u(offset: int, n: int, dtype) -> np.ndarray:  # little-endian fields at payload offset, (rows,) of dtype
+        idx = np.minimum(at[:, None] + offset + np.arange(n), len(data) - 1)
+        return np.ascontiguousarray(data[idx]).view(dtype).reshape(len(at))
+
+    gal_tow = u(4, 4, "<u4").astype(np.int64)
+    wn = u(12, 2, "<i2").astype(np.int64)
+    valid = (data[np.minimum(at + 15, len(data) - 1)] & 0x03) == 0x03  # galTowValid, galWnoValid
+    sig = np.where(data[np.minimum(at + 6, len(data) - 1)] >= 2, data[np.minimum(at + 2, len(data) - 1)], 1).astype(np.int64)
+    words_idx = np.minimum(at[:, None] + 8 + np.arange(32), len(data) - 1)
+    words = np.ascontiguousarray(data[words_idx]).view("<u4").reshape(len(at), 8).astype(np.uint64)
+    return {"is_time": time_row, "tow": gal_tow - (3 - gal_tow % 2), "wn": wn, "valid": time_row & valid,
+            "svid": data[np.minimum(at + 1, len(data) - 1)].astype(np.int64), "sig": sig,
+            "sig_byte": data[np.minimum(at + 2, len(data) - 1)].astype(np.int64), "signal_ok": np.isin(sig, list(_UBX_SIGNAL)),
+            "line": block.first_number + keep.astype(np.int64), "words": words}  # fmt: skip
+
+
+def _pages_of_rows(rows: dict, name: str) -> Pages:
+    """Label the pages with the NAV-TIMEGAL before them and keep the first per satellite and signal (``read_ubx``)."""
+    valid = rows["valid"]
+    label_tow, label_wn = rows["tow"][valid], rows["wn"][valid]
+    new_label = np.ones(len(label_tow), bool)
+    new_label[1:] = (label_tow[1:] != label_tow[:-1]) | (label_wn[1:] != label_wn[:-1])
+    label_id = np.full(len(valid), -1, np.int64)
+    label_id[valid] = np.cumsum(new_label) - 1
+    label_id = np.maximum.accumulate(label_id) if len(label_id) else label_id  # the label in force at each row
+    first_of_label = np.flatnonzero(valid)[new_label]
+    page = ~rows["is_time"] & rows["signal_ok"]
+    timed = page & (label_id >= 0)
+    idx = np.flatnonzero(timed)
+    key = pd.DataFrame({"label": label_id[idx], "svid": rows["svid"][idx], "sig": rows["sig_byte"][idx]})  # (svId, sigId) as sent
+    first = idx[~key.duplicated().to_numpy()]
+    n_dropped = int(page.sum() - len(first))
+    which = label_id[first]
+    tow, wn = rows["tow"][first_of_label][which], rows["wn"][first_of_label][which]
+    signal = np.array([_UBX_SIGNAL[int(k)] for k in rows["sig"][first]], dtype=object) if len(first) else np.zeros(0, object)
+    bits = ubx_page_bits(rows["words"][first])
+    return Pages(_table(rows["svid"][first], wn, tow, signal, bits, rows["line"][first]), n_dropped, name)
 
 
 def read_pages(path: str | os.PathLike, strict: bool = False) -> Pages:

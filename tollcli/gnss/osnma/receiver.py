@@ -414,9 +414,11 @@ class Receiver:
                 self.awaiting_tags.append(tag)
 
     def _update_tags(self, chain: Chain) -> None:
-        for macseq in list(self.awaiting_macseq):
+        waiting: list[Macseq] = []  # (lists rebuilt in one pass: a tag's equality compares every field)
+        for macseq in self.awaiting_macseq:
             key = chain.key_at(macseq.key_index)
             if key is None:
+                waiting.append(macseq)
                 continue
             if chain.mac(key.bits, macseq.message())[:12] == macseq.value:
                 index = chain.index_of(macseq.gst_sf_s)
@@ -425,20 +427,22 @@ class Receiver:
                 self.awaiting_tags.extend(macseq.flx)
             else:
                 self._fail(macseq.prn_a, "macseq", f"MACSEQ of subframe {_gst_text(macseq.gst_sf_s)} does not verify")
-            self.awaiting_macseq.remove(macseq)
-        for tag in list(self.awaiting_tags):
+        self.awaiting_macseq = waiting
+        tags, still = self.awaiting_tags, []
+        for k, tag in enumerate(tags):
             if self.s.sync_bound_s > 330 or (self.s.sync_bound_s > 30 and tag.adkd != 12):
-                self.awaiting_tags.remove(tag)
                 continue
             key = chain.key_at(tag.key_index)
             if key is None:
+                still.append(tag)
                 continue
-            self.awaiting_tags.remove(tag)
             data = self._data_for(tag, chain, key)
             if data is not None:
                 self._verify(tag, data, chain, key)
                 if self.nma_status == NMAS_DONT_USE:
+                    self.awaiting_tags = still + tags[k + 1 :]
                     return
+        self.awaiting_tags = still
         self._check_data()
 
     def _data_for(self, tag: Tag, chain: Chain, key: Key) -> tuple[str, Block | None] | None:
