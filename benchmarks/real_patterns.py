@@ -184,7 +184,7 @@ def _moved(kind: str, f: list[str], lat, lon, speed_mps, course_deg, when) -> li
 def ubx_epochs(log: Path) -> list[tuple[bytes, bytes]]:
     """(NAV-PVT payload, NAV-SAT payload) of every epoch of a real u-blox log that has both, in order."""
     from tollcli.readers.nmea import ReadStats
-    from tollcli.readers.ubx_nav import iter_frames
+    from tollcli.readers.ubx_frames import iter_frames
 
     epochs, pvt, sat, itow = [], None, None, None
     with open(log, "rb") as fh:
@@ -216,7 +216,7 @@ def ubx_drive(log: Path, out: Path, n_epochs: int, track, day0: tuple[int, int, 
     import datetime as dt
     import struct
 
-    from tollcli.readers.ubx_nav import frame
+    from tollcli.readers.ubx_frames import frame
 
     template = ubx_epochs(log)
     start = dt.datetime(day0[2], day0[1], day0[0])

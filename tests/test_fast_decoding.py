@@ -12,7 +12,7 @@ import pytest
 
 from tollcli.errors import DataError
 from tollcli.readers.nmea.line_reader import ReadStats
-from tollcli.readers.ubx_nav import SYNC, block_checksums, checksum, frame, iter_frames
+from tollcli.readers.ubx_frames import SYNC, block_checksums, checksum, frame, iter_frames
 
 
 def _reference_frames(data: bytes) -> tuple[list, tuple]:

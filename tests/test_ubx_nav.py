@@ -16,7 +16,8 @@ from tollcli.integrity.raim import RaimParams
 from tollcli.io.sources import format_of_head, sniff_format
 from tollcli.job.log_integrity import iter_integrity
 from tollcli.readers.nmea import ReadStats
-from tollcli.readers.ubx_nav import frame, iter_ubx_nav_tables, svinfo_satellite
+from tollcli.readers.ubx_frames import frame
+from tollcli.readers.ubx_nav import iter_ubx_nav_tables, svinfo_satellite
 
 GPSD = SHARED_DATA / "gpsd"
 OSNMA_UBX = SHARED_DATA / "osnma" / "ublox" / "current_config.ubx"

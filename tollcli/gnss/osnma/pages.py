@@ -21,7 +21,6 @@ a subframe (15 pages, 30 s) starts at a multiple of 30 s and its page ``k`` has 
 from __future__ import annotations
 
 import os
-import struct
 from dataclasses import dataclass
 
 import numpy as np
@@ -140,7 +139,7 @@ def read_ubx(path: str | os.PathLike, strict: bool = False) -> Pages:
     array operations (:func:`~tollcli.readers.ubx_nav.iter_frame_blocks`)."""
     from tollcli.io.sources import open_binary
     from tollcli.readers.nmea.line_reader import ReadStats
-    from tollcli.readers.ubx_nav import iter_frame_blocks
+    from tollcli.readers.ubx_frames import iter_frame_blocks
 
     parts: list[dict] = []
     stats = ReadStats()
