@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from tollcli.charging.design_hal import parse_design_hal
-from tollcli.charging.geoobject_info import covered_lengths_m
-from tollcli.charging.geoobjects import build_from_roads, fallbacks
-from tollcli.charging.osm_network import osm_roads
-from tollcli.readers.osm import read_osm_roads
+from tollcli.geoobjects.design_hal import parse_design_hal
+from tollcli.geoobjects.info import covered_lengths_m
+from tollcli.geoobjects.build import build_from_roads, fallbacks
+from tollcli.geoobjects.osm_network import osm_roads
+from tollcli.geoobjects.osm import read_osm_roads
 
 REPO = Path(__file__).resolve().parents[1]
 BASELINE = "5-50"

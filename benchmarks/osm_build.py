@@ -13,9 +13,9 @@ import argparse
 import time
 from pathlib import Path
 
-from tollcli.charging.geoobjects import Roads, build_from_roads
-from tollcli.charging.osm_network import osm_roads
-from tollcli.readers.osm import read_osm_roads
+from tollcli.geoobjects.build import Roads, build_from_roads
+from tollcli.geoobjects.osm_network import osm_roads
+from tollcli.geoobjects.osm import read_osm_roads
 
 REPO = Path(__file__).resolve().parents[1]
 

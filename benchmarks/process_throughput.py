@@ -38,7 +38,7 @@ import time
 from pathlib import Path
 
 import tollcli as tollcli_package
-from tollcli.charging.geoobjects import build_geoobjects
+from tollcli.geoobjects.build import build_geoobjects
 from tollcli.readers.nmea.compose import straight_drive
 
 from reader_throughput import plain_pynmea2  # noqa: E402  the same baseline as the reader's benchmark (benchmarks/ is on sys.path)

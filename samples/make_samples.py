@@ -19,7 +19,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tollcli.charging.geoobjects import build_geoobjects
+from tollcli.geoobjects.build import build_geoobjects
 from tollcli.readers.nmea.compose import straight_drive
 
 HERE = Path(__file__).resolve().parent

@@ -16,9 +16,10 @@ from pathlib import Path
 ROOMS = {
     "floor": 0,  # tollcli/__init__, errors, times, cache, geodesy, spatial, stats, io/
     "readers": 1,  # tollcli/readers/: receiver files → tables
+    "geoobjects": 1,  # tollcli/geoobjects/: road files → geo-objects, the compiled store (beside the readers)
     "gnss": 2,  # tollcli/gnss/: orbits, atmosphere, positioning, error models, measurements
     "integrity": 3,  # tollcli/integrity/: RAIM, FDE, design, speed, map matching, HIT, policies
-    "charging": 4,  # tollcli/charging/: geo-objects, recognition, tariffs, invoices, audit
+    "charging": 4,  # tollcli/charging/: recognition, tariffs, invoices, audit
     "enforcement": 4,  # tollcli/enforcement/: locate, findings, roadside checks
     "job": 5,  # tollcli/job/: one log and many, end to end
     "simulate": 5,  # tollcli/simulate/: drives with known truth
@@ -27,7 +28,7 @@ ROOMS = {
 }
 FLOOR_MODULES = {"tollcli", "tollcli.errors", "tollcli.times", "tollcli.cache", "tollcli.geodesy", "tollcli.spatial",
                  "tollcli.stats"}  # fmt: skip
-PACKAGE_ROOMS = {"io": "floor", "readers": "readers", "gnss": "gnss", "integrity": "integrity", "charging": "charging",
+PACKAGE_ROOMS = {"io": "floor", "readers": "readers", "geoobjects": "geoobjects", "gnss": "gnss", "integrity": "integrity", "charging": "charging",
                  "enforcement": "enforcement", "job": "job", "simulate": "simulate", "report": "report", "cli": "cli"}  # fmt: skip
 
 

@@ -10,7 +10,7 @@ import shapely
 from pyproj import Geod
 
 from conftest import built_geoobjects, run_cli, shared
-from tollcli.charging.carriageways import direction_check, heading_deg
+from tollcli.geoobjects.carriageways import direction_check, heading_deg
 from tollcli.charging.invoice import invoice_json
 from tollcli.job import pipeline, streaming
 from tollcli.job.pipeline import ChargeSettings, charge_log

@@ -17,8 +17,8 @@ import pytest
 import shapely
 from conftest import REPO, run_cli, shared
 
-from tollcli.charging.design_hal import DesignHal, parse_design_hal
-from tollcli.charging.geoobjects import build_from_roads, build_geoobjects
+from tollcli.geoobjects.design_hal import DesignHal, parse_design_hal
+from tollcli.geoobjects.build import build_from_roads, build_geoobjects
 from tollcli.errors import UsageError
 from tollcli.spatial import project
 
@@ -169,7 +169,7 @@ def test_a_road_crossing_on_another_level_does_not_cut_it_into_sections(tmp_path
 def test_a_passage_spans_the_stretch_between_parts(tmp_path):
     """The stretch cut out between two parts is driven without a fix inside: a slow vehicle crossing it (2 m/s) is
     still one passage, charged once."""
-    from tollcli.charging.geoobject_store import TUNNEL_MIN_SPEED_MPS, load_geoobjects
+    from tollcli.geoobjects.store import TUNNEL_MIN_SPEED_MPS, load_geoobjects
     from tollcli.charging.recognition import PASSAGE_GAP_S, passage_gaps_s
 
     roads = _write(tmp_path / "roads.geojson", [
@@ -244,8 +244,8 @@ def test_helsinki_primary_at_design_hal_25(tmp_path):
     """Real central Helsinki with its primary roads tolled, design HAL 25 m: every geo-object passes check, no point
     of a road a section does not meet lies inside its geo-object (opposite carriageways aside: they are told apart
     by the direction of travel), and geo-objects of HAL ≥ 25 m cover a share of the primary length (none before)."""
-    from tollcli.charging.osm_network import osm_roads
-    from tollcli.readers.osm import read_osm_roads
+    from tollcli.geoobjects.osm_network import osm_roads
+    from tollcli.geoobjects.osm import read_osm_roads
 
     path = shared("osm", "helsinki.osm.pbf")
     geo = tmp_path / "h.geojson"
@@ -273,7 +273,7 @@ def test_helsinki_primary_at_design_hal_25(tmp_path):
 
 
 def test_build_from_roads_keeps_the_design_of_each_class(tmp_path):
-    from tollcli.charging.geoobjects import roads_of
+    from tollcli.geoobjects.build import roads_of
 
     roads = _write(tmp_path / "roads.geojson", [
         ({"id": "FAST", "road_class": "motorway"}, [(0, 0), (1000, 0)]),

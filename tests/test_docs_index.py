@@ -45,3 +45,48 @@ def test_every_module_is_named_in_the_layout_and_every_named_module_exists():
         held = {p.name for p in init.parent.rglob("*.py")} | {"_bulk_kernels.c"}
         for named in set(re.findall(r"``?(\w+\.py)``?", init.read_text(encoding="utf-8"))):
             assert named in held or named.startswith("test_"), f"{init.relative_to(REPO)} names {named}, which it does not hold"
+
+
+def _top_level_names(path) -> set[str]:
+    import ast
+
+    names = set()
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names.update(t.id for t in targets if isinstance(t, ast.Name))
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            names.update((a.asname or a.name).split(".")[0] for a in node.names)
+    return names
+
+
+def test_every_dotted_name_in_the_code_and_the_docs_exists():
+    """``tollcli.<room>.<module>[.<name>]`` in a docstring, comment or document names a module that is there and, after
+    it, a name that module defines: a file moved or renamed leaves no description behind."""
+    package = REPO / "tollcli"
+    sources = [*package.rglob("*.py"), *(REPO / "docs").glob("*.md"), REPO / "README.md", REPO / "CONTRIBUTING.md",
+               *(REPO / "tests").glob("*.py"), *(REPO / "benchmarks").glob("*.py")]  # fmt: skip
+    stale = set()
+    for source in sources:
+        for dotted in set(re.findall(r"\btollcli(?:\.[A-Za-z_]\w*)+", source.read_text(encoding="utf-8"))):
+            parts = dotted.split(".")[1:]
+            where = package
+            for k, part in enumerate(parts):
+                if (where / part).is_dir():
+                    where = where / part
+                    continue
+                if (where / f"{part}.c").exists():  # a compiled extension
+                    break
+                if (where / f"{part}.py").exists():
+                    module = where / f"{part}.py"
+                    rest = parts[k + 1 :]
+                    if rest and rest[0] not in _top_level_names(module):
+                        stale.add(f"{source.relative_to(REPO)}: {dotted} ({rest[0]} not in {module.relative_to(REPO)})")
+                    break
+                init = where / "__init__.py"
+                if not (init.exists() and part in _top_level_names(init)):
+                    stale.add(f"{source.relative_to(REPO)}: {dotted}")
+                break
+    assert not stale, "names of modules or functions that are not there:\n" + "\n".join(sorted(stale))

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 from conftest import REPO, SAMPLES, run_cli
 
-from tollcli.charging.geoobjects import build_geoobjects
+from tollcli.geoobjects.build import build_geoobjects
 from tollcli.geodesy import enu_shift2geodetic
 from tollcli.simulate.drive import SimConfig, simulate
 from tollcli.simulate.errors import FaultPlan

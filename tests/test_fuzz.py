@@ -16,7 +16,7 @@ from conftest import run_main
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tollcli.charging.geoobjects import build_geoobjects, check_geoobjects
+from tollcli.geoobjects.build import build_geoobjects, check_geoobjects
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
 from tollcli.errors import TollError

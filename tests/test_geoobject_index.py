@@ -7,7 +7,7 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tollcli.charging.geoobject_index import MAX_CELLS, GridIndex, StoredGeometries, build_grid
+from tollcli.geoobjects.index import MAX_CELLS, GridIndex, StoredGeometries, build_grid
 
 
 def _index(geoms):

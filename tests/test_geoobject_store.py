@@ -13,8 +13,8 @@ import pytest
 import shapely
 from conftest import REPO, SAMPLES, run_cli
 
-from tollcli.charging import geoobject_store
-from tollcli.charging.geoobjects import build_from_roads, roads_of
+from tollcli.geoobjects import store as geoobject_store
+from tollcli.geoobjects.build import build_from_roads, roads_of
 from tollcli.charging.recognition import candidate_pairs
 from tollcli.errors import DataError
 from tollcli.spatial import feature_collection_text
@@ -143,7 +143,7 @@ def _features_as_loaded(path) -> list:
 def test_streamed_features_are_json_loads_ones(tmp_path, monkeypatch, indent):
     """Read 7 bytes at a time, made into geometries 2 features at a time, in any member order, pretty or not: the same
     properties and the same coordinates, bit for bit, as json.load; the digest is the file's."""
-    from tollcli.charging import geojson_stream
+    from tollcli.geoobjects import geojson_stream
 
     monkeypatch.setattr(geojson_stream, "READ_BYTES", 7)
     monkeypatch.setattr(geojson_stream, "BLOCK", 2)
@@ -173,7 +173,7 @@ def test_streamed_features_are_json_loads_ones(tmp_path, monkeypatch, indent):
     ],
 )
 def test_streamed_reading_says_what_is_wrong(tmp_path, text, message):
-    from tollcli.charging.geojson_stream import stream_features
+    from tollcli.geoobjects.geojson_stream import stream_features
 
     path = tmp_path / "bad.geojson"
     path.write_text(text)
@@ -188,7 +188,7 @@ def test_streamed_reading_says_what_is_wrong(tmp_path, text, message):
 def test_overlaps_found_block_by_block_are_every_pair_measured_at_once(monkeypatch, block):
     """check measures overlaps a block of pairs at a time: the same findings as measuring every pair of one metric
     projection, in file order."""
-    from tollcli.charging import geoobject_check
+    from tollcli.geoobjects import check as geoobject_check
     from tollcli.spatial import metric_crs, project
 
     monkeypatch.setattr(geoobject_check, "OVERLAP_BLOCK", block)

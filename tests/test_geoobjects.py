@@ -9,8 +9,8 @@ import pytest
 import shapely
 from conftest import run_cli
 
-from tollcli.charging.design_hal import DesignHal
-from tollcli.charging.geoobjects import build_geoobjects, check_geoobjects
+from tollcli.geoobjects.design_hal import DesignHal
+from tollcli.geoobjects.build import build_geoobjects, check_geoobjects
 from tollcli.errors import DataError
 from tollcli.spatial import metric_crs, project
 

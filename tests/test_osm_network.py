@@ -13,10 +13,10 @@ import pytest
 import shapely
 
 from conftest import run_cli, shared
-from tollcli.charging.geoobjects import build_from_roads
-from tollcli.charging.osm_network import osm_roads, tolled_ways
+from tollcli.geoobjects.build import build_from_roads
+from tollcli.geoobjects.osm_network import osm_roads, tolled_ways
 from tollcli.errors import UsageError
-from tollcli.readers.osm import read_osm_roads
+from tollcli.geoobjects.osm import read_osm_roads
 from tollcli.spatial import project
 
 

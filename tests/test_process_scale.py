@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from tollcli.charging import geoobject_store
+from tollcli.geoobjects import store as geoobject_store
 from tollcli.charging.canonical_json import canonical_json
 from tollcli.charging.invoice import invoice_json, seal
 from tollcli.charging.recognition import inside_pairs, load_geoobjects

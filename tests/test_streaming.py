@@ -18,7 +18,7 @@ from conftest import REPO, SAMPLES
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tollcli.charging.geoobjects import build_geoobjects
+from tollcli.geoobjects.build import build_geoobjects
 from tollcli.charging.invoice import invoice_json
 from tollcli.charging.recognition import _charges_in_order, charges, passages
 from tollcli.enforcement.trip import trailing_median

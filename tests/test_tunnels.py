@@ -10,7 +10,7 @@ import pyproj
 import pytest
 
 from conftest import built_geoobjects, run_cli, shared
-from tollcli.charging.geoobject_store import TUNNEL_MIN_SPEED_MPS, tunnel_lengths
+from tollcli.geoobjects.store import TUNNEL_MIN_SPEED_MPS, tunnel_lengths
 from tollcli.charging.recognition import PASSAGE_GAP_S, passage_gaps_s, passages
 
 #: a 6.7 km motorway north of Perpignan; the drive loses every satellite for 216 s from t = 100 s (at 50 km/h:
@@ -99,8 +99,8 @@ def test_tunnel_lengths_from_properties():
 def test_real_tunnels_in_a_tolled_osm_section_are_measured_and_kept(tmp_path):
     """Alvar Aallon katu (Helsinki) runs through three short tunnels and a building passage: its section records their
     ground length (the tunnel ways' geodesic lengths), and so does the geo-object built from it."""
-    from tollcli.charging.osm_network import osm_roads
-    from tollcli.readers.osm import read_osm_roads
+    from tollcli.geoobjects.osm_network import osm_roads
+    from tollcli.geoobjects.osm import read_osm_roads
 
     path = shared("osm/helsinki.osm.pbf")
     osm = read_osm_roads(str(path))

@@ -1,5 +1,5 @@
-"""Charging: geo-objects (build, check, compiled store), recognition, tariffs, invoices, audit.
+"""Charging: recognition of passages, tariffs and per-km rate tables, money, invoices, the audit.
 
-Turns positions the integrity room vouches for into charged passages and money.
-Uses integrity, GNSS, the readers and the floor (not enforcement, its neighbour).
+Turns positions the integrity room vouches for into charged passages and money, over the geo-objects of
+``tollcli.geoobjects``. Uses integrity, GNSS, the readers, the geo-objects and the floor (not enforcement, its neighbour).
 """

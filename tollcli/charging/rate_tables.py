@@ -28,7 +28,7 @@ from decimal import Decimal
 from zoneinfo import ZoneInfo
 
 from tollcli.charging.money import money, where
-from tollcli.charging.road_sections import road_of
+from tollcli.geoobjects.road_sections import road_of
 from tollcli.errors import DataError
 
 TABLE_KEYS = ("name", "valid_from", "valid_until", "rate")

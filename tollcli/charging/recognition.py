@@ -10,7 +10,7 @@ course must also agree with its direction of travel (``carriageways.py``).
 
 Positions inside one geo-object are grouped into passages (a new passage after
 ``passage_gap_s`` without a fix inside; in a geo-object with a tunnel, or of several parts, after that plus
-the time its tunnel and the longest stretch between its parts take at ``geoobject_store.TUNNEL_MIN_SPEED_MPS``: no
+the time its tunnel and the longest stretch between its parts take at ``tollcli.geoobjects.store.TUNNEL_MIN_SPEED_MPS``: no
 GNSS reaches a tunnel, no geo-object covers a stretch cut around another road, and the fixes before and after are
 one passage, charged once). In each passage the valid positions are
 thinned to independent ones, at least ``tc_s`` apart (greedy from the first:
@@ -38,7 +38,7 @@ def passage_gaps_s(geo, passage_gap_s: float = PASSAGE_GAP_S) -> np.ndarray:
     return passage_gap_s + geo.gap_times_s()
 
 
-from tollcli.charging.geoobject_store import GeoObjects, load_geoobjects  # noqa: E402,F401  (re-exported)
+from tollcli.geoobjects.store import GeoObjects, load_geoobjects  # noqa: E402,F401  (re-exported)
 
 
 def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -160,7 +160,7 @@ def _directions(epochs: pd.DataFrame, geo: GeoObjects, rows: np.ndarray, obj: np
     out = np.full(rows.size, "", dtype=object)
     directed = geo.directed()[obj]
     if directed.any():
-        from tollcli.charging.carriageways import direction_check
+        from tollcli.geoobjects.carriageways import direction_check
 
         nan = np.full(len(epochs), np.nan)
         course = epochs["course_deg"].to_numpy(float) if "course_deg" in epochs else nan

@@ -56,7 +56,7 @@ from tollcli.charging.rate_tables import (
     parse_vehicle,
     table_in_force,
 )
-from tollcli.charging.road_sections import road_of
+from tollcli.geoobjects.road_sections import road_of
 from tollcli.errors import DataError, UsageError
 
 DAYS = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")

@@ -165,7 +165,7 @@ def passages_from_trajectory(points: pd.DataFrame, geo) -> pd.DataFrame:
     rows, obj, px, py = candidate_pairs(points, geo)
     directed = geo.directed()[obj]
     if directed.any():  # a carriageway is driven only in its direction of travel (carriageways.py)
-        from tollcli.charging.carriageways import direction_check
+        from tollcli.geoobjects.carriageways import direction_check
 
         course = points["course_deg"].to_numpy(float) if "course_deg" in points else track_deg(points)
         ok = direction_check(geo.axes[obj[directed]], px[directed], py[directed], course[rows[directed]],

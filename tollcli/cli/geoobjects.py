@@ -8,8 +8,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from tollcli.charging.design_hal import HAL_FLOOR_M
-from tollcli.charging.geoobjects import CONNECT_TOL_M, TRIM_FACTOR
+from tollcli.geoobjects.design_hal import HAL_FLOOR_M
+from tollcli.geoobjects.build import CONNECT_TOL_M, TRIM_FACTOR
 from tollcli.cli import options as opt
 from tollcli.cli.console import note
 from tollcli.errors import DataError, UsageError
@@ -39,7 +39,7 @@ def build(
     level). A section cut around a near road keeps several parts, charged once per passage at its whole length. Where
     no stretch can have the design HAL, the largest HAL down to --hal-min is used and listed. Nothing is written that
     'geoobjects check' or 'process' would refuse."""
-    from tollcli.charging.geojson_stream import gc_paused
+    from tollcli.geoobjects.geojson_stream import gc_paused
 
     if out_fmt is not None and out_fmt.lower() != "geojson":
         raise UsageError(f"-f {out_fmt}: geo-objects are written as GeoJSON (what check, info and process read)")
@@ -52,11 +52,11 @@ def build(
 
 
 def _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet) -> None:
-    from tollcli.charging.design_hal import parse_design_hal
-    from tollcli.charging.geoobject_check import HAL_MIN_CHECK_M, check_features
-    from tollcli.charging.geoobject_store import precompile
-    from tollcli.charging.geoobjects import build_from_roads, fallbacks, roads_of
-    from tollcli.readers.osm import is_osm
+    from tollcli.geoobjects.design_hal import parse_design_hal
+    from tollcli.geoobjects.check import HAL_MIN_CHECK_M, check_features
+    from tollcli.geoobjects.store import precompile
+    from tollcli.geoobjects.build import build_from_roads, fallbacks, roads_of
+    from tollcli.geoobjects.osm import is_osm
     from tollcli.spatial import feature_collection_text
 
     gives_default = any("=" not in h for h in hal or [])
@@ -64,8 +64,8 @@ def _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_to
         hal = [*(hal or []), f"{min(25.0, hal_max):g}-{hal_max:g}"]
     design = parse_design_hal(hal)
     if is_osm(roads):
-        from tollcli.charging.osm_network import osm_roads
-        from tollcli.readers.osm import read_osm_roads
+        from tollcli.geoobjects.osm_network import osm_roads
+        from tollcli.geoobjects.osm import read_osm_roads
 
         network = osm_roads(read_osm_roads(roads), tolled or [])
     elif tolled:
@@ -103,7 +103,7 @@ def _hashed(pieces, digest):
 
 def _tell(roads: str, doc: dict, below: list[dict], skipped: list[dict], design: str, quiet: bool) -> None:
     """The build's summary line, then each section below its design HAL and each section skipped (stderr)."""
-    from tollcli.charging.geoobject_info import covered_lengths_m
+    from tollcli.geoobjects.info import covered_lengths_m
 
     props = [f["properties"] for f in doc["features"]]
     hals = [p["hal_m"] for p in props]
@@ -133,7 +133,7 @@ def check(
     quiet: opt.Quiet = False,
 ) -> None:
     """Report invalid geometry, missing or duplicate ids, overlaps, HAL below a minimum, wrong CRS (exit 1 if any)."""
-    from tollcli.charging.geoobject_check import check_geoobjects
+    from tollcli.geoobjects.check import check_geoobjects
 
     findings = check_geoobjects(path, hal_min)
     if as_json:
@@ -154,7 +154,7 @@ def info(
 ) -> None:
     """What a geo-object file holds: counts, HAL histogram, the share of the tolled length covered, and for each
     geo-object its HAL, design, parts, what holds its HAL and the nearest road kept clear of (and how far away it is)."""
-    from tollcli.charging.geoobject_info import geoobject_info
+    from tollcli.geoobjects.info import geoobject_info
 
     summary = geoobject_info(path, min_hal)
     if as_json:
@@ -194,7 +194,7 @@ def compile_store(
     import time
 
     from tollcli.cache import cache_dir
-    from tollcli.charging.geoobject_store import load_geoobjects
+    from tollcli.geoobjects.store import load_geoobjects
 
     if cache_dir() is None:
         raise UsageError("TOLLCLI_CACHE_DIR=off: there is no cache to compile into")

@@ -43,7 +43,7 @@ def _command(ctx: typer.Context) -> str:
 
 def _route_lines(route: str, via: str | None, path_from: str | None, path_to: str | None) -> list:
     """The lines to drive: a GeoJSON route (optionally --via ids) or an OpenStreetMap one (--via ways, --from/--to)."""
-    from tollcli.readers.osm import is_osm
+    from tollcli.geoobjects.osm import is_osm
 
     if not is_osm(route):
         if path_from:

@@ -121,7 +121,7 @@ def trip_findings(epochs: pd.DataFrame, satellites: pd.DataFrame | None = None, 
 
     ``cn0``: the per-epoch C/N0 summary (:func:`~tollcli.enforcement.trip.cn0_summary`) when the
     satellite table itself is not kept (a long log read in chunks). ``keep_rows``: each finding keeps
-    its first and last epoch rows under ``_rows`` (for :mod:`tollcli.enforcement.stream`).
+    its first and last epoch rows under ``_rows`` (for the streaming charge, :mod:`tollcli.job.streaming`).
     ``times_increase``: whether the trailing baselines may use time windows (default: the times of
     ``epochs`` are all known and never go back).
     """

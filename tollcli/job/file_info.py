@@ -4,7 +4,7 @@ For a log: its kind (as ``--input-format auto`` recognises it), its messages (NM
 messages, gpsd report classes, GnssLogger records …), and — for the receivers' own solutions (NMEA, u-blox NAV,
 gpsd JSON, RTKLIB) — the epochs, their span and rate, the fixes by quality, the evidence each integrity source
 needs (residuals, the receiver's RAIM, its error ellipse, satellites) and so the level ``--integrity-sources
-auto`` would settle on. For a geo-object file: :func:`tollcli.charging.geoobject_info.geoobject_info`.
+auto`` would settle on. For a geo-object file: :func:`tollcli.geoobjects.info.geoobject_info`.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ def _is_json_doc(path: str) -> dict | None:
 
 def file_info(path: str, min_hal_m: float = 25.0) -> dict:
     """What ``path`` holds, as a JSON-ready dict (see the module's description)."""
-    from tollcli.charging.geoobject_info import geoobject_info
+    from tollcli.geoobjects.info import geoobject_info
 
     if path != "-" and path.lower().endswith((".json", ".geojson")):
         try:  # read feature by feature: a national network's file is never parsed whole

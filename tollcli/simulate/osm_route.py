@@ -15,7 +15,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from tollcli.errors import DataError, UsageError
 from tollcli.geodesy import great_circle_distance_m
-from tollcli.readers.osm import OsmRoads, read_osm_roads
+from tollcli.geoobjects.osm import OsmRoads, read_osm_roads
 
 #: a point further than this from every road node is not on the network (m)
 SNAP_MAX_M = 200.0

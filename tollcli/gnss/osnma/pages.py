@@ -136,7 +136,7 @@ def read_ubx(path: str | os.PathLike, strict: bool = False) -> Pages:
     A page is labelled with the last valid NAV-TIMEGAL before it (its time of week rounded down to the page's
     even second, and its week); one page per satellite and signal is kept per label, and pages before the first
     label or repeated within one are counted as dropped. The frames are read block by block and selected with
-    array operations (:func:`~tollcli.readers.ubx_nav.iter_frame_blocks`)."""
+    array operations (:func:`~tollcli.readers.ubx_frames.iter_frame_blocks`)."""
     from tollcli.io.sources import open_binary
     from tollcli.readers.nmea.line_reader import ReadStats
     from tollcli.readers.ubx_frames import iter_frame_blocks

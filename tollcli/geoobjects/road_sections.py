@@ -29,7 +29,7 @@ def road_of(section: str) -> str:
 
 
 def cut_at_junctions(roads, connect_tol_m: float, levels: np.ndarray, tolled: np.ndarray):
-    """``roads`` (a :class:`tollcli.charging.geoobjects.Roads` without topology) with every tolled road cut at the
+    """``roads`` (a :class:`tollcli.geoobjects.build.Roads` without topology) with every tolled road cut at the
     junctions on its interior; free roads are kept whole (they only bound and cut geo-objects)."""
     lines = np.asarray(roads.lines, dtype=object)
     metric = project(lines, metric_crs(lines))  # topology only: one UTM zone is plenty for a metre's tolerance

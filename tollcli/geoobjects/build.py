@@ -1,6 +1,6 @@
 """Geo-objects: constant-HAL buffers around tolled road sections (paper 001 §II; thesis §3.4), built for a design HAL.
 
-A road network is a GeoJSON FeatureCollection (or a GeoPackage, Shapefile, FlatGeobuf: ``readers/road_files.py``)
+A road network is a GeoJSON FeatureCollection (or a GeoPackage, Shapefile, FlatGeobuf: ``geoobjects/road_files.py``)
 of LineStrings (centre lines) with properties ``id``, ``name``, ``road_class``, optional ``hal_m``, optional
 ``direction`` and ``tolled`` (default true); or an OpenStreetMap map (``osm_network.py``). Non-tolled roads only
 bound HAL and cut geo-objects. A tolled road is first cut into sections at its junctions (``road_sections.py``;
@@ -38,10 +38,10 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from tollcli.charging.carriageways import opposite_pairs
-from tollcli.charging.design_hal import HAL_FLOOR_M, DesignHal
-from tollcli.charging.geoobject_check import check_geoobjects  # noqa: F401  (re-exported)
-from tollcli.charging.section_cut import (
+from tollcli.geoobjects.carriageways import opposite_pairs
+from tollcli.geoobjects.design_hal import HAL_FLOOR_M, DesignHal
+from tollcli.geoobjects.check import check_geoobjects  # noqa: F401  (re-exported)
+from tollcli.geoobjects.section_cut import (
     cut_section,
     hal_bound,
     section_parts,
@@ -141,8 +141,8 @@ def is_tolled(props: dict) -> bool:
 
 def roads_of(path: str, connect_tol_m: float = CONNECT_TOL_M) -> Roads:
     """The roads of a vector file (GeoJSON, GeoPackage, Shapefile, FlatGeobuf), tolled ones cut at their junctions."""
-    from tollcli.charging.road_sections import cut_at_junctions
-    from tollcli.readers.road_files import read_road_features
+    from tollcli.geoobjects.road_sections import cut_at_junctions
+    from tollcli.geoobjects.road_files import read_road_features
 
     ids, props, lines = _roads(read_road_features(path), path)
     roads = Roads(ids, props, lines)

@@ -10,7 +10,7 @@ through the remaining nodes into sections. A section keeps its OSM way ids, ``re
 Roads meet only where they share a node: a road crossing on a bridge or in a tunnel, or merely drawn
 across another without a common node, is not connected to it (grade separation), whatever the 2-D
 geometry says. :func:`osm_roads` gives the sections and the free ways (whole) as
-:class:`tollcli.charging.geoobjects.Roads` with those junctions.
+:class:`tollcli.geoobjects.build.Roads` with those junctions.
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ import pandas as pd
 import shapely
 from pyproj import Geod
 
-from tollcli.charging.geoobjects import Roads
+from tollcli.geoobjects.build import Roads
 from tollcli.errors import UsageError
-from tollcli.readers.osm import OsmRoads
+from tollcli.geoobjects.osm import OsmRoads
 
 #: ground lengths (tunnel_m) on the WGS-84 ellipsoid
 _GEOD = Geod(ellps="WGS84")

@@ -29,7 +29,7 @@ def covered_lengths_m(props: list[dict], skipped: list[dict], min_hal_m: float =
 
 def geoobject_info(path: str, min_hal_m: float = 25.0) -> dict:
     """The summary of a geo-object file as a JSON-ready dict (lengths in metres)."""
-    from tollcli.charging.geojson_stream import gc_paused, stream_collection
+    from tollcli.geoobjects.geojson_stream import gc_paused, stream_collection
 
     with gc_paused():  # feature by feature, the properties only: a national network's file is never held whole
         doc, _ = stream_collection(path, geometry=False)

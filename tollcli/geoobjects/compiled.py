@@ -1,8 +1,8 @@
-"""Compile geo-object features into the store's arrays (:mod:`tollcli.charging.geoobject_store` writes and maps them).
+"""Compile geo-object features into the store's arrays (:mod:`tollcli.geoobjects.store` writes and maps them).
 
 Per feature only its properties are read in Python; the polygons (plain single-ring ones in bulk), their
 projections to each geo-object's own metric frame and to the file's search CRS, the boxes, the WKB and the grid
-(:mod:`tollcli.charging.geoobject_index`) are made over all of them at once, in time linear in the network.
+(:mod:`tollcli.geoobjects.index`) are made over all of them at once, in time linear in the network.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from tollcli.charging.geojson_stream import gc_paused
-from tollcli.charging.geoobject_index import build_grid
+from tollcli.geoobjects.geojson_stream import gc_paused
+from tollcli.geoobjects.index import build_grid
 from tollcli.errors import DataError
 from tollcli.spatial import feature_geometries, feature_geometry, project
 
@@ -32,7 +32,7 @@ def compile_file(path: str, columns: dict | None = None) -> tuple[dict[str, np.n
 
 
 def _compile_file(path: str, columns: dict | None) -> tuple[dict[str, np.ndarray], str]:
-    from tollcli.charging.geojson_stream import stream_features
+    from tollcli.geoobjects.geojson_stream import stream_features
 
     features, digest = stream_features(path, USED_PROPERTIES)  # feature by feature: never the whole text nor all
     # coordinates as lists
@@ -120,7 +120,7 @@ def _refuse_what_check_rejects(features: list, path: str) -> None:
     """DataError when ``tollcli geoobjects check`` finds a problem: a network that check rejects is never charged
     (overlaps would charge one passage twice, projected coordinates would charge nothing). Runs when a file is
     compiled only: the store is made after it passes."""
-    from tollcli.charging.geoobject_check import check_features
+    from tollcli.geoobjects.check import check_features
 
     problems = check_features(features)
     if problems:
@@ -147,7 +147,7 @@ def section_lengths(props: list[dict]) -> np.ndarray:
 
 def tunnel_lengths(props: list[dict]) -> np.ndarray:
     """Each geo-object's length in tunnels, m: ``tunnel_m``, else its whole length when ``tunnel`` is set, else 0."""
-    from tollcli.charging.geoobjects import flag_set
+    from tollcli.geoobjects.build import flag_set
 
     out = np.zeros(len(props))
     for i, p in enumerate(props):

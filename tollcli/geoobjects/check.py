@@ -1,6 +1,6 @@
 """``tollcli geoobjects check``: what makes a geo-object file unusable, each problem tied to its feature.
 
-Run on every file before it is compiled for charging (``geoobject_store.py``: a file check rejects is never
+Run on every file before it is compiled for charging (``store.py``: a file check rejects is never
 charged) and on what ``tollcli geoobjects build`` is about to write (a build never writes what check would reject):
 one list of problems, in the same words everywhere.
 """
@@ -57,7 +57,7 @@ HAL_MIN_CHECK_M = 5.0
 
 def check_geoobjects(path: str, hal_min_m: float = HAL_MIN_CHECK_M) -> list[Finding]:
     """Problems of a geo-object file, each tied to a feature id (empty list: the file is usable)."""
-    from tollcli.charging.geojson_stream import gc_paused, stream_features
+    from tollcli.geoobjects.geojson_stream import gc_paused, stream_features
 
     with gc_paused():  # read feature by feature: a national network's file is never held whole
         return check_features(stream_features(path)[0], hal_min_m)

@@ -8,7 +8,7 @@ The store is a folder of numpy files in ``$TOLLCLI_CACHE_DIR/geoobjects/<SHA-256
 (default cache ``~/.cache/tollcli``): per geo-object its HAL, lengths, frame, number of parts and whether it is a
 directed carriageway; the polygons in their own frames (and, with several frames, in the search CRS) and the
 carriageways' axes as WKB (every coordinate bit for bit: invoices never depend on the store); the boxes and a grid
-over them (:mod:`tollcli.charging.geoobject_index`); ids, names and road classes as JSON.
+over them (:mod:`tollcli.geoobjects.index`); ids, names and road classes as JSON.
 
 Loading memory-maps the arrays: nothing is parsed, the workers of a batch (and Dask workers on one host) share the
 pages, and a run decodes only the polygons of the geo-objects near its track — its cost grows with the drive, not
@@ -30,14 +30,14 @@ import numpy as np
 import shapely
 
 from tollcli.cache import cache_dir
-from tollcli.charging.geoobject_compile import (  # noqa: F401  (section_lengths, tunnel_lengths: re-exported)
+from tollcli.geoobjects.compiled import (  # noqa: F401  (section_lengths, tunnel_lengths: re-exported)
     STORE_FORMAT,
     compile_features,
     compile_file,
     section_lengths,
     tunnel_lengths,
 )
-from tollcli.charging.geoobject_index import GridIndex, StoredGeometries
+from tollcli.geoobjects.index import GridIndex, StoredGeometries
 from tollcli.errors import DataError
 from tollcli.io.sources import file_sha256
 

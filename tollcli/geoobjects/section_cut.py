@@ -1,5 +1,5 @@
 """How much of a tolled section a design HAL keeps: trims at its junctions, cuts around the roads it keeps clear of,
-and the fallback to the largest HAL that leaves a stretch (the rules: :mod:`tollcli.charging.geoobjects`).
+and the fallback to the largest HAL that leaves a stretch (the rules: :mod:`tollcli.geoobjects.build`).
 
 Every function works on one section in its metric frame: ``line`` (its centre line), ``met_union`` (the roads it
 meets, merged; None), ``others`` / ``other_dist`` (indices and distances of the other roads within reach, which it
