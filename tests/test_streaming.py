@@ -30,7 +30,8 @@ from tollcli.readers.nmea import read_nmea
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
 TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
 ROADS = str(REPO / "geoobjects" / "example-roads.geojson")
-LOGS = ["sim/urban-fault/drive.nmea", "sim/rural-fault/drive.nmea", "sim/urban-clean/drive.nmea", "straight-drive.nmea"]
+LOGS = ["sim/urban-fault/drive.nmea", "sim/rural-fault/drive.nmea", "sim/urban-clean/drive.nmea", "straight-drive.nmea",
+        "sim/urban-fault/drive-derived.csv", "sim/rural-clean/drive-derived.csv"]  # the last two: pseudorange logs
 
 
 def _whole(monkeypatch, log: str, **kw) -> dict:
@@ -57,8 +58,38 @@ def test_streamed_invoice_is_the_whole_log_invoice(monkeypatch, log, roads):
     streamed = _streamed(monkeypatch, path, roads=roads)
     assert invoice_json(streamed) == invoice_json(whole)
     assert whole["lines"] or whole["not_charged"]  # the comparison covers passages
-    if roads:
-        assert whole["parameters"]["policy_used"] == "all"
+    if roads:  # the derived CSV has no speeds: RAIM alone
+        assert whole["parameters"]["policy_used"] == ("raim" if log.endswith(".csv") else "all")
+
+
+def test_a_real_pseudorange_drive_streamed_is_the_whole_log(tmp_path, monkeypatch):
+    """The Berlin drive (libRSF pseudoranges and odometry speed, 1 372 epochs) through the one charge path in 37-epoch
+    chunks, with 500 m roads laid along its own track: the invoice of the whole log, passages and findings included."""
+    from conftest import shared
+
+    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+    from tollcli.gnss.sigma_models import NominalModel
+
+    log = str(shared("smartloc", "Berlin_Potsdamer_Platz_Input.txt"))
+    epochs, _ = pseudorange_epochs(log, "librsf", None, "nominal", 5.0, NominalModel())
+    lon_lat = epochs[["lon_deg", "lat_deg"]].dropna().to_numpy()[::20]
+    features = [{"type": "Feature", "properties": {"id": f"B{k}", "road_class": "motorway", "tolled": True},
+                 "geometry": {"type": "LineString", "coordinates": lon_lat[k * 4 : k * 4 + 5].tolist()}}
+                for k in range(len(lon_lat) // 4)]  # fmt: skip
+    (tmp_path / "roads.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": features}))
+    geo = tmp_path / "geo.geojson"
+    geo.write_text(json.dumps(build_geoobjects(str(tmp_path / "roads.geojson"))))
+    for settings in ({}, {"environment": "open"}):
+        monkeypatch.setattr(pipeline, "STREAM_ROUNDS", False)
+        monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 1_000_000)
+        whole = charge_log(log, str(geo), TARIFF, ChargeSettings(**settings))[0]
+        monkeypatch.setattr(pipeline, "STREAM_ROUNDS", True)
+        monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 37)
+        monkeypatch.setattr(streaming, "ROUND_ROWS", 1)
+        streamed = charge_log(log, str(geo), TARIFF, ChargeSettings(**settings))[0]
+        assert invoice_json(streamed) == invoice_json(whole)
+        assert whole["not_charged"] and whole["findings"]["items"]
+    assert whole["lines"]  # declared open, the city positions charge
 
 
 def test_rounds_do_happen_and_the_tail_stays_short(tmp_path, monkeypatch):

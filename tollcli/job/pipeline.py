@@ -6,6 +6,7 @@ import datetime as dt
 import hashlib
 import math
 import os
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -19,22 +20,18 @@ from tollcli.charging.invoice import (
     seal,
 )
 from tollcli.charging.rate_tables import check_vehicle
-from tollcli.charging.recognition import (
-    charges,
-    inside_pairs,
-    load_geoobjects,
-    positions_from_pairs,
-)
+from tollcli.charging.recognition import inside_pairs, load_geoobjects
 from tollcli.charging.tariffs import load_tariff
-from tollcli.enforcement.findings import FindingSettings, trip_findings
+from tollcli.enforcement.findings import FindingSettings
 from tollcli.enforcement.trip import cn0_summary
 from tollcli.errors import DataError, UsageError
+from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
 from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.gnss.wls import wls_geometry
 from tollcli.integrity.environment import ENVIRONMENTS, EnvironmentCarry
-from tollcli.integrity.nav_authentication import epoch_authentication, not_checked, require_authenticated
+from tollcli.integrity.nav_authentication import epoch_authentication, not_checked
 from tollcli.integrity.raim import MODES, RaimParams
 from tollcli.integrity.run import level_name, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
@@ -44,7 +41,7 @@ from tollcli.job.log_integrity import measured_environment
 from tollcli.job.osnma_evidence import OsnmaEvidence, failure_findings, fixes_before, osnma_evidence, record_in_invoice
 from tollcli.job.osnma_evidence import inputs_record as osnma_inputs
 from tollcli.io.log_run import LogRun
-from tollcli.job.streaming import TailCharger, choose_policy, has_speeds, policy_columns, with_geo_roads
+from tollcli.job.streaming import TailCharger
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_usable
@@ -192,39 +189,17 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         nominal = NominalModel()
         epoch_raim = replace(params, fde=False)
         finding_settings = FindingSettings.for_class(settings.vehicle_class)
-        if kind in NAVIGATION_KINDS:
-            charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
-            with run.named_errors():
-                stats, params = _read_navigation_chunks(run, settings, geo_objects, params, epoch_raim, nominal, charger, epoch_table,
-                                                  kind, osnma, auth_counts, failure_fixes)  # fmt: skip
-            policy, table, details, found, period = charger.finish()
-            positions, step_s = None, charger.step_s
-        else:
-            with run.named_errors():
-                epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
-            meas, env_columns = measured_environment(epochs, meas, settings.environment)
-            params = settle_sources(params, meas)
-            per_epoch = run_raim(meas, replace(epoch_raim, sources=params.sources))
-            pairs = inside_pairs(epochs, meas, geo_objects, params)
-            policy, why, checks, road_net = _policy_checks(epochs.assign(raim_status=per_epoch["raim_status"].to_numpy()), settings, roads)
-            if checks is not None and "matched_road" in checks and pairs["epoch_row"].size:
-                pairs = with_geo_roads(pairs, road_net, geo_objects, epochs, pairs["epoch_row"])
-            if settings.require_authenticated:  # a pseudorange log carries no Galileo pages: nothing is authenticated
-                why = require_authenticated(why, np.full(len(epochs), "not_checked", dtype=object))
-                auth_counts["not_checked"] = len(epochs)
-            positions = positions_from_pairs(pairs, epochs["time_utc"], geo_objects, tc_s=settings.tc_s, epoch_why=why,
-                                             checks=checks)  # fmt: skip
-            found = trip_findings(epochs, None, per_epoch, geo_objects, finding_settings)
-            table, details = charges(positions, settings.n_th), None
-            dated = epochs["time_utc"].dropna()
-            period = (dated.min(), dated.max()) if len(dated) else None
-            from tollcli.integrity.speed import nominal_step_s
-            from tollcli.times import epoch_seconds
-
-            step_s = nominal_step_s(epoch_seconds(epochs)) if len(epochs) > 1 else None
-            if epoch_table is not None:
-                epoch_table.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}), env_columns,
-                                              per_epoch], axis=1))  # fmt: skip
+        charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
+        with run.named_errors():  # one charge for every input kind: its chunks of epochs and measurements, streamed
+            stats = ReadStats() if kind in NAVIGATION_KINDS else None
+            chunks = (_navigation_chunks(run, kind, settings, nominal, stats) if kind in NAVIGATION_KINDS
+                      else _pseudorange_chunks(run, kind, nav, settings, nominal))  # fmt: skip
+            params = _charge_chunks(chunks, settings, geo_objects, params, epoch_raim, charger, epoch_table, osnma, auth_counts,
+                                    failure_fixes)  # fmt: skip
+            if stats is not None:
+                check_usable(stats)
+        policy, table, details, found, period = charger.finish()
+        step_s = charger.step_s
         log_sha256 = run.sha256
     inputs = {"log": printable_path(log), "geoobjects": printable_path(geo), "tariff": printable_path(tariff),
               "geoobjects_sha256": geo_objects.source_sha256 or file_sha256(geo), "tariff_sha256": file_sha256(tariff)}  # fmt: skip
@@ -247,13 +222,12 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         del parameters["vehicle_attrs"]  # recorded only for a tariff of per-km tables
     if not settings.require_authenticated:
         del parameters["require_authenticated"]  # recorded only when required: invoices made before it stay as they were
-    invoice = build_invoice(table, positions, geo_objects, tariff_doc,
+    invoice = build_invoice(table, None, geo_objects, tariff_doc,
                             vehicle=settings.vehicle or printable_path(os.path.basename(log)), vehicle_class=settings.vehicle_class,
                             inputs=inputs, parameters=parameters, period=period, details=details,
                             continued=settings.continued, vehicle_attrs=settings.vehicle_attrs)  # fmt: skip
     if osnma is not None:
-        fixes = pd.concat(failure_fixes, ignore_index=True) if positions is None else epochs[["time_utc", "lat_deg", "lon_deg"]]
-        found = sorted([*found, *failure_findings(osnma, fixes)], key=lambda f: (f["start_utc"], f["kind"]))
+        found = sorted([*found, *failure_findings(osnma, pd.concat(failure_fixes, ignore_index=True))], key=lambda f: (f["start_utc"], f["kind"]))
     if osnma is not None or settings.require_authenticated:
         record_in_invoice(invoice, osnma, auth_counts, settings.require_authenticated)
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
@@ -290,41 +264,62 @@ BLOCK_BYTES = SOURCE_BLOCK_BYTES
 STREAM_ROUNDS = True
 
 
-def _read_navigation_chunks(run: LogRun, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams,
-                      nominal: NominalModel, charger: TailCharger,
-                      epoch_table: list | None = None, kind: str = "nmea", osnma: OsnmaEvidence | None = None,
-                      auth_counts: dict | None = None, failure_fixes: list | None = None) -> tuple[ReadStats, RaimParams]:  # fmt: skip
-    """Read a navigation log (NMEA, u-blox NAV, gpsd JSON: ``kind``) chunk by chunk: each chunk's satellites, RAIM and geo-object pairs are done
-    before the next, and handed to ``charger`` with the few per-epoch columns it needs.
-
-    Memory is the chunk's and the charger's tail, not the log's (``epoch_table``, a list for batch
-    outputs, receives the whole per-epoch table and so grows with the log). Returns the reader's
-    statistics and ``params`` with the integrity sources the log settled on.
-    """
+def _navigation_chunks(run: LogRun, kind: str, settings: ChargeSettings, nominal: NominalModel,
+                       stats: ReadStats) -> Iterator[tuple[pd.DataFrame, Measurements, pd.DataFrame | None]]:  # fmt: skip
+    """A navigation log's (NMEA, u-blox NAV, gpsd JSON, RTKLIB: ``kind``) chunks as they are read: each chunk's epochs,
+    its RAIM measurements and its satellite table (``stats`` counts what the reader saw)."""
     date = dt.date.fromisoformat(settings.date) if settings.date else None
     model = settings.sigma_model if settings.sigma_model != "input" else "nominal"
-    stats = ReadStats()
-    carry, env_carry = AngleCarry(), EnvironmentCarry()
+    carry = AngleCarry()
+    epochs_seen = 0
+    for chunk in iter_navigation_tables(run.source(), kind, strict=settings.strict, date=date, stats=stats, chunk_epochs=CHUNK_EPOCHS,
+                                        block_bytes=BLOCK_BYTES):  # fmt: skip
+        if chunk.epochs.empty:
+            continue
+        epochs_seen += len(chunk.epochs)
+        yield chunk.epochs, nmea_measurements(chunk.epochs, chunk.satellites, model, settings.sigma_m, nominal, carry=carry), chunk.satellites
+    if epochs_seen == 0:
+        check_usable(stats)
+        raise DataError(f"{run.name}: no epoch with a time of day")
+
+
+def _pseudorange_chunks(run: LogRun, kind: str, nav: str | None, settings: ChargeSettings,
+                        nominal: NominalModel) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
+    """A pseudorange log's (RINEX, GnssLogger, GSDC, u-blox RAWX, libRSF) WLS epochs and RAIM measurements, in chunks of
+    :data:`CHUNK_EPOCHS` epochs. The positions are solved for the whole log at once (its reader and solver read it
+    whole, from the run's replay); from there on the chunks take the same path as a navigation log's."""
+    epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
+    for start in range(0, len(epochs), CHUNK_EPOCHS):
+        rows = np.arange(start, min(start + CHUNK_EPOCHS, len(epochs)))
+        yield epochs.iloc[rows].reset_index(drop=True), meas.take(rows), None
+
+
+def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams, charger: TailCharger,
+                   epoch_table: list | None = None, osnma: OsnmaEvidence | None = None, auth_counts: dict | None = None,
+                   failure_fixes: list | None = None) -> RaimParams:  # fmt: skip
+    """Charge a log chunk by chunk (``chunks``: epochs, RAIM measurements, satellite table or None): each chunk's
+    environment, RAIM, geo-object pairs and OSNMA authentication are done before the next, and handed to ``charger``
+    with the few per-epoch columns it needs.
+
+    Memory is the chunk's and the charger's tail, not the log's (``epoch_table``, a list for batch
+    outputs, receives the whole per-epoch table and so grows with the log). Returns ``params`` with the integrity
+    sources the log settled on.
+    """
+    env_carry = EnvironmentCarry()
     table_parts = []
     offset = 0
-    source = run.source()
-    for chunk in iter_navigation_tables(source, kind, strict=settings.strict, date=date, stats=stats, chunk_epochs=CHUNK_EPOCHS,
-                                  block_bytes=BLOCK_BYTES):  # fmt: skip
-        epochs = chunk.epochs
-        if epochs.empty:
-            continue
-        meas = nmea_measurements(epochs, chunk.satellites, model, settings.sigma_m, nominal, carry=carry)
+    for epochs, meas, satellites in chunks:
         params = settle_sources(params, meas)  # the log's level, from its first epoch with a source
         meas, env_columns = measured_environment(epochs, meas, settings.environment, env_carry)
         epoch_raim = replace(epoch_raim, sources=params.sources)
         geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)  # once for the epoch RAIM and every HAL
         raim = run_raim(meas, epoch_raim, geometry=geometry)
         pairs = inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry)
-        cn0 = cn0_summary(chunk.satellites, len(epochs), int(epochs["epoch"].iat[0]))
-        kept = epochs[list(KEPT_EPOCH_COLUMNS)]
+        cn0 = cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
+        kept = epochs[[c for c in KEPT_EPOCH_COLUMNS if c in epochs]]
         auth = None
         if osnma is not None or settings.require_authenticated:
-            auth = not_checked(len(epochs)) if osnma is None else epoch_authentication(meas, epochs, osnma.authenticated_for(chunk.satellites),
+            auth = not_checked(len(epochs)) if osnma is None else epoch_authentication(meas, epochs, osnma.authenticated_for(satellites),
                                                                                                         settings.p_fa, geometry)
             kept = kept.assign(nav_auth=auth["nav_auth"].to_numpy())
             if osnma is not None and failure_fixes is not None:
@@ -337,27 +332,10 @@ def _read_navigation_chunks(run: LogRun, settings: ChargeSettings, geo, params: 
                                           env_columns, raim.reset_index(drop=True), *([auth] if auth is not None else [])],
                                          axis=1))  # fmt: skip
         offset += len(epochs)
-        del chunk, epochs, meas, geometry, raim, pairs, cn0  # freed before the next chunk is read, not after
-    check_usable(stats)
-    if offset == 0:
-        raise DataError(f"{run.name}: no epoch with a time of day")
-    if epoch_table is not None:
+        del epochs, meas, geometry, raim, pairs, cn0  # freed before the next chunk is read, not after
+    if epoch_table is not None and table_parts:
         epoch_table.append(pd.concat(table_parts, ignore_index=True))
-    return stats, params
-
-
-def _policy_checks(epochs, settings: ChargeSettings, roads: str | None):
-    """The policy in force, each epoch's fault ('' when none), the policy's check columns and the road network
-    (None, None without checks / without roads)."""
-    from tollcli.integrity.map_matching import load_roads
-    from tollcli.integrity.verdict import epoch_checks, failed_check
-
-    policy, needs = choose_policy(has_speeds(epochs), settings.policy, roads)
-    if not needs:
-        return policy, None, None, None
-    network = load_roads(roads) if "mm" in needs else None
-    checks = epoch_checks(epochs, network)
-    return policy, failed_check(checks, policy), policy_columns(checks, needs), network
+    return params
 
 
 def settings_from_invoice(invoice: dict) -> ChargeSettings:
