@@ -79,7 +79,7 @@ def _opens(tmp_path, log: str, *args: str) -> int:
 
 
 @pytest.mark.skipif(shutil.which("strace") is None, reason="strace not installed (Debian: apt-get install strace)")
-def test_process_verify_findings_and_osnma_open_the_log_once(tmp_path):
+def test_every_command_that_reads_a_log_opens_it_once(tmp_path):
     recording = shared("osnma", "ublox", "current_config.ubx")
     for log in (str(NMEA), str(recording)):
         invoice = tmp_path / "inv.json"
@@ -87,6 +87,8 @@ def test_process_verify_findings_and_osnma_open_the_log_once(tmp_path):
         assert _opens(tmp_path, log, "verify", str(invoice), "-q") == 1, log
         assert _opens(tmp_path, log, "findings", log, "-q", "-o", str(tmp_path / "f.json")) == 1, log
         assert _opens(tmp_path, log, "integrity", log, "-q", "-o", str(tmp_path / "i.csv")) == 1, log
+        assert _opens(tmp_path, log, "info", log, "--json") == 1, log
+        assert _opens(tmp_path, log, "locate", log, "-q", "-o", str(tmp_path / "l.csv")) == 1, log
         assert json.loads(invoice.read_text())["inputs"]["log_sha256"] == hashlib.sha256(open(log, "rb").read()).hexdigest()
     assert _opens(tmp_path, str(recording), "osnma", str(recording), "-o", str(tmp_path / "o.csv")) == 1
 
@@ -103,3 +105,13 @@ def test_process_authenticates_the_osnma_recording_from_stdin(tmp_path):
     assert b["navigation_authentication"] == a["navigation_authentication"]
     assert b["navigation_authentication"]["epochs"]["authenticated"] > 3000
     assert b["lines"] == a["lines"] and b["findings"] == a["findings"]
+
+
+def test_info_reads_stdin_as_a_file(tmp_path):
+    """``info -`` counts and reads the bytes of stdin as it does a file's."""
+    from_file = run_cli("info", str(NMEA), "--json")
+    from_stdin = run_cli("info", "-", "--json", stdin=NMEA.read_bytes())
+    assert from_file.returncode == from_stdin.returncode == 0, from_stdin.stderr
+    a, b = json.loads(from_file.stdout), json.loads(from_stdin.stdout)
+    assert a.pop("file") == str(NMEA) and b.pop("file") == "-"
+    assert a == b and a["epochs"] > 0 and a["messages"]

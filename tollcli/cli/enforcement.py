@@ -10,41 +10,23 @@ from typing import Annotated, Optional
 import pandas as pd
 import typer
 
-from tollcli.charging.recognition import load_geoobjects
 from tollcli.cli import options as opt
 from tollcli.cli.console import note
-from tollcli.enforcement.findings import (
-    CLASS_MAX_SPEED_MPS,
-    FindingSettings,
-    trip_findings,
-)
+from tollcli.enforcement.findings import CLASS_MAX_SPEED_MPS, FindingSettings
 from tollcli.enforcement.locate import (
     COLUMNS,
     latest_per_vehicle,
     locate_in,
     located_rows,
     separate_simultaneous,
-    vehicle_from_log,
     vehicle_from_path,
 )
-from tollcli.enforcement.roadside import (
-    RoadsideSettings,
-    cross_check,
-    read_gantries,
-    read_reads,
-)
+from tollcli.enforcement.roadside import RoadsideSettings
 from tollcli.errors import UsageError
-from tollcli.io.log_run import LogRun
 from tollcli.io.writers import TableWriter, format_for, write_text_atomic
-from tollcli.job.log_integrity import trip_tables
+from tollcli.job.trip_checks import locate_log, log_findings, roadside_findings
 
 VehicleClass = Annotated[str, typer.Option("--vehicle-class", help=f"Vehicle class, sets the top speed: {', '.join(CLASS_MAX_SPEED_MPS)}.")]
-
-
-def _vehicles(logs: list[str], vehicle: str | None) -> list[str]:
-    if vehicle and len(logs) > 1:
-        raise UsageError("--vehicle names the vehicle of a single log; with several logs the file names give the ids")
-    return [vehicle] if vehicle else [vehicle_from_log(p) or vehicle_from_path(p) for p in logs]
 
 
 def locate(
@@ -65,11 +47,12 @@ def locate(
     lon_deg, raim_status, hpl_m, hal_m, speed_mps, course_deg, line.
     """
     at_utc = pd.Timestamp(at).tz_localize("UTC") if at else None
-    vehicles = _vehicles(logs, vehicle)
-    named_by_file = [not vehicle and vehicle_from_log(p) is None for p in logs]
-    per_log, spans = [], []
+    if vehicle and len(logs) > 1:
+        raise UsageError("--vehicle names the vehicle of a single log; with several logs the file names give the ids")
+    per_log, spans, headers = [], [], []
     for log in logs:
-        table, _ = trip_tables(log, hal, strict, date)
+        table, header = locate_log(log, hal, strict, date)
+        headers.append(header)
         dated = table["time_utc"].dropna() if "time_utc" in table else pd.Series(dtype=object)
         spans.append((dated.min(), dated.max()) if len(dated) else None)
         if table.empty:
@@ -80,6 +63,8 @@ def locate(
         if found["any"] is None:
             note(f"{log}: no position{' before ' + str(at_utc) if at_utc is not None else ''}", quiet)
         per_log.append(found)
+    vehicles = [vehicle] if vehicle else [header or vehicle_from_path(log) for log, header in zip(logs, headers)]
+    named_by_file = [not vehicle and header is None for header in headers]
     vehicles, notes = separate_simultaneous(vehicles, named_by_file, logs, spans)
     for line in notes:
         note(line, quiet)
@@ -130,14 +115,7 @@ def findings(
     if max_speed is not None:  # the given top speed serves any class name
         overrides["max_speed_mps"] = max_speed
     settings = FindingSettings.for_class(vehicle_class, **overrides)
-    from tollcli.job.osnma_evidence import failure_findings, osnma_evidence
-
-    with LogRun(log) as run:  # the log opened once: the OSNMA pages and the trip read the same bytes
-        evidence = osnma_evidence(log, run.kind, osnma_merkle, osnma_public_key, strict=strict, run=run)
-        table, sats = trip_tables(run, hal, strict, date)
-    items = trip_findings(table, sats, table, load_geoobjects(geo) if geo else None, settings) if not table.empty else []
-    if evidence is not None and not table.empty:
-        items = sorted([*items, *failure_findings(evidence, table)], key=lambda f: (f["start_utc"], f["kind"]))
+    items = log_findings(log, settings, hal, strict, date, geo, osnma_merkle, osnma_public_key)
     doc = {"log": log, "settings": settings.__dict__, "findings": items}
     _write_findings(output, kind, doc)
     _findings_summary(log, output, items, "findings", quiet, as_json)
@@ -161,9 +139,7 @@ def enforce(
 ) -> None:
     """Cross-check RFID/DSRC gantry reads with the GNSS trip: reads where the trip was elsewhere or silent, gantries passed without a read."""
     kind = _findings_format(output, out_fmt, as_json)
-    table, _ = trip_tables(log, hal, strict, date)
-    ids, geoms, crs = read_gantries(gantries)
-    items = cross_check(table, read_reads(reads), ids, geoms, crs, tag, RoadsideSettings(time_tol, distance_tol, pass_dist))
+    items = roadside_findings(log, reads, gantries, tag, RoadsideSettings(time_tol, distance_tol, pass_dist), hal, strict, date)
     doc = {"log": log, "tag": tag, "settings": {"time_tol_s": time_tol, "distance_tol_m": distance_tol, "pass_dist_m": pass_dist},
            "findings": items}  # fmt: skip
     _write_findings(output, kind, doc)

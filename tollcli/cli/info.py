@@ -8,11 +8,10 @@ from typing import Annotated
 import typer
 
 from tollcli.cli import options as opt
-from tollcli.errors import UsageError
 
 
 def info(
-    path: Annotated[str, typer.Argument(metavar="LOG|GEOOBJECTS|INVOICE", help="A receiver log (any kind the tool reads, .gz too), a geo-object file or an invoice.", show_default=False)],
+    path: Annotated[str, typer.Argument(metavar="LOG|GEOOBJECTS|INVOICE", help="A receiver log (any kind the tool reads, .gz too, - for stdin), a geo-object file or an invoice.", show_default=False)],
     min_hal: Annotated[float, typer.Option("--min-hal", help="Geo-objects: also give the tolled length covered by geo-objects of at least this HAL, m.", min=0.0)] = 25.0,
     as_json: Annotated[bool, typer.Option("--json", help="Everything as JSON on stdout.")] = False,
     quiet: opt.Quiet = False,
@@ -29,8 +28,6 @@ def info(
     """
     from tollcli.job.file_info import file_info
 
-    if path == "-":
-        raise UsageError("info reads a file (its messages are counted, then read): give a path")
     summary = file_info(path, min_hal)
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True, default=str))

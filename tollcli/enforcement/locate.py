@@ -59,6 +59,11 @@ def vehicle_from_log(path: str) -> str | None:
             head = fh.read(4096)
     except Exception:  # noqa: BLE001 - the reader will report the file properly
         return None
+    return vehicle_in_head(head)
+
+
+def vehicle_in_head(head: bytes) -> str | None:
+    """The vehicle id of a ``# vehicle: ID`` comment line in a log's first bytes, if any."""
     match = _HEADER_VEHICLE.search(head)
     return match.group(1).decode("utf-8", "replace") if match else None
 

@@ -102,6 +102,15 @@ class LogRun:
             self._replay = path
         return self._replay
 
+    def head(self, n: int = 4096) -> bytes:
+        """The log's first ``n`` (gunzipped) bytes, without reading them away (b"" once the stream is handed out)."""
+        if self._handed or self._replay is not None or not hasattr(self._stream, "peek"):
+            return b""
+        try:
+            return self._stream.peek(n)[:n]
+        except (OSError, EOFError, zlib.error):
+            return b""
+
     def source(self) -> str | BinaryIO:
         """What a reader of the whole log takes: the replay when there is one, else the one streaming pass."""
         return self._replay if self._replay is not None else self.stream()
@@ -115,6 +124,11 @@ class LogRun:
             if self._replay is None or not exc.args or self._replay not in str(exc.args[0]):
                 raise
             raise type(exc)(str(exc.args[0]).replace(self._replay, self.name), *exc.args[1:]) from None
+
+    @property
+    def bytes_stored(self) -> int:
+        """How many bytes of the log as stored were read so far (all of them once a replay is made)."""
+        return self._hashing.bytes_read
 
     @property
     def sha256(self) -> str:

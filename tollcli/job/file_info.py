@@ -15,7 +15,7 @@ from collections import Counter
 import numpy as np
 
 from tollcli.errors import DataError
-from tollcli.io.sources import sniff_format
+from tollcli.io.log_run import LogRun
 from tollcli.readers.log_contents import message_counts
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
@@ -57,21 +57,27 @@ def file_info(path: str, min_hal_m: float = 25.0) -> dict:
                 "charged": len(doc["lines"]), "not_charged": len(doc.get("not_charged") or []),
                 "total": doc.get("total"), "currency": doc.get("currency"), "inputs": doc.get("inputs"),
                 "integrity_sources_used": (doc.get("parameters") or {}).get("integrity_sources_used")}
-    kind = sniff_format(path)
-    out: dict = {"file": path, "kind": kind, "bytes": os.path.getsize(path) if path != "-" and os.path.isfile(path) else None}
-    if path != "-":
-        out["messages"] = message_counts(path, kind)
+    with LogRun(path) as run:  # the log opened once: counted and read from the same copy of its bytes
+        kind = run.kind
+        replay = run.replay_path()
+        out: dict = {"file": path, "kind": kind,
+                     "bytes": os.path.getsize(path) if path != "-" and os.path.isfile(path) else run.bytes_stored}  # fmt: skip
+        with run.named_errors():
+            out["messages"] = message_counts(replay, kind)
         if kind == "nmea" and not out["messages"]:  # what is nothing else is read as NMEA: here there is none
             return {**out, "kind": "unknown", "needs": UNKNOWN_HINT}
-    if kind in NAVIGATION_KINDS:
-        try:
-            out.update(_solution_info(path, kind))
-        except DataError as exc:  # nothing to read: what info says, not an error of info's
-            out.update(epochs=0, problem=str(exc))
-    elif kind != "unknown":
-        out["solved_by"] = "tollcli (pseudoranges: WLS, then the RAIM on their residuals)"
-        out["needs"] = NEEDS.get(kind, "")
-        out["integrity_level"] = "residual"
+        if kind in NAVIGATION_KINDS:
+            try:
+                with run.named_errors():
+                    out.update(_solution_info(replay, kind))
+            except DataError as exc:  # nothing to read: what info says, not an error of info's
+                out.update(epochs=0, problem=str(exc))
+            if out.get("first_problem"):
+                out["first_problem"] = out["first_problem"].replace(replay, run.name)
+        elif kind != "unknown":
+            out["solved_by"] = "tollcli (pseudoranges: WLS, then the RAIM on their residuals)"
+            out["needs"] = NEEDS.get(kind, "")
+            out["integrity_level"] = "residual"
     return out
 
 
