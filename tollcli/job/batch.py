@@ -121,18 +121,21 @@ def plan_outputs(logs: list[str], settings: ChargeSettings, outdir: str) -> list
     return out
 
 
-def _current(done: dict, job: Job, settings: ChargeSettings, log_sha: str) -> bool:
-    """Whether an earlier invoice was made from this very log, inputs, settings and tool version."""
+def _current(done: dict, job: Job, settings: ChargeSettings, log_sha) -> bool:
+    """Whether an earlier invoice was made from this very log, inputs, settings and tool version (``log_sha``: a
+    function giving the log's SHA-256, called only when everything else agrees)."""
     inputs, parameters = done.get("inputs") or {}, done.get("parameters") or {}
     if not isinstance(inputs, dict) or not isinstance(parameters, dict) or done.get("tool") != f"tollcli {__version__}":
         return False
     if not isinstance(inputs.get("log"), str) or os.path.abspath(inputs["log"]) != os.path.abspath(job.log):
         return False
-    if inputs.get("log_sha256") != log_sha or any(inputs.get(key) != sha for key, sha in job.input_sha256):
+    if any(inputs.get(key) != sha for key, sha in job.input_sha256):
         return False
     # ``continued`` depends on the vehicle's other logs: join_passages checks it after every log is done
     recorded = {"input_format": "auto", "vehicle_attrs": None, "require_authenticated": False, **parameters}  # recorded only when given
-    return all(k in recorded and recorded[k] == v for k, v in asdict(settings).items() if k != "continued")
+    if not all(k in recorded and recorded[k] == v for k, v in asdict(settings).items() if k != "continued"):
+        return False
+    return inputs.get("log_sha256") == log_sha()
 
 
 def run_one(job: Job) -> dict:
@@ -146,15 +149,11 @@ def run_one(job: Job) -> dict:
     settings = replace(job.settings, vehicle=vehicle)
     if job.error:
         return _failed(job, name, outcome, job.error)
-    try:
-        log_sha = file_sha256(job.log)
-    except OSError as exc:
-        return _failed(job, name, outcome, f"{job.log}: {exc.strerror}")
-    if not job.force and os.path.isfile(inv_path):
+    if not job.force and os.path.isfile(inv_path):  # an earlier run's invoice: the log is hashed only to compare with it
         try:
             with open(inv_path, encoding="utf-8") as fh:
                 done = json.load(fh)
-            if isinstance(done, dict) and _current(done, job, settings, log_sha):
+            if isinstance(done, dict) and _current(done, job, settings, lambda: file_sha256(job.log)):
                 return {**outcome, "status": "skipped", "total": done["total"], "currency": done["currency"],
                         "lines": len(done["lines"])}  # fmt: skip
         except (OSError, ValueError, KeyError, TypeError):
