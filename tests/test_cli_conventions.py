@@ -168,7 +168,10 @@ def test_info_on_every_shared_file():
         info = file_info(str(path))
         kinds[info["kind"]] = kinds.get(info["kind"], 0) + 1
         if info["kind"] in ("nmea", "ubx-nav", "gpsd-json"):
-            assert info["epochs"] >= 0 and info["integrity_level"] in ("residual", "receiver", "covariance", "model", "none")
+            assert info["integrity_level"] in ("residual", "receiver", "covariance", "model", "none")
+            if not info.get("problem"):  # every epoch counted once by its fix quality, positions among them
+                assert sum(info["fix_quality"].values()) == info["epochs"] >= info["epochs_with_position"]
+                assert all(v <= info["epochs"] for v in info["integrity_evidence_epochs"].values())
             if info["epochs_with_position"] > 1 and info["interval_s"]:
                 assert 0 < info["interval_s"] <= info["span_s"]
     for parts, kind in EXPECTED_KINDS.items():

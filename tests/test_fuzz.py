@@ -12,6 +12,8 @@ import json
 import os
 import tempfile
 
+import numpy as np
+
 from conftest import run_main
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -105,10 +107,40 @@ def _written(folder: str, name: str, text) -> str:
     return path
 
 
-def _judged(code: int, err: str, what: str) -> None:
+def _judged(code: int, err: str, what: str, output: str | None = None, parse=None) -> None:
+    """A documented exit, no traceback; an error (1, 2) in one line that says so and no output left behind; a
+    success (0, 3) whose ``output`` is there and parses (``parse``: the reader that must take it)."""
     assert code in DOCUMENTED and "Traceback" not in err, f"{what}: exit {code}: {err}"
     if code:
         assert err.strip(), f"{what}: exit {code} without a word"
+    if code in (1, 2):
+        assert err.strip().splitlines()[-1].startswith("tollcli: error"), f"{what}: exit {code}: {err}"
+        if output is not None:
+            assert not os.path.exists(output), f"{what}: exit {code} left {output} behind"
+    elif output is not None and parse is not None:
+        assert os.path.exists(output), f"{what}: exit {code} wrote no {output}"
+        parse(output)
+
+
+def _parses_as_invoice(path: str) -> None:
+    """An invoice that parses and whose content hash is its content's."""
+    from tollcli.job.pipeline import content_sha256
+
+    with open(path, encoding="utf-8") as fh:
+        invoice = json.load(fh)
+    assert invoice["content_sha256"] == content_sha256(invoice)
+    assert all(line["evidence"] for line in invoice["lines"])  # every charge explained by positions
+
+
+def _parses_as_json(path: str) -> None:
+    with open(path, encoding="utf-8") as fh:
+        json.load(fh)
+
+
+def _parses_as_table(path: str) -> None:
+    import pandas as pd
+
+    (pd.read_parquet if path.endswith(".parquet") else pd.read_csv)(path)
 
 
 @FUZZ_CLI
@@ -119,18 +151,20 @@ def test_fuzz_logs_through_every_command(lines):
         log = os.path.join(tmp, "log.nmea")
         with open(log, "w", encoding="latin-1", errors="replace") as fh:
             fh.write("\n".join(lines))
+        out = {k: os.path.join(tmp, name) for k, name in (("e", "e.parquet"), ("i", "i.csv"), ("c", "c.csv"), ("f", "f.json"),
+                                                          ("l", "l.csv"), ("inv", "inv.json"))}  # fmt: skip
         runs = {
-            "epochs": ["epochs", log, "-q", "-o", os.path.join(tmp, "e.parquet"), "--satellites", os.path.join(tmp, "s.parquet")],
-            "integrity": ["integrity", log, "-q", "-o", os.path.join(tmp, "i.csv")],
-            "integrity --checks": ["integrity", log, "--checks", "-q", "-o", os.path.join(tmp, "c.csv")],
-            "findings": ["findings", log, "--geo", GEO, "-q", "-o", os.path.join(tmp, "f.json")],
-            "locate": ["locate", log, "-q", "-o", os.path.join(tmp, "l.csv")],
-            "process": ["process", log, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", os.path.join(tmp, "inv.json")],
-            "batch": ["batch", log, "--geo", GEO, "--tariff", TARIFF, "--workers", "1", "-q", "-o", os.path.join(tmp, "out")],
+            "epochs": (["epochs", log, "-q", "-o", out["e"], "--satellites", os.path.join(tmp, "s.parquet")], out["e"], _parses_as_table),
+            "integrity": (["integrity", log, "-q", "-o", out["i"]], out["i"], _parses_as_table),
+            "integrity --checks": (["integrity", log, "--checks", "-q", "-o", out["c"]], out["c"], _parses_as_table),
+            "findings": (["findings", log, "--geo", GEO, "-q", "-o", out["f"]], out["f"], _parses_as_json),
+            "locate": (["locate", log, "-q", "-o", out["l"]], out["l"], _parses_as_table),
+            "process": (["process", log, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", out["inv"]], out["inv"], _parses_as_invoice),
+            "batch": (["batch", log, "--geo", GEO, "--tariff", TARIFF, "--workers", "1", "-q", "-o", os.path.join(tmp, "out")], None, None),
         }  # fmt: skip
-        for what, args in runs.items():
+        for what, (args, output, parse) in runs.items():
             code, err = run_main(*args)
-            _judged(code, err, what)
+            _judged(code, err, what, output, parse)
             if what == "process" and code == 0:
                 _judged(*run_main("verify", os.path.join(tmp, "inv.json")), "verify")
 
@@ -189,9 +223,24 @@ def test_fuzz_geoobject_files_give_results_or_data_errors(doc):
         path = _written(tmp, "g.geojson", doc)
         for fn in (build_geoobjects, check_geoobjects, load_geoobjects):
             try:
-                fn(path)
-            except TollError:
-                pass
+                result = fn(path)
+            except TollError as exc:  # refused: one line that names the file
+                assert path in str(exc) and "\n" not in str(exc), f"{fn.__name__}: {exc}"
+                continue
+            if fn is build_geoobjects:  # built: polygons of finite coordinates, each with an id and a positive HAL
+                for feature in result["features"]:
+                    assert feature["geometry"]["type"] in ("Polygon", "MultiPolygon")
+                    assert np.isfinite(np.array(_flat_coordinates(feature["geometry"]["coordinates"]), float)).all()
+                    assert feature["properties"]["id"] not in (None, "") and feature["properties"]["hal_m"] > 0
+            elif fn is load_geoobjects:  # loaded: as many distinct ids as geo-objects
+                assert len(set(result.ids)) == len(result.ids)
+
+
+def _flat_coordinates(coords) -> list:
+    """Every number of nested GeoJSON coordinates."""
+    if isinstance(coords, (int, float)):
+        return [coords]
+    return [x for c in coords for x in _flat_coordinates(c)]
 
 
 # ------------------------------------------------------------------------------------------- tariffs

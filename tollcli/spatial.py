@@ -42,7 +42,7 @@ def feature_geometry(feature) -> tuple[object | None, str]:
         with np.errstate(invalid="ignore"):
             geom = shapely.geometry.shape(feature.get("geometry") or {})
     except (ValueError, TypeError, AttributeError, KeyError, IndexError, shapely.errors.ShapelyError) as exc:
-        return None, f"unreadable geometry ({type(exc).__name__}: {exc})"
+        return None, f"unreadable geometry ({type(exc).__name__}: {' '.join(str(exc).split())})"  # one line: GEOS ends its messages with a newline
     coords = shapely.get_coordinates(geom)
     if not np.isfinite(coords).all():
         return None, "coordinates must be finite numbers"

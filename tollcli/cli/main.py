@@ -13,6 +13,7 @@ from tollcli.errors import EXIT_DATA, EXIT_INTERNAL, EXIT_SYSTEM, EXIT_USAGE, To
 
 
 def _fail(message: str, code: int) -> None:
+    message = " ".join(message.split())  # one line, whatever a library's message held
     sys.stderr.write(f"tollcli: error: {message}\n")
     sys.exit(code)
 
