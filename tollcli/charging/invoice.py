@@ -288,15 +288,25 @@ class SealedInvoice(dict):
         super().__delitem__(key)
 
 
+def _sealed_body(invoice: dict) -> tuple[dict, str, str]:
+    """The invoice without ``content_sha256``, its canonical text and that text's SHA-256: the one sealing recipe."""
+    body = {k: v for k, v in invoice.items() if k != "content_sha256"}
+    text = invoice_json(body)
+    return body, text, hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def content_sha256(invoice: dict) -> str:
+    """SHA-256 of the invoice's canonical JSON without its own ``content_sha256`` (what :func:`seal` writes there)."""
+    return _sealed_body(invoice)[2]
+
+
 def seal(invoice: dict) -> SealedInvoice:
     """The invoice with ``content_sha256`` = SHA-256 of its canonical text without that key.
 
     The sealed text is the body's text with the hash line put first, where sorting puts
     ``content_sha256`` (checked; otherwise it is encoded again).
     """
-    body = {k: v for k, v in invoice.items() if k != "content_sha256"}
-    text = invoice_json(body)
-    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
+    body, text, digest = _sealed_body(invoice)
     sealed = SealedInvoice(body)
     dict.__setitem__(sealed, "content_sha256", digest)
     if body and min(body) > "content_sha256" and text.startswith('{\n  "'):

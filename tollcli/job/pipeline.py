@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import datetime as dt
-import hashlib
 import math
 import os
 from collections.abc import Iterator
@@ -14,9 +13,9 @@ import pandas as pd
 
 from tollcli.charging.invoice import (
     build_invoice,
+    content_sha256,  # noqa: F401  (verify and the tests take it from here too)
     explain_not_charged,
     file_sha256,
-    invoice_json,
     seal,
 )
 from tollcli.charging.rate_tables import check_vehicle
@@ -145,12 +144,6 @@ def _check_continued(continued) -> None:
             pd.Timestamp(carried["exit_utc"]).tz_convert("UTC")
         except (ValueError, TypeError):
             raise UsageError(f"continued[{gid!r}].exit_utc = {carried['exit_utc']!r}: not a UTC time") from None
-
-
-def content_sha256(invoice: dict) -> str:
-    """SHA-256 of the invoice's canonical JSON without its own ``content_sha256``."""
-    body = {k: v for k, v in invoice.items() if k != "content_sha256"}
-    return hashlib.sha256(invoice_json(body).encode("utf-8")).hexdigest()
 
 
 def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | None = None,

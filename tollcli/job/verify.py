@@ -21,7 +21,8 @@ import os
 from tollcli.charging.invoice import file_sha256, invoice_json
 from tollcli.errors import DataError
 from tollcli.io.sources import read_json
-from tollcli.job.pipeline import charge_log, content_sha256, settings_from_invoice
+from tollcli.charging.invoice import content_sha256
+from tollcli.job.pipeline import charge_log, settings_from_invoice
 
 INPUTS = (("log", "log"), ("geoobjects", "geo-objects"), ("tariff", "tariff"), ("nav", "navigation file"), ("roads", "road network"))
 
