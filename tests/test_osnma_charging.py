@@ -249,6 +249,31 @@ def test_streamed_in_small_chunks_the_invoice_is_the_same(site, clean, monkeypat
     assert whole["navigation_authentication"]["epochs"] == clean["navigation_authentication"]["epochs"]
 
 
+def test_the_check_beside_the_charge_gives_the_invoice_of_the_check_inline(site, clean, monkeypatch):
+    """The verification runs in a forked process beside the charge on a machine with two CPUs: the invoice is the one
+    of the verification done inline (one CPU), byte for byte; and a broken key file is the same one-line error."""
+    import os
+
+    from tollcli.charging.invoice import invoice_json
+    from tollcli.errors import TollError
+
+    settings = ChargeSettings(policy="raim")
+    geo, tariff = str(site / "geo.geojson"), str(site / "tariff.toml")
+    beside = charge_log(LOG, geo, tariff, settings)[0]
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
+    inline = charge_log(LOG, geo, tariff, settings)[0]
+    assert invoice_json(beside) == invoice_json(inline)
+    broken = site / "broken-tree.xml"
+    broken.write_text("<signalData><MerkleTree>")
+    errors = []
+    for cpus in ({0}, {0, 1}):
+        monkeypatch.setattr(os, "sched_getaffinity", lambda pid, cpus=cpus: cpus)
+        with pytest.raises(TollError) as caught:
+            charge_log(LOG, geo, tariff, settings, osnma_merkle=str(broken))
+        errors.append(str(caught.value))
+    assert errors[0] == errors[1] and "broken-tree.xml" in errors[0]
+
+
 # ---- tampering in the log: caught, named, and nothing else changes ------------------------------------------------
 
 @pytest.fixture(scope="module")

@@ -57,7 +57,7 @@ def authenticated_satellites(status: pd.DataFrame) -> pd.DataFrame:
     ``constellation``, ``svid``, ``nav_authenticated``) whose data were authenticated: what
     :func:`epoch_authentication` looks up."""
     auth = status[status["nav_authenticated"].to_numpy(bool)]
-    return pd.DataFrame({"time_utc": auth["time_utc"].to_numpy(),
+    return pd.DataFrame({"time_utc": auth["time_utc"].array,  # (the times kept as times: no array of Timestamp objects)
                          "sv": sv_labels(auth["constellation"].to_numpy(object), auth["svid"].to_numpy())})  # fmt: skip
 
 

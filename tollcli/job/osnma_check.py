@@ -25,6 +25,7 @@ from tollcli.gnss.osnma.pages import read_pages
 from tollcli.gnss.osnma.receiver import OsnmaResult, OsnmaSettings, run_osnma
 from tollcli.gnss.osnma.satellite_status import GST_ORIGIN_GPS_S, epoch_counts, satellite_status
 from tollcli.gnss.osnma.tesla import WEEK_S
+from tollcli.geoobjects.geojson_stream import gc_paused
 
 
 @dataclass
@@ -82,8 +83,9 @@ def check_osnma(log: str, merkle: str | None = None, public_keys: list[str] | No
     tree = read_merkle_tree(merkle)
     keys = [read_public_key(path, tree) for path in public_keys]
     data = data or log
-    pages = read_pages(data, strict=strict)
-    result = run_osnma(pages.table, OsnmaSettings(tree, keys, sync_bound_s=sync_bound_s))
+    with gc_paused():  # tens of thousands of pages and receiver records, no cycles: no collections over them
+        pages = read_pages(data, strict=strict)
+        result = run_osnma(pages.table, OsnmaSettings(tree, keys, sync_bound_s=sync_bound_s))
     sats = _log_satellites(data, pages.table, kind) if per_epoch else NO_SATELLITES
     status = satellite_status(result, sats)
     epochs = epoch_counts(status)

@@ -30,18 +30,28 @@ SYNC_BOUND_S = 30.0
 
 @dataclass
 class OsnmaEvidence:
-    """A log's OSNMA check, the satellites it authenticated per epoch, and the key files it used."""
+    """A log's OSNMA check, the satellites it authenticated per epoch, and the key files it used.
 
-    check: object  # tollcli.job.osnma_check.OsnmaCheck
+    ``pending``: the check still running beside the charge (a future); :attr:`check` waits for it."""
+
+    pending: object  # tollcli.job.osnma_check.OsnmaCheck, or a concurrent.futures.Future of one
     merkle: str
     public_keys: list[str]
+
+    @property
+    def check(self):
+        from concurrent.futures import Future
+
+        if isinstance(self.pending, Future):
+            self.pending = self.pending.result()
+        return self.pending
 
     def authenticated_for(self, satellites: pd.DataFrame) -> pd.DataFrame:
         """(``time_utc``, ``sv``) of the rows of a chunk's satellite table (``time_utc``, ``constellation``, ``svid``)
         whose navigation data were authenticated by then: what the chunk's positions look up."""
         from tollcli.gnss.osnma.satellite_status import satellite_status
 
-        return authenticated_satellites(satellite_status(self.check.result, satellites))
+        return authenticated_satellites(satellite_status(self.check.result, satellites[["time_utc", "constellation", "svid"]]))
 
     @property
     def failure_times(self) -> pd.Series:
@@ -76,9 +86,39 @@ def osnma_evidence(log: str, kind: str, merkle: str | None = None, public_keys: 
         check = check_osnma(log, merkle, public_keys, SYNC_BOUND_S, strict, positions=False, per_epoch=False)
     else:
         with run.named_errors():
-            check = check_osnma(log, merkle, public_keys, SYNC_BOUND_S, strict, positions=False, data=run.replay_path(), kind=kind,
-                                per_epoch=False)  # the charge joins the result with its own chunks' satellites
+            replay = run.replay_path()
+        check = _beside(run, lambda: check_osnma(log, merkle, public_keys, SYNC_BOUND_S, strict, positions=False, data=replay,
+                                                 kind=kind, per_epoch=False))  # the charge joins it with its own chunks' satellites
     return OsnmaEvidence(check, merkle, public_keys)
+
+
+def _beside(run, work):
+    """``work`` (the OSNMA verification: pure Python, its own input) run in a forked process beside the charge's own
+    reading, on another CPU; its result (a future) is waited for when the first chunk needs it. Inline where no
+    second CPU or no child process is to be had (a batch's pool worker). Errors name the log."""
+    import multiprocessing
+    from concurrent.futures import Future, ProcessPoolExecutor
+
+    def named():
+        with run.named_errors():
+            return work()
+
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if cpus < 2 or multiprocessing.current_process().daemon or "fork" not in multiprocessing.get_all_start_methods():
+        return named()
+    global _WORK
+    _WORK = named
+    pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"))
+    future: Future = pool.submit(_run_work)
+    pool.shutdown(wait=False)
+    return future
+
+
+_WORK = None  # what a forked child runs: set in the parent just before the fork
+
+
+def _run_work():
+    return _WORK()
 
 
 def inputs_record(evidence: OsnmaEvidence) -> dict:
