@@ -121,3 +121,4 @@ def test_too_many_erasures_hand_over():
 
     assert erasure_decode(bytes(118), list(range(61))) is None
     assert erasure_decode(bytes(118), list(range(60))) == bytes(118)  # the zero word fits
+

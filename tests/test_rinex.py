@@ -119,3 +119,17 @@ def test_cli_rinex(tmp_path):
     bad_nav.write_text("this is not RINEX\n")
     proc = run_cli("integrity", str(obs), "--nav", str(bad_nav))
     assert proc.returncode == 1 and b"Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_a_navigation_file_without_gps_or_galileo_is_a_data_error_not_an_internal_one():
+    """A BeiDou- or GLONASS-only RINEX navigation file reads as an empty dataset (GPS and Galileo are read): a clear
+    DataError, where it was ``KeyError: ['sqrtA']``."""
+    import xarray as xr
+
+    from tollcli.errors import DataError
+
+    from tollcli.gnss.satellite_states import rinex_ephemeris_table
+
+    with pytest.raises(DataError, match="no GPS or Galileo ephemerides"):
+        rinex_ephemeris_table(xr.Dataset({"SVclockBias": (("time", "sv"), [[1e-4]])},
+                                         coords={"time": [np.datetime64("2021-04-29T00:00")], "sv": ["C01"]}))

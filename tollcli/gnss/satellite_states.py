@@ -26,7 +26,8 @@ MAX_AGE_S = 4 * 3600.0
 
 def rinex_ephemeris_table(nav) -> pd.DataFrame:
     """A georinex navigation dataset (RINEX 2 or 3, GPS and Galileo) as one ephemeris per row."""
-    table = nav.to_dataframe().reset_index().dropna(subset=["sqrtA"])
+    table = nav.to_dataframe().reset_index()
+    table = table.dropna(subset=["sqrtA"]) if "sqrtA" in table else table.iloc[:0]  # (a file of other systems only: none)
     if table.empty:
         raise DataError("no GPS or Galileo ephemerides in the navigation file")
     table["sv"] = table["sv"].astype(str)
