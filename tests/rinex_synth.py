@@ -130,12 +130,34 @@ def write_obs(path: Path, rows, start: dt.datetime) -> None:
     path.write_text("\n".join(head + body) + "\n")
 
 
-def make_rinex(folder: Path, n_epochs: int = 5, lat=42.6987, lon=2.8956, h=60.0, noise_m=0.0, seed=0):
-    """Write obs + nav into ``folder``; returns (obs path, nav path, rows)."""
+def write_obs2(path: Path, rows, start: dt.datetime) -> None:
+    """The same observations as :func:`write_obs`, in RINEX 2.11 (types C1 and S1; 12 satellites an epoch line)."""
+    head = [
+        f"{'2.11':>9}{'':11}{'OBSERVATION DATA':<20}{'M (MIXED)':<20}RINEX VERSION / TYPE",
+        f"{'     2    C1    S1':<60}# / TYPES OF OBSERV",
+        f"{start.year:6d}{start.month:6d}{start.day:6d}{start.hour:6d}{start.minute:6d}{start.second:13.7f}     GPS         TIME OF FIRST OBS",
+        f"{'':60}END OF HEADER",
+    ]
+    body = []
+    for k in sorted({r[0] for r in rows}):
+        epoch_rows = [r for r in rows if r[0] == k]
+        t = start + dt.timedelta(seconds=k)
+        svs = "".join(sv for _, sv, _, _ in epoch_rows)
+        first, rest = svs[: 12 * 3], svs[12 * 3 :]
+        body.append(f" {t:%y} {t.month:2d} {t.day:2d} {t.hour:2d} {t.minute:2d}{t.second + t.microsecond / 1e6:11.7f}  0{len(epoch_rows):3d}{first}")
+        while rest:
+            body.append(f"{'':32}{rest[:36]}")
+            rest = rest[36:]
+        body += [f"{pr:14.3f}  {cn0:14.3f}  " for _, _, pr, cn0 in epoch_rows]
+    path.write_text("\n".join(head + body) + "\n")
+
+
+def make_rinex(folder: Path, n_epochs: int = 5, lat=42.6987, lon=2.8956, h=60.0, noise_m=0.0, seed=0, version: int = 3):
+    """Write obs + nav into ``folder``; returns (obs path, nav path, rows). ``version`` 2: the observations in RINEX 2.11."""
     start = dt.datetime(2024, 5, 6, 8, 0, 0)
     sats = constellation(start)
     rows = observe(sats, start, n_epochs, lat, lon, h, noise_m=noise_m, seed=seed)
     obs, nav = folder / "drive.24o", folder / "drive.24n"
-    write_obs(obs, rows, start)
+    (write_obs2 if version == 2 else write_obs)(obs, rows, start)
     write_nav(nav, sats)
     return obs, nav, rows

@@ -84,6 +84,22 @@ def test_rinex_round_trip_recovers_the_receiver(tmp_path):
     assert (out["raim_status"] == "valid").all() and (out["dof"] == 14 - 5).all()
 
 
+def test_rinex_2_11_observations_give_the_rinex_3_positions(tmp_path):
+    """The same observations written as RINEX 2.11 (C1, S1; a satellite list continued on a second line) and as
+    RINEX 3 (C1C, S1C): the same epochs, positions and measurements — a change of format that must change nothing.
+    (RINEX 2.11 was refused: "no GPS or Galileo L1/E1 code observations".)"""
+    three, two = tmp_path / "three", tmp_path / "two"
+    three.mkdir(), two.mkdir()
+    obs3, nav3, _ = make_rinex(three, n_epochs=4, noise_m=0.5, seed=5)
+    obs2, nav2, _ = make_rinex(two, n_epochs=4, noise_m=0.5, seed=5, version=2)
+    assert obs2.read_text().startswith("     2.11")
+    e3, m3 = rinex_epochs(str(obs3), str(nav3), sigma_model="nominal", sigma_m=5.0)
+    e2, m2 = rinex_epochs(str(obs2), str(nav2), sigma_model="nominal", sigma_m=5.0)
+    pd.testing.assert_frame_equal(e2, e3)
+    assert np.array_equal(m2.sv, m3.sv) and np.allclose(m2.sigma_m, m3.sigma_m, equal_nan=True)
+    assert (e2["n_measurements"] == 14).all() and np.abs(_enu_error(e2, 42.6987, 2.8956, 60.0)).max() < 5.0
+
+
 def test_rinex_fault_is_excluded(tmp_path):
     obs, nav, rows = make_rinex(tmp_path, n_epochs=3, noise_m=0.5, seed=3)
     faulty = [(k, sv, pr + (80.0 if sv == "G11" else 0.0), c) for k, sv, pr, c in rows]

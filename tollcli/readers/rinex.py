@@ -16,7 +16,9 @@ import pandas as pd
 
 from tollcli.errors import DataError, UsageError
 
-CODES = {"G": ("C1C", "C1P", "C1W"), "E": ("C1C", "C1X", "C1B")}
+#: the L1/E1 code observations read, in order of preference: RINEX 3 names, then RINEX 2 (C1 the C/A code, P1 the P
+#: code); the C/N0 is the S observation of the same band and attribute (S1C, S1 …)
+CODES = {"G": ("C1C", "C1P", "C1W", "C1", "P1"), "E": ("C1C", "C1X", "C1B", "C1")}
 NAMES = {"G": "GPS", "E": "Galileo"}
 
 
@@ -51,6 +53,8 @@ def observations(obs) -> pd.DataFrame:
         table = pd.DataFrame({"pr_m": pr.stack(future_stack=True), "cn0_dbhz": snr.stack(future_stack=True)}).reset_index()
         frames.append(table.rename(columns={table.columns[0]: "time", table.columns[1]: "sv"}))
     if not frames:
-        raise DataError("no GPS or Galileo L1/E1 code observations (C1C/C1X/C1P) in the observation file")
+        raise DataError("no GPS or Galileo L1/E1 code observations (RINEX 3: C1C/C1X/C1P/C1W/C1B; RINEX 2: C1/P1) in the "
+                        "observation file")  # fmt: skip
     rows = pd.concat(frames, ignore_index=True)
+    rows["time"] = rows["time"].astype("datetime64[ns]")  # one unit whatever the RINEX version (georinex: ns for 2, µs for 3)
     return rows[np.isfinite(rows["pr_m"])].sort_values(["time", "sv"], kind="stable").reset_index(drop=True)
