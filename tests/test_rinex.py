@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import run_cli
+from conftest import REPO, run_cli
 from rinex_synth import make_rinex
 
 from tollcli.geodesy import enu_rotation, geodetic2ecef
@@ -149,3 +150,41 @@ def test_a_navigation_file_without_gps_or_galileo_is_a_data_error_not_an_interna
     with pytest.raises(DataError, match="no GPS or Galileo ephemerides"):
         rinex_ephemeris_table(xr.Dataset({"SVclockBias": (("time", "sv"), [[1e-4]])},
                                          coords={"time": [np.datetime64("2021-04-29T00:00")], "sv": ["C01"]}))
+
+
+def test_several_navigation_files_are_read_as_one(tmp_path):
+    """``--nav`` given twice (the GPS records in one file, the Galileo ones in another, one record in both): the same
+    positions as the one file that holds them all; ``process`` records both files and ``verify`` re-runs it. (The
+    last ``--nav`` used to win silently: Galileo alone here.)"""
+    import datetime as dt
+
+    from rinex_synth import constellation, write_nav
+
+    obs, nav, _ = make_rinex(tmp_path, n_epochs=3, noise_m=0.5, seed=7)
+    sats = constellation(dt.datetime(2024, 5, 6, 8, 0, 0))
+    gps, galileo = tmp_path / "gps.24n", tmp_path / "gal.24n"
+    write_nav(gps, [s for s in sats if s["sv"][0] == "G"])
+    write_nav(galileo, [s for s in sats if s["sv"][0] == "E"] + [sats[0]])  # a GPS record broadcast in both
+    whole, _ = rinex_epochs(str(obs), str(nav))
+    split, _ = rinex_epochs(str(obs), [str(gps), str(galileo)])
+    pd.testing.assert_frame_equal(split, whole)
+    assert (whole["n_measurements"] == 14).all()
+    one, _ = rinex_epochs(str(obs), str(galileo))
+    assert (one["n_measurements"] < 14).all()  # what the last file alone gave
+
+    geo, tariff = str(REPO / "geoobjects" / "example-geoobjects.geojson"), str(REPO / "geoobjects" / "example-tariff.toml")
+    invoice = tmp_path / "inv.json"
+    done = run_cli("process", str(obs), "--nav", str(gps), "--nav", str(galileo), "--geo", geo, "--tariff", tariff, "-q",
+                   "-o", str(invoice))  # fmt: skip
+    assert done.returncode == 0, done.stderr.decode()
+    inputs = json.loads(invoice.read_text())["inputs"]
+    assert [os.path.basename(p) for p in inputs["nav"]] == ["gps.24n", "gal.24n"] and len(inputs["nav_sha256"]) == 2
+    assert run_cli("verify", str(invoice), "-q").returncode == 0
+    single = tmp_path / "single.json"
+    assert run_cli("process", str(obs), "--nav", str(nav), "--geo", geo, "--tariff", tariff, "-q", "-o", str(single)).returncode == 0
+    assert isinstance(json.loads(single.read_text())["inputs"]["nav"], str)  # one file: recorded as before
+    for value in (json.dumps(str(nav)), json.dumps([str(gps), str(galileo)])):  # a settings file: one path or a list
+        (tmp_path / "settings.toml").write_text(f"nav = {value}\n")
+        done = run_cli("process", str(obs), "--config", str(tmp_path / "settings.toml"), "--geo", geo, "--tariff", tariff,
+                       "-q", "-o", str(tmp_path / "c.json"))  # fmt: skip
+        assert done.returncode == 0, done.stderr.decode()

@@ -46,7 +46,7 @@ class ChargeOptions:
     vehicle_class: str
     vehicle_attr: list[str] | None
     input_format: str
-    nav: str | None
+    nav: str | tuple[str, ...] | None
     roads: str | None
     policy: str | None
     integrity_sources: str
@@ -67,6 +67,9 @@ class ChargeOptions:
     strict: bool
     date: object
     max_bad: int | None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "nav", opt.nav_files(self.nav))  # one file recorded as before, several as a list
 
     def settings(self, vehicle: str | None = None, input_format: str | None = None) -> ChargeSettings:
         """The settings of a charge (``input_format``: the input's format when the command settled it otherwise)."""

@@ -94,6 +94,7 @@ def integrity(
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     nominal = NominalModel(iono=iono)
+    nav = opt.nav_files(nav)
     run = LogRun(log, fmt)  # the log opened once (io.log_run)
     kind = run.kind
     with run:

@@ -102,6 +102,8 @@ def _load(ctx: typer.Context, param: typer.CallbackParam, value: str | None) -> 
         return value
     options = {p.name for p in ctx.command.params if p.param_type_name == "option"}
     defaults = settings_for(ctx.info_name or "", read_settings(value), value, options)
+    repeatable = {p.name for p in ctx.command.params if p.param_type_name == "option" and getattr(p, "multiple", False)}
+    defaults = {k: [v] if k in repeatable and isinstance(v, str) else v for k, v in defaults.items()}  # nav = "f" as ["f"]
     ctx.default_map = {**(ctx.default_map or {}), **defaults}
     return value
 

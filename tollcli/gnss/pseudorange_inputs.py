@@ -19,7 +19,7 @@ from tollcli.gnss.sigma_models import NominalModel
 PSEUDORANGE_FORMATS = ("gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
 
 
-def pseudorange_epochs(log: str, kind: str, nav: str | None, sigma_model: str, sigma_m: float,
+def pseudorange_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: str, sigma_m: float,
                        nominal: NominalModel, strict: bool = False) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
     """WLS epochs (with Doppler velocities where the input has rates) and RAIM measurements of a pseudorange log."""
     if kind == "gsdc-derived":
@@ -46,7 +46,7 @@ def pseudorange_epochs(log: str, kind: str, nav: str | None, sigma_model: str, s
     raise UsageError(f"{log}: {kind} is not a pseudorange format")
 
 
-def _raw_epochs(log: str, kind: str, nav: str | None, sigma_model: str, sigma_m: float, nominal: NominalModel,
+def _raw_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: str, sigma_m: float, nominal: NominalModel,
                 strict: bool) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
     from tollcli.gnss.raw_positions import (
         raw_epochs,
@@ -56,15 +56,9 @@ def _raw_epochs(log: str, kind: str, nav: str | None, sigma_model: str, sigma_m:
 
     ephemerides, iono = None, None
     if nav is not None:
-        from tollcli.gnss.satellite_states import rinex_ephemeris_table
-        from tollcli.readers.rinex import load_rinex
+        from tollcli.gnss.satellite_states import load_navigation
 
-        nav_data = load_rinex(nav, "navigation")
-        try:
-            ephemerides = rinex_ephemeris_table(nav_data)
-        except DataError as exc:
-            raise DataError(f"{nav}: {exc}") from None
-        iono = nav_data.attrs.get("ionospheric_corr_GPS")
+        ephemerides, iono = load_navigation(nav)  # one file or several
     if kind == "gnsslogger":
         from tollcli.gnss.android_raw import raw_pseudoranges
         from tollcli.readers.gnsslogger import read_gnsslogger

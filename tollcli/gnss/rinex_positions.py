@@ -21,27 +21,28 @@ from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
 from tollcli.gnss.measurements import Measurements, pad, slots
 from tollcli.gnss.orbits import WEEK_S
 from tollcli.gnss.pseudorange_wls import C_MPS, final_geometry, solve_positions
-from tollcli.gnss.satellite_states import rinex_ephemeris_table, satellite_states
+from tollcli.gnss.satellite_states import load_navigation, navigation_files, satellite_states
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.gps_time import gps_millis_to_utc, gps_seconds
 from tollcli.readers.rinex import load_rinex, observations
 
 
-def rinex_epochs(obs_path: str, nav_path: str, sigma_model: str = "nominal", sigma_m: float = 5.0,
+def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m: float = 5.0,
                  nominal: NominalModel | None = None) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
-    """WLS position per epoch (an epoch table) and the RAIM measurements at that position."""
+    """WLS position per epoch (an epoch table) and the RAIM measurements at that position (``nav_path``: one
+    navigation file or a list of them, :func:`~tollcli.gnss.satellite_states.load_navigation`)."""
     if sigma_model == "input":
         raise UsageError("--sigma-model input: RINEX observations carry no per-measurement σ; use nominal or constant")
-    obs, nav = load_rinex(obs_path, "observation"), load_rinex(nav_path, "navigation")
+    obs = load_rinex(obs_path, "observation")
+    ephemerides, coeffs = load_navigation(nav_path)
     rows = observations(obs)
     t_rx = gps_seconds(rows["time"].to_numpy())
     sv = rows["sv"].to_numpy(str)
     pr = rows["pr_m"].to_numpy(float)
-    ephemerides = rinex_ephemeris_table(nav)
     states = satellite_states(ephemerides, sv, t_rx, pr)
     pos, clock, usable = states["pos_m"], states["clock_s"], states["have"]
     if not usable.any():  # a navigation file of another day: say so, not "every epoch insufficient"
-        raise DataError(f"{obs_path}: no observation has a satellite orbit in {nav_path} ({orbit_coverage(ephemerides, t_rx)}); "
+        raise DataError(f"{obs_path}: no observation has a satellite orbit in {', '.join(navigation_files(nav_path))} ({orbit_coverage(ephemerides, t_rx)}); "
                         "a navigation file for the day of the observations gives the orbits")  # fmt: skip
 
     epoch_times, row = np.unique(rows["time"].to_numpy(), return_inverse=True)
@@ -56,7 +57,6 @@ def rinex_epochs(obs_path: str, nav_path: str, sigma_model: str = "nominal", sig
     letters = pad(np.array([s[0] for s in sv[keep]], dtype=object), row, slot, shape, "")
     cn0 = pad(rows["cn0_dbhz"].to_numpy(float)[keep], row, slot, shape, np.nan)
     tow = np.mod(gps_seconds(epoch_times), WEEK_S)[:, None]
-    coeffs = nav.attrs.get("ionospheric_corr_GPS")
 
     def correction(lat, lon, h, elev, azim):
         delay = saastamoinen_delay_m(lat[:, None], h[:, None], elev)

@@ -44,6 +44,34 @@ def rinex_ephemeris_table(nav) -> pd.DataFrame:
     return table
 
 
+def navigation_files(nav) -> list[str]:
+    """``--nav`` as given (one path, or several) → the list of paths."""
+    return [nav] if isinstance(nav, str) else list(nav)
+
+
+def load_navigation(nav) -> tuple[pd.DataFrame, list | None]:
+    """One ephemeris table from one or several RINEX navigation files (``nav``: a path or a list: a day's GPS file
+    beside its Galileo file, or consecutive days), and the GPS Klobuchar coefficients of the first file that has
+    them. A record broadcast twice (the same satellite and clock time in two files) is kept once, from the first
+    file; a file without GPS or Galileo ephemerides is an error naming it."""
+    from tollcli.readers.rinex import load_rinex
+
+    tables, iono = [], None
+    for path in navigation_files(nav):
+        data = load_rinex(path, "navigation")
+        try:
+            tables.append(rinex_ephemeris_table(data))
+        except DataError as exc:
+            raise DataError(f"{path}: {exc}") from None
+        coeffs = data.attrs.get("ionospheric_corr_GPS")
+        if iono is None and coeffs is not None and len(coeffs) == 8:
+            iono = coeffs
+    if len(tables) == 1:
+        return tables[0], iono
+    table = pd.concat(tables, ignore_index=True).drop_duplicates(["sv", "toc_s"], keep="first")
+    return table.sort_values(["sv", "toc_s"], kind="stable").reset_index(drop=True), iono
+
+
 def nearest_ephemerides(table: pd.DataFrame, sv: np.ndarray, t_s: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Per query, the fields of the satellite's ephemeris with the nearest clock reference time, and
     whether there is one (within ``MAX_AGE_S``, healthy)."""

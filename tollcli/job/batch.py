@@ -70,7 +70,7 @@ class Job:
     vehicle: str = ""  # the vehicle id (data, as the log or the options give it)
     name: str = ""  # the outputs' file name (a safe path component, unique in OUTDIR)
     input_sha256: tuple = ()  # (key, SHA-256) of the shared inputs, for the resume check
-    nav: str | None = None  # the navigation file shared by the logs (raw-measurement inputs)
+    nav: str | tuple[str, ...] | None = None  # the navigation file(s) shared by the logs (raw-measurement inputs)
     error: str = ""  # why the log cannot be charged before it is read (a vehicle the fleet file does not list)
     osnma_merkle: str | None = None  # the OSNMA Merkle tree for every log (None: each u-blox log's own, beside it)
     osnma_public_keys: tuple[str, ...] | None = None
@@ -332,7 +332,7 @@ def _fleet_jobs(jobs: list[Job], table: dict, fleet: str) -> list[Job]:
 
 
 def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, outdir: str, *, workers: int = 1,
-              scheduler: str | None = None, force: bool = False, roads: str | None = None, nav: str | None = None,
+              scheduler: str | None = None, force: bool = False, roads: str | None = None, nav: str | tuple[str, ...] | None = None,
               progress=None, fleet: str | None = None, osnma_merkle: str | None = None,
               osnma_public_keys: list[str] | None = None) -> dict:  # fmt: skip
     """Process every log; returns the summary (also written to OUTDIR/summary.json).
@@ -345,8 +345,8 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
     shared = [("geoobjects_sha256", file_sha256(geo)), ("tariff_sha256", file_sha256(tariff))]
     if roads is not None:
         shared.append(("roads_sha256", file_sha256(roads)))
-    if nav is not None:
-        shared.append(("nav_sha256", file_sha256(nav)))
+    if nav is not None:  # (several files: their digests in order, as the invoice lists them)
+        shared.append(("nav_sha256", file_sha256(nav) if isinstance(nav, str) else [file_sha256(p) for p in nav]))
     if osnma_merkle is not None:
         shared.append(("osnma_merkle_sha256", file_sha256(osnma_merkle)))
     keys = tuple(osnma_public_keys) if osnma_public_keys is not None else None

@@ -146,7 +146,7 @@ def _check_continued(continued) -> None:
             raise UsageError(f"continued[{gid!r}].exit_utc = {carried['exit_utc']!r}: not a UTC time") from None
 
 
-def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | None = None,
+def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: str | tuple[str, ...] | None = None,
                roads: str | None = None, epoch_table: list | None = None,
                as_recorded: dict[str, str] | None = None, geo_sha256: str | None = None,
                osnma_merkle: str | None = None, osnma_public_keys: list[str] | None = None,
@@ -198,8 +198,10 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
               "geoobjects_sha256": geo_objects.source_sha256 or file_sha256(geo), "tariff_sha256": file_sha256(tariff)}  # fmt: skip
     if log != "-":  # (a log read from stdin cannot be found again: its invoice records no digest to verify against)
         inputs["log_sha256"] = log_sha256
-    if nav is not None:
+    if isinstance(nav, str):
         inputs.update(nav=printable_path(nav), nav_sha256=file_sha256(nav))
+    elif nav is not None:  # several navigation files, read as one
+        inputs.update(nav=[printable_path(p) for p in nav], nav_sha256=[file_sha256(p) for p in nav])
     if osnma is not None:
         inputs.update(osnma_inputs(osnma))
     if roads is not None:
@@ -276,7 +278,7 @@ def _navigation_chunks(run: LogRun, kind: str, settings: ChargeSettings, nominal
         raise DataError(f"{run.name}: no epoch with a time of day")
 
 
-def _pseudorange_chunks(run: LogRun, kind: str, nav: str | None, settings: ChargeSettings,
+def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | None, settings: ChargeSettings,
                         nominal: NominalModel) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
     """A pseudorange log's (RINEX, GnssLogger, GSDC, u-blox RAWX, libRSF) WLS epochs and RAIM measurements, in chunks of
     :data:`CHUNK_EPOCHS` epochs. The positions are solved for the whole log at once (its reader and solver read it

@@ -41,13 +41,18 @@ def verify_invoice(path: str) -> dict:
     inputs = invoice["inputs"]
     if not isinstance(inputs, dict) or not all(isinstance(inputs.get(k), str) for k in ("log", "geoobjects", "tariff")):
         raise DataError(f"{path}: not a verifiable tollcli invoice (inputs must name the log, geo-objects and tariff)")
-    found: dict[str, str] = {}
+    found: dict = {}
     for key, label in INPUTS:
         if key not in inputs:
             continue
         file = inputs[key]
         if file == "-":
             raise VerifyFailed(f"{path}: the {label} was read from stdin and cannot be read again")
+        if key == "nav" and isinstance(file, list):  # several navigation files, read as one
+            digests = inputs.get("nav_sha256")
+            digests = digests if isinstance(digests, list) and len(digests) == len(file) else [None] * len(file)
+            found[key] = tuple(locate_input(path, str(f), d, label) for f, d in zip(file, digests))
+            continue
         # the log is hashed as it is charged (opened once): its digest is checked against the invoice's below
         found[key] = locate_input(path, str(file), inputs.get(f"{key}_sha256"), label, hash_single=key != "log")
     merkle, keys = _osnma_keys(path, inputs)
