@@ -2,7 +2,10 @@
 run forward and backward over the real Berlin Potsdamer Platz drive (libRSF: pseudoranges, odom3 speed and yaw
 rate), the two combined, and a protection level K·σ_major audited against the drive's truth.
 
-    python benchmarks/city_fusion.py [--no-odom] [--k=5] [--rounds=2] [--corr]
+    python benchmarks/city_fusion.py [--no-odom] [--k=5] [--rounds=2] [--corr] [--log=FILE --truth=FILE]
+
+(``--log``/``--truth``: another libRSF drive and its truth, e.g. ``tollcli simulate --nlos --odometry``'s
+``drive-librsf.txt`` and ``truth-librsf.txt``.)
 
 The estimator never sees the truth (it is read only by ``stats``, the audit). Its pieces:
 * state: east, north, up (local frame at the first fix), heading, a receiver clock per constellation, a common drift;
@@ -38,17 +41,19 @@ from tollcli.gnss.librsf_positions import librsf_epochs
 from tollcli.readers.librsf import read_librsf
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "smartloc"
-if not DATA.exists():
+if not DATA.exists() and not any(a.startswith("--log=") for a in sys.argv):
     sys.exit(f"{DATA}: not present")
 C = 299_792_458.0
-log = read_librsf(str(DATA / "Berlin_Potsdamer_Platz_Input.txt"))
+LOG = next((a.split("=", 1)[1] for a in sys.argv if a.startswith("--log=")), str(DATA / "Berlin_Potsdamer_Platz_Input.txt"))
+TRUTH = next((a.split("=", 1)[1] for a in sys.argv if a.startswith("--truth=")), str(DATA / "Berlin_Potsdamer_Platz_GT.txt"))
+log = read_librsf(LOG)
 ODOM = "--no-odom" not in sys.argv
 MAXLAG = 400
 APPLY_CORR = "--corr" in sys.argv
 NOISE_ROUNDS = int(next((a.split("=")[1] for a in sys.argv if a.startswith("--rounds=")), 2))
 QU = float(next((a.split("=")[1] for a in sys.argv if a.startswith("--qu=")), 0.01))
 K = float(next((a.split("=")[1] for a in sys.argv if a.startswith("--k=")), 5.0))
-truth = read_librsf(str(DATA / "Berlin_Potsdamer_Platz_GT.txt")).points
+truth = read_librsf(TRUTH).points
 ep, _ = librsf_epochs(log)
 d = log.pseudoranges
 tk = np.round(d.t_s.values * 1e3).astype(np.int64)

@@ -99,6 +99,8 @@ def simulate(
     lateral_bias_duration: Annotated[float, typer.Option("--lateral-bias-duration", help="How long each offset lasts, s.", min=0.0)] = 60.0,
     stop_at: Annotated[Optional[str], typer.Option("--stop-at", help="Comma-separated times the vehicle stops in traffic, s from the start (it brakes and pulls away at 1.5 m/s²).")] = None,
     stop_duration: Annotated[float, typer.Option("--stop-duration", help="How long each stop lasts, s.", min=0.0)] = 180.0,
+    nlos: Annotated[bool, typer.Option("--nlos", help="City reflections: a satellite the buildings block is received by reflection part of the time, weaker and late (an excess path of ~30–70 m correlated over 30 s); C/N0 rises with elevation.")] = False,
+    odometry: Annotated[bool, typer.Option("--odometry", help="The vehicle's odometry (wheel speed with a 1 % scale error, yaw rate with a 0.002 rad/s bias), written with the pseudoranges as libRSF text (drive-librsf.txt, truth-librsf.txt).")] = False,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every random draw: the same seed gives the same files.")] = 0,
     json_summary: opt.JsonSummary = False,
     quiet: opt.Quiet = False,
@@ -141,7 +143,7 @@ def simulate(
                        start_utc=start_utc.replace(tzinfo=dt.UTC), jam_at_s=_floats(jam_at, "--jam-at") if jam_at else [],
                        jam_duration_s=jam_duration, jam_db=jam_db, track_min_dbhz=track_min, nav_path=nav,
                        lateral_bias_m=lateral_bias, lateral_bias_at_s=_floats(lateral_bias_at, "--lateral-bias-at") if lateral_bias_at else [],
-                       lateral_bias_duration_s=lateral_bias_duration)  # fmt: skip
+                       lateral_bias_duration_s=lateral_bias_duration, nlos=nlos, odometry=odometry)  # fmt: skip
     command = _command(ctx)
     with progress("simulating", quiet) as advance:
         manifest = write_drive(trajectory, config, output, geo=geo, command=command, progress=advance)

@@ -62,6 +62,17 @@ class SimConfig:
     lateral_bias_m: float = 0.0  # a receiver-level position offset to the right of travel (invisible to RAIM) …
     lateral_bias_at_s: list[float] = field(default_factory=list)  # … from these times …
     lateral_bias_duration_s: float = 60.0  # … for this long
+    # a city street's reflections (off by default): a satellite the buildings block is received by reflection part of
+    # the time, weaker (C/N0) and late (a positive excess path), both correlated over ``nlos_tc_s``; the LOS C/N0 then
+    # rises with elevation (cn0_dbhz at the horizon, + 15 dB at the zenith)
+    nlos: bool = False
+    nlos_tc_s: float = 30.0
+    # the vehicle's odometry (off by default): wheel speed with a scale error, yaw rate with a bias, each with noise
+    odometry: bool = False
+    odo_scale: float = 0.01
+    odo_speed_sigma_mps: float = 0.05
+    gyro_bias_radps: float = 0.002
+    gyro_sigma_radps: float = 0.002
 
 
 @dataclass
@@ -71,7 +82,7 @@ class SimChunk:
 
 
 def _streams(seed: int) -> dict[str, np.random.Generator]:
-    names = ("street", "noise", "faults", "speed")
+    names = ("street", "noise", "faults", "speed", "nlos", "odometry")  # (added at the end: the first streams stay as they were)
     return dict(zip(names, (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(len(names)))))
 
 
@@ -103,7 +114,9 @@ def simulate(traj: Trajectory, config: SimConfig) -> Iterator[SimChunk]:
     street = make_street(config.env, length, rng["street"])
     model = NominalModel(iono=config.iono, default_cn0_dbhz=config.cn0_dbhz)
     faulty_all = fault_epochs(config.faults, traj.t_s, rng["faults"])
-    state = None
+    dt_s = float(np.median(np.diff(traj.t_s))) if traj.t_s.size > 1 else 1.0
+    yaw_radps = _yaw_rate_radps(traj) if config.odometry else None
+    state = nlos_state = None
     start = pd.Timestamp(config.start_utc)
     for lo in range(0, traj.t_s.size, config.chunk_epochs):
         sl = slice(lo, min(lo + config.chunk_epochs, traj.t_s.size))
@@ -117,12 +130,15 @@ def simulate(traj: Trajectory, config: SimConfig) -> Iterator[SimChunk]:
         for j0 in config.jam_at_s:  # a few episodes
             jammed |= (t >= j0) & (t < j0 + config.jam_duration_s)
         cn0 = np.full(elev.shape, config.cn0_dbhz) - np.where(jammed, config.jam_db, 0.0)[:, None]
+        excess = np.zeros(elev.shape)
+        if config.nlos:
+            reflected, cn0, excess, nlos_state = _reflections(config, elev, visible, cn0, dt_s, rng["nlos"], nlos_state)
+            visible |= reflected
         visible &= cn0 >= config.track_min_dbhz
         used = _top_k(elev, visible, group, config.max_per_constellation)
         sigma = model.sigma_m(elev, cn0, names[None, :], lat[:, None], lon[:, None])
-        unit, state = gauss_markov(n, names.size, config.tc_s, float(np.median(np.diff(traj.t_s))) if traj.t_s.size > 1 else 1.0,
-                                   rng["noise"], state)  # fmt: skip
-        error = sigma * unit
+        unit, state = gauss_markov(n, names.size, config.tc_s, dt_s, rng["noise"], state)
+        error = sigma * unit + excess  # (with reflections: the excess path of a reflected signal)
         H = observation_matrix(elev, azim, np.broadcast_to(group, elev.shape), int(group.max()) + 1)
         geometry = wls_geometry(H, np.where(used, sigma, np.nan), used)
         faulty = faulty_all[sl]
@@ -133,7 +149,36 @@ def simulate(traj: Trajectory, config: SimConfig) -> Iterator[SimChunk]:
         pr = view["range_m"] + config.clock_bias_m + error + bias
         measured = ChunkMeasurements(first_epoch=lo, t_s=t, rows=sl, view=view, used=used, cn0_dbhz=cn0, sigma_m=sigma, error_m=error,
                                      bias_m=bias, pr_m=pr, faulty=faulty, fault_col=fault_col)  # fmt: skip
-        yield _receiver_output(measured, Satellites(names, svid, group), traj, start, config, rng)
+        chunk = _receiver_output(measured, Satellites(names, svid, group), traj, start, config, rng)
+        if yaw_radps is not None:  # the odometer and the gyro: what the vehicle's own sensors say
+            o = rng["odometry"]
+            chunk.epochs["odo_speed_mps"] = traj.speed_mps[sl] * (1.0 + config.odo_scale) + config.odo_speed_sigma_mps * o.standard_normal(n)
+            chunk.epochs["odo_yaw_rate_radps"] = yaw_radps[sl] + config.gyro_bias_radps + config.gyro_sigma_radps * o.standard_normal(n)
+        yield chunk
+
+
+def _yaw_rate_radps(traj: Trajectory) -> np.ndarray:
+    """The true yaw rate (rad/s, counter-clockwise positive as a gyro's z axis) from the heading (clockwise from north)."""
+    if traj.t_s.size < 2:
+        return np.zeros(traj.t_s.size)
+    return -np.gradient(np.unwrap(np.radians(traj.heading_deg)), traj.t_s)
+
+
+def _reflections(config: SimConfig, elev: np.ndarray, line_of_sight_ok: np.ndarray, cn0: np.ndarray, dt_s: float,
+                 rng: np.random.Generator, state) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Which blocked satellites are received by reflection (about 60 % of the time, in spells of ``nlos_tc_s``), every
+    satellite's C/N0 (LOS: + 15 dB·sin(elevation); reflected: 8–18 dB weaker) and the reflected signals' excess path
+    (m, ≥ 5, growing with the loss: ~30–70 m), from three correlated unit processes per satellite."""
+    n, m = elev.shape
+    u, last = gauss_markov(n, 3 * m, config.nlos_tc_s, dt_s, rng, state)
+    present, loss, spread = u[:, :m], u[:, m : 2 * m], u[:, 2 * m :]
+    above = elev >= config.mask_deg
+    reflected = above & ~line_of_sight_ok & (present > -0.25)
+    loss_db = np.clip(13.0 + 3.0 * loss, 8.0, 18.0)
+    los_cn0 = cn0 + 15.0 * np.sin(np.radians(np.clip(elev, 0.0, 90.0)))
+    cn0 = np.where(reflected, los_cn0 - loss_db, los_cn0)
+    excess = np.where(reflected, np.maximum(5.0, 4.0 * (loss_db - 5.0) + 15.0 * np.abs(spread)), 0.0)
+    return reflected, cn0, excess, last
 
 
 def _fault_column(plan: FaultPlan, names: np.ndarray, svid: np.ndarray, slope: np.ndarray, used: np.ndarray) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""The simulated receiver's logs: NMEA 0183 (4.10) and the GSDC derived CSV.
+"""The simulated receiver's logs: NMEA 0183 (4.10), the GSDC derived CSV and (with odometry) libRSF text.
 
 NMEA per epoch: RMC, VTG, GGA, GSA per constellation (with system id), GSV per
 constellation (with signal id), GST, GRS per constellation (residuals in GSA
@@ -6,7 +6,10 @@ order) — what a multi-GNSS receiver with RAIM outputs. Without a fix, GGA has
 quality 0, RMC status V, and GSA/GST/GRS are not written. The GSDC derived CSV
 has one row per received satellite: ECEF at transmission, the pseudorange, σ as
 ``rawPrUncM``, no satellite clock, ionosphere or troposphere terms (the simulated
-errors are the residuals after those corrections).
+errors are the residuals after those corrections). The libRSF text is the smartLoc layout
+(:mod:`tollcli.readers.librsf`): ``pseudorange3`` lines (the same pseudoranges, σ² as the variance, Galileo numbered
+300 + PRN) and ``odom3`` lines (the odometer's speed, the gyro's yaw rate and their variances), times in seconds
+from the start; the truth as ``point3`` lines (ECEF).
 """
 
 from __future__ import annotations
@@ -100,3 +103,38 @@ def truth_rows(epochs: pd.DataFrame) -> pd.DataFrame:
 
 def start_date(epochs: pd.DataFrame) -> dt.date:
     return pd.Timestamp(epochs["time_utc"].iloc[0]).date()
+
+
+#: libRSF system codes (smartLoc: 1 GPS, 3 Galileo) and Galileo's satellite numbers
+LIBRSF_SYSTEM = {"GPS": 1, "Galileo": 3}
+LIBRSF_GALILEO_ID0 = 300
+
+
+def librsf_lines(epochs: pd.DataFrame, satellites: pd.DataFrame, config) -> Iterator[str]:
+    """A chunk's ``odom3`` and ``pseudorange3`` lines (without line ends), epoch by epoch (odometry first, as smartLoc writes them)."""
+    t_of = pd.Series(epochs["t_s"].to_numpy(float), index=epochs["epoch"].to_numpy())
+    v_var, w_var = config.odo_speed_sigma_mps**2, config.gyro_sigma_radps**2
+    odom = {int(e): f"odom3 {t:.3f} {v:.6f} 0 0 0 0 {w:.9f} {v_var:g} {v_var:g} {v_var:g} {w_var:g} {w_var:g} {w_var:g}"
+            for e, t, v, w in zip(epochs["epoch"], epochs["t_s"], epochs["odo_speed_mps"], epochs["odo_yaw_rate_radps"])}  # fmt: skip
+    const = satellites["constellation"].to_numpy(object)
+    sat_id = np.where(const == "Galileo", LIBRSF_GALILEO_ID0, 0) + satellites["svid"].to_numpy(np.int64)
+    system = np.where(const == "Galileo", LIBRSF_SYSTEM["Galileo"], LIBRSF_SYSTEM["GPS"])
+    rows: dict[int, list[str]] = {}
+    for e, pr, sg, x, y, z, sid, sy, el, c in zip(satellites["epoch"].to_numpy(), satellites["pr_m"].to_numpy(),
+                                                   satellites["sigma_m"].to_numpy(), satellites["x_sv_m"].to_numpy(),
+                                                   satellites["y_sv_m"].to_numpy(), satellites["z_sv_m"].to_numpy(), sat_id,
+                                                   system, satellites["elev_deg"].to_numpy(), satellites["cn0_dbhz"].to_numpy()):  # fmt: skip
+        rows.setdefault(int(e), []).append(f"pseudorange3 {t_of[e]:.3f} {pr:.4f} {sg * sg:.4f} {x:.4f} {y:.4f} {z:.4f} {sid} {sy} {el:.4f} {c:.2f}")
+    for e in epochs["epoch"].to_numpy():
+        yield odom[int(e)]
+        yield from rows.get(int(e), [])
+
+
+def librsf_truth_lines(epochs: pd.DataFrame) -> Iterator[str]:
+    """The chunk's true positions as libRSF ``point3`` lines (ECEF, m)."""
+    from tollcli.geodesy import geodetic2ecef
+
+    x, y, z = geodetic2ecef(epochs["true_lat_deg"].to_numpy(float), epochs["true_lon_deg"].to_numpy(float),
+                            epochs["true_height_m"].to_numpy(float))  # fmt: skip
+    for t, a, b, c in zip(epochs["t_s"].to_numpy(float), np.atleast_1d(x), np.atleast_1d(y), np.atleast_1d(z)):
+        yield f"point3 {t:.3f} {a:.4f} {b:.4f} {c:.4f} 0 0 0 0 0 0 0 0 0"

@@ -6,6 +6,8 @@ Files written (each atomically):
 ``drive-derived.csv``   the same measurements as a GSDC derived CSV (full WLS path)
 ``truth.csv``           the true trajectory (time, position, speed, heading, fault flag)
 ``truth-geoobjects.json`` the geo-objects really driven (with ``geo``): ids, as ``audit --truth`` reads
+``drive-librsf.txt``, ``truth-librsf.txt``  with odometry: the pseudoranges and the odometry as libRSF text (the
+                        smartLoc layout of the real Berlin drive), and the truth as its ``point3`` lines
 ``manifest.json``       the settings, the command, counts and every file's SHA-256
 
 No wall-clock time is written anywhere: the same settings and seed give the same bytes.
@@ -13,6 +15,7 @@ No wall-clock time is written anywhere: the same settings and seed give the same
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from dataclasses import asdict
@@ -23,23 +26,29 @@ from tollcli import __version__
 from tollcli.charging.invoice import file_sha256
 from tollcli.io.writers import AtomicText, TableWriter, output_folder, write_text_atomic
 from tollcli.simulate.drive import SimConfig, simulate
-from tollcli.simulate.logs import gsdc_rows, nmea_lines, truth_rows
+from tollcli.simulate.logs import gsdc_rows, librsf_lines, librsf_truth_lines, nmea_lines, truth_rows
 from tollcli.simulate.route import Trajectory
 
 FILES = ("drive.nmea", "drive-derived.csv", "truth.csv")
+LIBRSF_FILES = ("drive-librsf.txt", "truth-librsf.txt")
 
 
 def write_drive(traj: Trajectory, config: SimConfig, outdir: str, geo: str | None = None, command: str = "",
                 progress=None) -> dict:  # fmt: skip
     """Simulate and write the drive's files into ``outdir``; returns the manifest."""
     output_folder(outdir)
-    path = {name: os.path.join(outdir, name) for name in FILES}
+    names = FILES + (LIBRSF_FILES if config.odometry else ())
+    path = {name: os.path.join(outdir, name) for name in names}
     counts = {"epochs": 0, "fixes": 0, "faulty_epochs": 0, "satellite_rows": 0}
     visible = []
     with AtomicText(path["drive.nmea"]) as nmea, TableWriter(path["drive-derived.csv"], "csv") as gsdc, \
-            TableWriter(path["truth.csv"], "csv") as truth:  # fmt: skip
+            TableWriter(path["truth.csv"], "csv") as truth, contextlib.ExitStack() as extra:  # fmt: skip
+        librsf = [extra.enter_context(AtomicText(path[name])) for name in LIBRSF_FILES] if config.odometry else None
         for chunk in simulate(traj, config):
             nmea.writelines(nmea_lines(chunk.epochs, chunk.satellites))
+            if librsf is not None:
+                librsf[0].writelines(librsf_lines(chunk.epochs, chunk.satellites, config))
+                librsf[1].writelines(librsf_truth_lines(chunk.epochs))
             gsdc.write(gsdc_rows(chunk.epochs, chunk.satellites))
             truth.write(truth_rows(chunk.epochs))
             counts["epochs"] += len(chunk.epochs)
@@ -52,7 +61,9 @@ def write_drive(traj: Trajectory, config: SimConfig, outdir: str, geo: str | Non
         nmea.commit()
         gsdc.commit()
         truth.commit()
-    files = list(FILES)
+        for out in librsf or ():
+            out.commit()
+    files = list(names)
     if geo is not None:
         from tollcli.charging.audit import driven_from_truth
         from tollcli.charging.recognition import load_geoobjects
