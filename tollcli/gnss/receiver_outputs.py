@@ -15,6 +15,8 @@
   1σ, m) and the 1σ latitude/longitude errors. ``gst_sigma_major_m`` = the largest
   of the semi-major axis and the two σ's (receivers disagree on which they fill and
   some fill the axis inconsistently: the bound takes the most conservative).
+* A σ that is no σ (≤ 0 or infinite: a damaged or hostile sentence, even with a good checksum) makes that output
+  give no verdict for its epoch (GBS or GST NaN, and the GST RMS with it): never a bound of zero or less.
 * The GST RMS field is meant as the RMS of the range residuals (m). Many receivers
   write something else there (u-blox: 837, 235 111 "m" beside an ellipse of
   2.3 × 3.5 m). It counts as a residual statistic only where it is plausible: a
@@ -80,6 +82,13 @@ def _largest(*arrays: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(out), out, np.nan)
 
 
+def _impossible(*arrays: np.ndarray) -> np.ndarray:
+    """Element-wise: some σ given is not a σ (≤ 0, or infinite): the receiver's output that carries it says nothing."""
+    stack = np.stack(arrays)
+    with np.errstate(invalid="ignore"):
+        return ((stack <= 0) | np.isinf(stack)).any(axis=0)
+
+
 def rms_plausible(rms_m: np.ndarray, sigma_major_m: np.ndarray, hdop: np.ndarray) -> np.ndarray:
     """Whether each GST RMS can be a range-residual RMS given the ellipse and the geometry (False where unknown)."""
     h = np.where(np.isfinite(hdop) & (hdop > 0), hdop, 1.0)
@@ -90,7 +99,8 @@ def rms_plausible(rms_m: np.ndarray, sigma_major_m: np.ndarray, hdop: np.ndarray
 def receiver_outputs(epochs: pd.DataFrame, carry: RmsCarry | None = None) -> ReceiverOutputs:
     """The GBS and GST integrity outputs of every row of ``epochs`` (``carry``: the log's earlier chunks)."""
     n = len(epochs)
-    gbs = _largest(_column(epochs, "gbs_err_lat_m"), _column(epochs, "gbs_err_lon_m"))
+    gbs_sigmas = (_column(epochs, "gbs_err_lat_m"), _column(epochs, "gbs_err_lon_m"))
+    gbs = np.where(_impossible(*gbs_sigmas), np.nan, _largest(*gbs_sigmas))  # a σ ≤ 0 is no bound: no GBS verdict
     failed = epochs["gbs_failed_svid"].to_numpy(np.int64) if "gbs_failed_svid" in epochs else np.full(n, -1, np.int64)
     bias, bias_sd = _column(epochs, "gbs_bias_m"), _column(epochs, "gbs_bias_sd_m")
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -99,8 +109,10 @@ def receiver_outputs(epochs: pd.DataFrame, carry: RmsCarry | None = None) -> Rec
     mode = _column(epochs, "fix_mode")
     unknowns = np.where(mode == 2, 3, 4)
     redundant = ~(np.isfinite(n_used) & (n_used > 0) & (n_used <= unknowns))
-    gst = _largest(_column(epochs, "sigma_major_m"), _column(epochs, "sigma_lat_m"), _column(epochs, "sigma_lon_m"))
-    rms = _column(epochs, "rms_residual_m")
+    gst_sigmas = (_column(epochs, "sigma_major_m"), _column(epochs, "sigma_lat_m"), _column(epochs, "sigma_lon_m"))
+    gst_impossible = _impossible(*gst_sigmas)
+    gst = np.where(gst_impossible, np.nan, _largest(*gst_sigmas))  # a σ ≤ 0 is no bound: no GST verdict that epoch
+    rms = np.where(gst_impossible, np.nan, _column(epochs, "rms_residual_m"))
     given = np.isfinite(rms)
     bad = given & ~rms_plausible(rms, gst, _column(epochs, "hdop"))
     note = np.where(bad, 1, 0)
