@@ -263,7 +263,7 @@ def load_tariff(path: str) -> Tariff:
     try:
         with open(path, "rb") as fh:
             raw = fh.read()
-        text = raw.decode("utf-8")
+        text = raw.decode("utf-8-sig")  # (a byte-order mark, as some editors write, is no statement)
         doc = tomllib.loads(text, parse_float=Decimal)
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None

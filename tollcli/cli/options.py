@@ -115,7 +115,7 @@ RaimMode = Annotated[Literal[RAIM_MODES], typer.Option("--raim", help="RAIM: ss 
 Environment = Annotated[Literal[ENVIRONMENTS], typer.Option("--environment", help="Error model's environment: auto (urban where the residuals of the last 30 s exceed the nominal model 1.5-fold: C/N0-weighted urban σ there), open (the nominal model throughout) or urban (the urban σ throughout).")]
 PSat = Annotated[float, typer.Option("--p-sat", help="--raim ss: prior probability of a satellite fault.")]
 PConst = Annotated[float, typer.Option("--p-const", help="--raim ss: prior probability of a constellation-wide fault.")]
-Hal = Annotated[float, typer.Option("--hal", help="Horizontal alert limit, m.", min=0.0)]
+Hal = Annotated[float, typer.Option("--hal", help="Horizontal alert limit, m (0–10 000).", min=0.0, max=10_000.0)]
 PMd = Annotated[float, typer.Option("--p-md", help="Probability of missed detection.")]
 PFa = Annotated[float, typer.Option("--p-fa", help="Probability of false alarm: classic RAIM's design value; under ETC an alarm at a higher per-epoch P_FA reads probable_false_alarm.")]
 IntegritySources = Annotated[
@@ -130,9 +130,9 @@ SigmaModel = Annotated[
     Literal[SIGMA_MODELS],
     typer.Option("--sigma-model", help="Pseudorange error model: nominal (thesis; alias urban, rural), constant (--sigma), input (σ from the log)."),
 ]
-Sigma = Annotated[float, typer.Option("--sigma", help="σ of every pseudorange for --sigma-model constant, m.", min=0.0)]
-Tc = Annotated[float, typer.Option("--tc", help="Correlation time: independent positions are at least this far apart, s (≥ 0.1).", min=0.1)]
-NTh = Annotated[int, typer.Option("--n-th", help="Charge when at least this many valid independent positions fell inside.", min=1)]
+Sigma = Annotated[float, typer.Option("--sigma", help="σ of every pseudorange for --sigma-model constant, m (0.01–1 000).", min=0.01, max=1_000.0)]
+Tc = Annotated[float, typer.Option("--tc", help="Correlation time: independent positions are at least this far apart, s (0.1–86 400).", min=0.1, max=86_400.0)]
+NTh = Annotated[int, typer.Option("--n-th", help="Charge when at least this many valid independent positions fell inside (1–10 000).", min=1, max=10_000)]
 Iono = Annotated[Literal[IONO_MODELS], typer.Option("--iono", help="Nominal model ionosphere: single (single frequency), sbas, iono-free.")]
 MaxBad = Annotated[
     Optional[int],

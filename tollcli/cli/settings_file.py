@@ -17,6 +17,7 @@ invoice again.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import tomllib
 from typing import Annotated, Optional
@@ -66,7 +67,7 @@ def read_settings(path: str) -> dict:
             raise UsageError(f"--config {path}: a JSON settings file is an invoice, with its parameters")
         return {PARAMETER_OPTION.get(k, k): _option_value(v) for k, v in params.items() if k not in DERIVED and v is not None}
     try:
-        doc = tomllib.loads(raw.decode("utf-8"))
+        doc = tomllib.loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise UsageError(f"--config {path}: not TOML ({exc})") from None
     return doc
@@ -91,6 +92,8 @@ def settings_for(command: str, doc: dict, path: str, options: set[str]) -> dict:
         if name in NOT_SETTINGS:
             raise UsageError(f"--config {path}: {key!r} is not a setting")
         if name in options:
+            if isinstance(value, (dt.date, dt.time)):  # a TOML date (date = 2026-03-02, unquoted): as the option writes it
+                value = value.isoformat(timespec="seconds") if isinstance(value, dt.datetime) else value.isoformat()
             out[name] = value
         elif name not in known:
             raise UsageError(f"--config {path}: {key!r} is no option of {', '.join(COMMANDS)}")
