@@ -247,14 +247,7 @@ def stats(name, est, cov):
 
 fx = np.array([p[0] for p in post_f]); fP = np.array([p[1] for p in post_f])
 stats("forward", fx, fP)
-# two-filter combination: forward posterior with backward prior
-cx = np.zeros((n, 7)); cP = np.zeros((n, 7, 7))
-for k in range(n):
-    xf, Pf = post_f[k]; xb, Pb = prior_b[k]
-    If, Ib = np.linalg.inv(Pf), np.linalg.inv(Pb)
-    # heading wrap: bring xb heading near xf
-    xb = xb.copy(); xb[3] = xf[3] + (xb[3] - xf[3] + np.pi) % (2 * np.pi) - np.pi
-    cP[k] = np.linalg.inv(If + Ib); cx[k] = cP[k] @ (If @ xf + Ib @ xb)
+cx, cP = combine(post_f, prior_b)  # two-filter combination: forward posterior with backward prior
 stats("combined", cx, cP)
 bx = np.array([p[0] for p in post_b]); bP = np.array([p[1] for p in post_b])
 stats("backward", bx, bP)
