@@ -307,11 +307,13 @@ def test_the_parsers_choices_are_the_rooms_own():
     from tollcli.integrity.environment import ENVIRONMENTS
     from tollcli.integrity.raim import MODES
     from tollcli.integrity.sources import LEVEL_CHOICES
+    from tollcli.integrity.trajectory import POSITIONINGS
     from tollcli.integrity.verdict import POLICIES
     from tollcli.io.sources import INPUT_KINDS
 
     assert opt.RAIM_MODES == MODES and opt.ENVIRONMENTS == ENVIRONMENTS and opt.INTEGRITY_LEVELS == LEVEL_CHOICES
     assert opt.SIGMA_MODELS == SIGMA_MODELS and opt.INPUT_KINDS == INPUT_KINDS and opt.POLICIES == tuple(POLICIES)
+    assert opt.POSITIONINGS == POSITIONINGS
     proc = run_cli("integrity", SAMPLE, "--raim", "raimy", "-o", "-")
     assert proc.returncode == 2 and proc.stderr.decode().count("\n") == 1
     assert "'raimy' is not one of 'ss', 'etc', 'classic'" in proc.stderr.decode() and "Value error" not in proc.stderr.decode()

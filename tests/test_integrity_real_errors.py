@@ -53,17 +53,24 @@ def test_the_defaults_declare_no_position_in_berlin_further_off_than_its_bound(t
     proc = run_cli("integrity", _berlin("Input.txt"), "--hal", str(hal), "-q", "-o", str(epochs))
     assert proc.returncode == 0, proc.stderr.decode()
     table = pd.read_csv(epochs)
-    assert len(table) == 1_372 and (table["raim_mode"] == "ss").all()
-    assert (table["environment"] == "urban").all()  # the canyon's residuals: 1.5–10 × the nominal model's
+    assert len(table) == 1_372 and (table["raim_mode"] == "smoothed").all()
     report = tmp_path / "audit.json"
     proc = run_cli("audit", "--epochs", str(epochs), "--truth", _berlin("GT.txt"), "-q", "-o", str(report))
     assert proc.returncode == 0, proc.stderr.decode()
+    integrity = json.loads(report.read_text())["integrity"]
+    assert integrity["with_position"] == 1_372 and integrity["positioning_failures"] == 0  # smoothed: under 25 m
+    assert integrity["undetected"] == 0 and integrity["regions"]["misleading"] == 0 and integrity["regions"]["hazardous"] == 0
+    snapshot = tmp_path / "snapshot.csv"  # each epoch alone, the RAIM judging it
+    assert run_cli("integrity", _berlin("Input.txt"), "--hal", str(hal), "--positioning", "snapshot", "-q", "-o", str(snapshot)).returncode == 0
+    table = pd.read_csv(snapshot)
+    assert (table["raim_mode"] == "ss").all() and (table["environment"] == "urban").all()  # residuals 1.5–10 × the model's
+    assert run_cli("audit", "--epochs", str(snapshot), "--truth", _berlin("GT.txt"), "-q", "-o", str(report)).returncode == 0
     integrity = json.loads(report.read_text())["integrity"]
     assert integrity["with_position"] == 1_372 and integrity["positioning_failures"] > 100  # the WLS: 27 m median
     assert integrity["undetected"] == 0 and integrity["regions"]["misleading"] == 0 and integrity["regions"]["hazardous"] == 0
     old = tmp_path / "etc.csv"
     assert run_cli("integrity", _berlin("Input.txt"), "--hal", str(hal), "--raim", "etc", "--environment", "open", "-q",
-                   "-o", str(old)).returncode == 0  # fmt: skip
+                   "--positioning", "snapshot", "-o", str(old)).returncode == 0  # fmt: skip
     assert run_cli("audit", "--epochs", str(old), "--truth", _berlin("GT.txt"), "-q", "-o", str(report)).returncode == 0
     assert json.loads(report.read_text())["integrity"]["undetected"] > 100  # what the papers' defaults did
 
@@ -175,9 +182,10 @@ def test_gsdc2021_and_librsf_truths_are_trajectories():
     assert len(berlin) == 1_372 and berlin["lat_deg"].between(52.50, 52.52).all() and not is_id_list(_berlin("GT.txt"))
 
 
-def _streets_around_the_drive(tmp_path, offset_m: float = 150.0) -> str:
-    """Three tolled streets: one along a straight stretch the Berlin drive took (its NE diagonal), two parallel
-    to it ``offset_m`` away on either side; geo-objects of HAL 50 m built by the product."""
+def _streets_around_the_drive(tmp_path, offsets_m: tuple[float, ...] = (150.0,), free_roads: bool = False) -> str:
+    """Tolled streets: one along a straight stretch the Berlin drive took (its NE diagonal), and parallels to it at
+    each of ``offsets_m`` on either side; with ``free_roads``, the streets the drive took elsewhere (its truth), untolled
+    (the build keeps the geo-objects clear of them); geo-objects of HAL 50 m built by the product."""
     lat0, lon0 = 52.5, 13.37
     kx, ky = 111_320.0 * np.cos(np.radians(lat0)), 111_132.0
     p, q = np.array([0.0028 * kx, 0.00775 * ky]), np.array([0.0056 * kx, 0.00905 * ky])
@@ -189,36 +197,61 @@ def _streets_around_the_drive(tmp_path, offset_m: float = 150.0) -> str:
         return {"type": "Feature", "properties": {"id": sid, "name": sid, "road_class": "primary"},
                 "geometry": {"type": "LineString", "coordinates": [[lon0 + a[0] / kx, lat0 + a[1] / ky], [lon0 + b[0] / kx, lat0 + b[1] / ky]]}}  # fmt: skip
 
+    features = [street("DRIVEN", 0.0)]
+    for off in offsets_m:
+        features += [street(f"LEFT{off:g}", off), street(f"RIGHT{off:g}", -off)]
+    if free_roads:  # the other streets the drive took (its truth away from the tolled stretch), untolled
+        from tollcli.readers.librsf import librsf_truth
+
+        truth = librsf_truth(_berlin("GT.txt"))
+        xy = np.stack([(truth["lon_deg"].to_numpy() - lon0) * kx, (truth["lat_deg"].to_numpy() - lat0) * ky], axis=1) - p
+        across, along = xy @ n, xy @ d
+        away = (np.abs(across) > 60.0) | (along < -60.0) | (along > np.linalg.norm(q - p) + 60.0)
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], away.astype(int), [0]])))
+        for k, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
+            if b - a >= 2:
+                coords = truth[["lon_deg", "lat_deg"]].to_numpy()[a:b:3].tolist()
+                features.append({"type": "Feature", "properties": {"id": f"FREE{k}", "road_class": "residential", "tolled": False},
+                                 "geometry": {"type": "LineString", "coordinates": coords}})  # fmt: skip
     roads = tmp_path / "streets.geojson"
-    roads.write_text(json.dumps({"type": "FeatureCollection", "features": [
-        street("DRIVEN", 0.0), street("LEFT", offset_m), street("RIGHT", -offset_m)]}))  # fmt: skip
+    roads.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
     geo = tmp_path / "geo.geojson"
     assert run_cli("geoobjects", "build", str(roads), "-o", str(geo), "--hal", "50", "-q").returncode == 0
     return str(geo)
 
 
-def test_on_the_real_city_drive_the_defaults_charge_no_street_not_driven_and_say_why(tmp_path):
-    """Metamorphic on real data: tolled streets laid around the Potsdamer Platz drive's own track. The papers'
-    ETC under the nominal σ charges a street the vehicle never drove (its positions up to 79 m off are
-    'valid'); the defaults charge none — and, unable to vouch for any position in that canyon, none driven
-    either, with the reason in the invoice and the summary line."""
-    geo = _streets_around_the_drive(tmp_path)
+@pytest.mark.parametrize("offset_m", [100.0, 150.0])
+def test_on_the_real_city_drive_the_defaults_charge_the_street_driven_and_no_other(tmp_path, offset_m):
+    """Metamorphic on real data: tolled streets laid around the Potsdamer Platz drive's own track — the stretch it
+    drove, parallels ``offset_m`` away on either side, the other streets it took untolled. The defaults (the smoothed
+    trajectory) charge the street driven, once, and no other; the snapshot positions (each epoch alone) charge none,
+    unable to vouch for any position in that canyon, and say why; the papers' ETC under the nominal σ charges a
+    street 100 m away that the vehicle never drove."""
+    geo = _streets_around_the_drive(tmp_path, (offset_m,), free_roads=True)
     tariff = tmp_path / "t.toml"
     tariff.write_text('currency = "EUR"\n[road_class.primary]\ncar = 1.00\n')
     audits = {}
-    for name, args in (("defaults", ()), ("etc", ("--raim", "etc", "--environment", "open"))):
+    runs = (("defaults", ()), ("snapshot", ("--positioning", "snapshot")), ("etc", ("--raim", "etc", "--environment", "open",
+                                                                               "--positioning", "snapshot")))  # fmt: skip
+    for name, args in runs:
         invoice, report = tmp_path / f"{name}.json", tmp_path / f"{name}-audit.json"
         proc = run_cli("process", _berlin("Input.txt"), "--geo", geo, "--tariff", str(tariff), "-o", str(invoice), *args)
         assert proc.returncode == 0, proc.stderr.decode()
+        doc = json.loads(invoice.read_text())
         if name == "defaults":
+            assert doc["parameters"]["positioning_used"] == "smoothed"
+            assert [line["geoobject"] for line in doc["lines"]] == ["DRIVEN"] and not doc["not_charged"]
+        if name == "snapshot":
             assert b"mostly unavailable: the protection level exceeds the geo-object's HAL" in proc.stderr
-            doc = json.loads(invoice.read_text())
             assert doc["lines"] == [] and "unavailable" in doc["status_notes"] and doc["parameters"]["raim"] == "ss"
             assert all(p["why"].startswith("the protection level exceeds the geo-object's HAL") for p in doc["not_charged"])
         assert run_cli("audit", str(invoice), "--truth", _berlin("GT.txt"), "--geo", geo, "-q", "-o", str(report)).returncode == 0
         audits[name] = json.loads(report.read_text())
-    assert audits["defaults"]["passages_driven"] == audits["etc"]["passages_driven"] >= 1
-    assert audits["defaults"]["false_recognitions"] == 0 < audits["etc"]["false_recognitions"]
+    assert audits["defaults"]["passages_driven"] == 1
+    assert audits["defaults"]["false_recognitions"] == audits["defaults"]["missed_recognitions"] == 0
+    assert audits["snapshot"]["false_recognitions"] == 0
+    if offset_m == 100.0:
+        assert audits["etc"]["false_recognitions"] > 0
     page = tmp_path / "report.html"  # the report reads the libRSF truth too: errors and the Stanford regions
     assert run_cli("report", str(tmp_path / "defaults.json"), "--truth", _berlin("GT.txt"), "-q", "-o", str(page)).returncode == 0
     assert "hazardous" in page.read_text()

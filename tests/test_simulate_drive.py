@@ -71,13 +71,14 @@ def test_nmea_log_reads_back_as_the_receiver_wrote_it(tmp_path):
 
 
 def test_fault_free_test_statistic_is_chi_square_on_the_pseudorange_path(tmp_path):
-    """Property: no fault, white errors, σ known (rawPrUncM) ⇒ t ~ χ²_k; a 3σ-inflated error model is rejected."""
+    """Property: no fault, white errors, σ known (rawPrUncM) ⇒ the snapshot RAIM's t ~ χ²_k; a 3σ-inflated error model is
+    rejected."""
     epochs, sats = _drive("open", tc_s=0.0, seconds=900, seed=3)
     from tollcli.simulate.logs import gsdc_rows
 
     gsdc_rows(epochs, sats).to_csv(tmp_path / "d.csv", index=False)
     out = tmp_path / "i.csv"
-    result = run_cli("integrity", str(tmp_path / "d.csv"), "--sigma-model", "input", "-q", "-o", str(out))
+    result = run_cli("integrity", str(tmp_path / "d.csv"), "--sigma-model", "input", "--positioning", "snapshot", "-q", "-o", str(out))
     assert result.returncode == 0, result.stderr.decode()
     table = pd.read_csv(out)
     u = stats.chi2.cdf(table["test_stat"], table["dof"])

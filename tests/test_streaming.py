@@ -64,7 +64,8 @@ def test_streamed_invoice_is_the_whole_log_invoice(monkeypatch, log, roads):
 
 def test_a_real_pseudorange_drive_streamed_is_the_whole_log(tmp_path, monkeypatch):
     """The Berlin drive (libRSF pseudoranges and odometry speed, 1 372 epochs) through the one charge path in 37-epoch
-    chunks, with 500 m roads laid along its own track: the invoice of the whole log, passages and findings included."""
+    chunks, with 500 m roads laid along its own track: the invoice of the whole log, passages and findings included,
+    with the smoothed trajectory (the default) and with snapshot positions."""
     from conftest import shared
 
     from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
@@ -79,7 +80,7 @@ def test_a_real_pseudorange_drive_streamed_is_the_whole_log(tmp_path, monkeypatc
     (tmp_path / "roads.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": features}))
     geo = tmp_path / "geo.geojson"
     geo.write_text(json.dumps(build_geoobjects(str(tmp_path / "roads.geojson"))))
-    for settings in ({}, {"environment": "open"}):
+    for settings in ({}, {"positioning": "snapshot"}, {"environment": "open", "positioning": "snapshot"}):
         monkeypatch.setattr(pipeline, "STREAM_ROUNDS", False)
         monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 1_000_000)
         whole = charge_log(log, str(geo), TARIFF, ChargeSettings(**settings))[0]
@@ -88,7 +89,10 @@ def test_a_real_pseudorange_drive_streamed_is_the_whole_log(tmp_path, monkeypatc
         monkeypatch.setattr(streaming, "ROUND_ROWS", 1)
         streamed = charge_log(log, str(geo), TARIFF, ChargeSettings(**settings))[0]
         assert invoice_json(streamed) == invoice_json(whole)
-        assert whole["not_charged"] and whole["findings"]["items"]
+        if not settings:  # the smoothed trajectory: the city positions charge
+            assert whole["lines"] and whole["parameters"]["positioning_used"] == "smoothed"
+        else:  # each epoch alone: mostly not (declared open: some)
+            assert whole["not_charged"] and whole["findings"]["items"]
     assert whole["lines"]  # declared open, the city positions charge
 
 

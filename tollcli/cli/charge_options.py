@@ -28,7 +28,8 @@ CHARGE_PARAMETERS = (
     ("geo", Geo, _REQUIRED), ("tariff", Tariff, _REQUIRED),
     ("vehicle_class", opt.TariffVehicleClass, "car"), ("vehicle_attr", opt.VehicleAttr, None),
     ("input_format", opt.InputFormat, "auto"), ("nav", opt.Nav, None), ("roads", Roads, None), ("policy", Policy, None),
-    ("integrity_sources", opt.IntegritySources, "auto"), ("raim", opt.RaimMode, "ss"), ("environment", opt.Environment, "auto"),
+    ("integrity_sources", opt.IntegritySources, "auto"), ("raim", opt.RaimMode, "ss"), ("positioning", opt.Positioning, "smoothed"),
+    ("environment", opt.Environment, "auto"),
     ("p_sat", opt.PSat, 1e-5), ("p_const", opt.PConst, 1e-8), ("p_md", opt.PMd, 5e-5), ("p_fa", opt.PFa, 5e-3),
     ("fde", opt.Fde, False), ("sigma_model", opt.SigmaModel, "nominal"), ("sigma", opt.Sigma, 5.0), ("tc", opt.Tc, 5.0),
     ("n_th", opt.NTh, 1), ("require_authenticated", opt.RequireAuthenticated, False), ("osnma_merkle", opt.OsnmaMerkle, None),
@@ -51,6 +52,7 @@ class ChargeOptions:
     policy: str | None
     integrity_sources: str
     raim: str
+    positioning: str
     environment: str
     p_sat: float
     p_const: float
@@ -79,7 +81,7 @@ class ChargeOptions:
             sigma_model=self.sigma_model, sigma_m=self.sigma, tc_s=self.tc, n_th=self.n_th, strict=self.strict,
             date=self.date.date().isoformat() if self.date else None, policy=self.policy,
             integrity_sources=self.integrity_sources, input_format=opt.check_input_format(input_format or self.input_format),
-            require_authenticated=self.require_authenticated,
+            require_authenticated=self.require_authenticated, positioning=self.positioning,
         )  # fmt: skip
 
 

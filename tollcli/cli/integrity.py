@@ -34,6 +34,7 @@ def integrity(
     integrity_sources: opt.IntegritySources = "auto",
     raim: opt.RaimMode = "ss",
     environment: opt.Environment = "auto",
+    positioning: opt.Positioning = "smoothed",
     p_sat: opt.PSat = 1e-5,
     p_const: opt.PConst = 1e-8,
     hal: opt.Hal = 50.0,
@@ -105,7 +106,7 @@ def integrity(
         with writer:
             if checks or roads:
                 tables = [c.table for c in iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav,
-                                                          date=day, environment=environment)]
+                                                          date=day, environment=environment, positioning=positioning)]
                 if kind in NAVIGATION_KINDS:
                     check_usable(stats)  # a log without one epoch: the data error, before any check runs
                 table = with_epoch_checks(pd.concat(tables, ignore_index=True), roads)
@@ -114,7 +115,7 @@ def integrity(
             elif kind in NAVIGATION_KINDS:
                 _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
             else:
-                table = _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment, strict)
+                table = _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment, strict, positioning)
                 counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
                 _tally(table, counts)
                 writer.write(table)
@@ -128,6 +129,8 @@ def integrity(
                "fde": fde, "sigma_model": sigma_model, "environment_setting": environment,
                "environments": {k[1]: n for k, n in sorted(counts.items()) if k[0] == "environment"},
                "skipped_lines": counts["skipped", "lines"]}  # fmt: skip
+    if kind not in NAVIGATION_KINDS:
+        summary["positioning"] = positioning
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
     else:
@@ -169,5 +172,7 @@ def _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, str
     note(stats.summary(), quiet)
 
 
-def _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment="auto", strict=False) -> pd.DataFrame:
-    return next(iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, nav=nav, environment=environment)).table
+def _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment="auto", strict=False,
+                  positioning="smoothed") -> pd.DataFrame:  # fmt: skip
+    return next(iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, nav=nav, environment=environment,
+                               positioning=positioning)).table

@@ -82,5 +82,6 @@ def gsdc_epochs(
         }
     )
     source = np.full(n_epochs, "pseudorange", dtype=object)
-    meas = Measurements(H_enu, sigma, mask, labels, dy_m=dy, test_stat_source=source)
+    meas = Measurements(H_enu, sigma, mask, labels, dy_m=dy, test_stat_source=source, sat_ecef_m=sat, pr_m=g["pr_m"],
+                        clock_index=g["clock_index"])
     return epochs, meas

@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError
+from tollcli.gnss.odometry import interval_odometry
 from tollcli.gnss.measurements import Measurements, pad, slots, sv_labels
 from tollcli.gnss.pseudorange_wls import final_geometry, solve_positions
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
@@ -65,12 +66,24 @@ def librsf_epochs(log: LibrsfLog, sigma_model: str = "nominal", sigma_m: float =
             "clock_bias_m": np.where(ok, x[:, 3], np.nan),
             "n_measurements": mask.sum(axis=1).astype(np.int16),
             "speed_mps": _odometry_speed(log.odometry, epoch_ms),
+            **_interval_odometry(log.odometry, epoch_ms),
         }
     )
     epochs.attrs["skipped_lines"] = log.malformed  # malformed lines the reader passed over
     meas = Measurements(g["H"], sigma, mask, labels, dy_m=g["dy_m"], cn0_dbhz=cn0,
-                        test_stat_source=np.full(n_epochs, "pseudorange", dtype=object))  # fmt: skip
+                        test_stat_source=np.full(n_epochs, "pseudorange", dtype=object), sat_ecef_m=sat, pr_m=g["pr_m"],
+                        clock_index=g["clock_index"])  # fmt: skip
     return epochs, meas
+
+
+def _interval_odometry(odometry: pd.DataFrame, epoch_ms: np.ndarray) -> dict[str, np.ndarray]:
+    """The odometer's mean speed (m/s) and yaw rate (rad/s) over the interval ending at each epoch (NaN: none)."""
+    if odometry.empty:
+        nan = np.full(epoch_ms.size, np.nan)
+        return {"odometer_speed_mps": nan, "yaw_rate_radps": nan.copy()}
+    speed, yaw = interval_odometry(odometry["t_s"].to_numpy(float), odometry["vx_mps"].to_numpy(float),
+                                   odometry["wz_radps"].to_numpy(float), epoch_ms / 1e3)  # fmt: skip
+    return {"odometer_speed_mps": speed, "yaw_rate_radps": yaw}
 
 
 def _odometry_speed(odometry: pd.DataFrame, epoch_ms: np.ndarray) -> np.ndarray:

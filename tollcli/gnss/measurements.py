@@ -40,6 +40,20 @@ class Measurements:
     #: (E,) bool: the receiver says the fix is corrected (GGA quality 2 DGNSS/SBAS, 4 RTK fixed, 5 RTK float, 9 SBAS;
     #: u-blox diffSoln/carrSoln; gpsd DGPS/RTK): its σ is the corrected one, at the ``model`` level too
     corrected_fix: np.ndarray | None = None
+    #: pseudorange logs: each measurement's satellite (E, N, 3; ECEF at transmission, in the ECEF frame of that time),
+    #: its pseudorange with the satellite clock and the atmosphere removed (E, N; m) and its receiver-clock group
+    #: (E, N; one per constellation): what the trajectory estimator (:mod:`tollcli.integrity.trajectory`) solves from
+    sat_ecef_m: np.ndarray | None = None
+    pr_m: np.ndarray | None = None
+    clock_index: np.ndarray | None = None
+    #: (E,) the trajectory estimator's verdict inputs where it placed the epochs (``--positioning smoothed|filtered``):
+    #: which positioning, its HPL (m), fault test statistic and degrees of freedom, and the measurements its robust
+    #: loss set aside; None: snapshot positions (the RAIM decides)
+    trajectory_source: np.ndarray | None = None
+    trajectory_hpl_m: np.ndarray | None = None
+    trajectory_test_stat: np.ndarray | None = None
+    trajectory_dof: np.ndarray | None = None
+    trajectory_set_aside: np.ndarray | None = None
 
     def take(self, rows: np.ndarray) -> Measurements:
         """The given epochs (rows may repeat: one per epoch and geo-object)."""

@@ -91,7 +91,8 @@ def _correction_at(correction: Correction, los: np.ndarray, x: np.ndarray) -> np
 
 def final_geometry(sat_xyz: np.ndarray, pr_m: np.ndarray, mask: np.ndarray, x: np.ndarray,
                    correction: Correction | None = None, clock_index: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
-    """At the solution: geodetic position, angles, ENU observation matrix and pre-fit residuals."""
+    """At the solution: geodetic position, angles, ENU observation matrix, pre-fit residuals, and the pseudoranges with
+    the corrections at that position removed (``pr_m``) with their clock groups."""
     clock_index, n_clocks = _clocks(mask, clock_index)
     onehot = (clock_index[..., None] == np.arange(n_clocks)).astype(float)
     lat, lon, h = ecef2geodetic(x[:, 0], x[:, 1], x[:, 2])
@@ -100,4 +101,5 @@ def final_geometry(sat_xyz: np.ndarray, pr_m: np.ndarray, mask: np.ndarray, x: n
     pr = pr_m - (np.nan_to_num(correction(lat, lon, h, elev, azim)) if correction is not None else 0.0)
     dy = np.where(mask, pr - (rng + _clock_term(x, clock_index)), np.nan)
     H = np.concatenate([-los_enu, onehot], axis=-1)
-    return {"lat_deg": lat, "lon_deg": lon, "height_m": h, "elev_deg": elev, "azim_deg": azim, "H": H, "dy_m": dy}
+    return {"lat_deg": lat, "lon_deg": lon, "height_m": h, "elev_deg": elev, "azim_deg": azim, "H": H, "dy_m": dy,
+            "pr_m": np.where(mask, pr, np.nan), "clock_index": clock_index}

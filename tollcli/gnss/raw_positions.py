@@ -153,5 +153,6 @@ def raw_epochs(m: pd.DataFrame, sigma_model: str = "nominal", sigma_m: float = 5
         "n_doppler": vel["n_doppler"],
     })  # fmt: skip
     meas = Measurements(g["H"], sigma, mask, labels, dy_m=g["dy_m"], cn0_dbhz=cn0,
-                        test_stat_source=np.full(n_epochs, "pseudorange", dtype=object))  # fmt: skip
+                        test_stat_source=np.full(n_epochs, "pseudorange", dtype=object), sat_ecef_m=sat_xyz, pr_m=g["pr_m"],
+                        clock_index=g["clock_index"])  # fmt: skip
     return epochs, meas

@@ -86,7 +86,8 @@ def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m:
         }
     )
     meas = Measurements(H, sigma, mask, labels, dy_m=g["dy_m"], cn0_dbhz=cn0,
-                        test_stat_source=np.full(epoch_times.size, "pseudorange", dtype=object))  # fmt: skip
+                        test_stat_source=np.full(epoch_times.size, "pseudorange", dtype=object), sat_ecef_m=sat, pr_m=g["pr_m"],
+                        clock_index=g["clock_index"])  # fmt: skip
     return epochs, meas
 
 

@@ -66,8 +66,13 @@ _STATUS_OR_NONE = np.array(STATUSES + ("",), dtype=object)  # index -1: no verdi
 def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geometry | None = None) -> pd.DataFrame:
     """One row of RAIM results per epoch of ``meas`` (``hal_m``: scalar or per epoch).
 
-    ``geometry``: ``wls_geometry`` of ``meas`` when already computed (it does not depend on the HAL).
+    ``geometry``: ``wls_geometry`` of ``meas`` when already computed (it does not depend on the HAL). Epochs the
+    trajectory estimator placed are judged by its bound and fault test instead (:mod:`tollcli.integrity.trajectory_verdicts`).
     """
+    if meas.trajectory_hpl_m is not None:
+        from tollcli.integrity.trajectory_verdicts import trajectory_raim
+
+        return trajectory_raim(meas, params, hal_m)
     if geometry is None:
         geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
     n_epochs = meas.mask.shape[0]

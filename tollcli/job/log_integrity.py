@@ -12,6 +12,7 @@ from tollcli.errors import UsageError
 from tollcli.geodesy import enu_shift2geodetic
 from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
 from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+from tollcli.integrity.trajectory import with_trajectory
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.integrity.environment import EnvironmentCarry, with_environment
 from tollcli.integrity.raim import RaimParams
@@ -37,12 +38,14 @@ def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
 
 def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
                    nominal: NominalModel | None = None, strict: bool = False, stats: ReadStats | None = None,
-                   nav: str | tuple[str, ...] | None = None, date: dt.date | None = None, environment: str = "auto") -> Iterator[IntegrityChunk]:  # fmt: skip
+                   nav: str | tuple[str, ...] | None = None, date: dt.date | None = None, environment: str = "auto",
+                   positioning: str = "smoothed") -> Iterator[IntegrityChunk]:  # fmt: skip
     """Integrity tables of ``log`` (``kind``: a navigation kind — nmea, ubx-nav, gpsd-json — streamed in chunks, or a
     pseudorange format). ``log``: a path, or the log's :class:`~tollcli.io.log_run.LogRun` (read through it: opened once).
 
     ``date``: the UTC date of the first epoch, for NMEA logs without RMC/ZDA dates. ``environment``: auto
-    (each epoch's class from its residuals, :mod:`tollcli.integrity.environment`), open or urban.
+    (each epoch's class from its residuals, :mod:`tollcli.integrity.environment`), open or urban. ``positioning``: a
+    pseudorange log's (:func:`~tollcli.integrity.trajectory.with_trajectory`).
     """
     from tollcli.io.log_run import LogRun
 
@@ -50,10 +53,11 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
     if isinstance(log, LogRun):
         with log.named_errors():
             yield from iter_integrity(log.replay_path() if kind not in NAVIGATION_KINDS else log.source(), kind, params, sigma_model,
-                                      sigma_m, nominal, strict, stats, nav, date, environment)  # fmt: skip
+                                      sigma_m, nominal, strict, stats, nav, date, environment, positioning)  # fmt: skip
         return
     if kind not in NAVIGATION_KINDS:
         epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
+        epochs, meas, _used = with_trajectory(epochs, meas, positioning)
         meas, env_columns = measured_environment(epochs, meas, environment)
         table = with_raim_position(pd.concat([epochs, env_columns, run_raim(meas, params)], axis=1))
         table.attrs["skipped_lines"] = int(epochs.attrs.get("skipped_lines", 0))

@@ -34,6 +34,7 @@ from tollcli.integrity.nav_authentication import epoch_authentication, not_check
 from tollcli.integrity.raim import MODES, RaimParams
 from tollcli.integrity.run import level_name, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
+from tollcli.integrity.trajectory import POSITIONINGS, with_trajectory
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
 from tollcli.io.sources import INPUT_KINDS, printable_path
 from tollcli.job.log_integrity import measured_environment
@@ -79,6 +80,10 @@ class ChargeSettings:
     #: a position counts only when its navigation data were authenticated (Galileo OSNMA,
     #: integrity.nav_authentication.ACCEPTED): ``--require-authenticated``
     require_authenticated: bool = False
+    #: where a pseudorange log's positions come from (integrity.trajectory.POSITIONINGS): smoothed (forward and
+    #: backward over the whole log), filtered (forward only) or snapshot (each epoch alone, the RAIM's); recorded for
+    #: pseudorange logs only (a navigation log's positions are its receiver's)
+    positioning: str = "smoothed"
 
 
 #: the shortest correlation time accepted, s (a 10 Hz receiver's epoch interval)
@@ -105,6 +110,8 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
         bad("environment (--environment)", settings.environment, f"one of {', '.join(ENVIRONMENTS)}")
     if not isinstance(settings.sigma_m, number) or not math.isfinite(settings.sigma_m) or settings.sigma_m <= 0:
         bad("sigma_m (--sigma)", settings.sigma_m, "a standard deviation > 0 m")
+    if settings.positioning not in POSITIONINGS:
+        bad("positioning (--positioning)", settings.positioning, f"one of {', '.join(POSITIONINGS)}")
     if settings.integrity_sources not in LEVEL_CHOICES:
         bad("integrity_sources (--integrity-sources)", settings.integrity_sources, f"one of {', '.join(LEVEL_CHOICES)}")
     if not isinstance(settings.vehicle_class, str) or not settings.vehicle_class:
@@ -185,8 +192,9 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
         with run.named_errors():  # one charge for every input kind: its chunks of epochs and measurements, streamed
             stats = ReadStats() if kind in NAVIGATION_KINDS else None
+            used: list[str] = []  # the positioning a pseudorange log's chunks were placed by
             chunks = (_navigation_chunks(run, kind, settings, nominal, stats) if kind in NAVIGATION_KINDS
-                      else _pseudorange_chunks(run, kind, nav, settings, nominal))  # fmt: skip
+                      else _pseudorange_chunks(run, kind, nav, settings, nominal, used))  # fmt: skip
             params = _charge_chunks(chunks, settings, geo_objects, params, epoch_raim, charger, epoch_table, osnma, auth_counts,
                                     failure_fixes)  # fmt: skip
             if stats is not None:
@@ -217,6 +225,10 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         del parameters["vehicle_attrs"]  # recorded only for a tariff of per-km tables
     if not settings.require_authenticated:
         del parameters["require_authenticated"]  # recorded only when required: invoices made before it stay as they were
+    if kind in NAVIGATION_KINDS:
+        del parameters["positioning"]  # the receiver's positions: nothing to choose
+    else:
+        parameters["positioning_used"] = used[0] if used else "snapshot"
     invoice = build_invoice(table, None, geo_objects, tariff_doc,
                             vehicle=settings.vehicle or printable_path(os.path.basename(log)), vehicle_class=settings.vehicle_class,
                             inputs=inputs, parameters=parameters, period=period, details=details,
@@ -279,11 +291,15 @@ def _navigation_chunks(run: LogRun, kind: str, settings: ChargeSettings, nominal
 
 
 def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | None, settings: ChargeSettings,
-                        nominal: NominalModel) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
-    """A pseudorange log's (RINEX, GnssLogger, GSDC, u-blox RAWX, libRSF) WLS epochs and RAIM measurements, in chunks of
+                        nominal: NominalModel, used: list[str]) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
+    """A pseudorange log's (RINEX, GnssLogger, GSDC, u-blox RAWX, libRSF) epochs and measurements, in chunks of
     :data:`CHUNK_EPOCHS` epochs. The positions are solved for the whole log at once (its reader and solver read it
-    whole, from the run's replay); from there on the chunks take the same path as a navigation log's."""
+    whole, from the run's replay) — each epoch alone (snapshot WLS), then placed by the trajectory estimator
+    (``settings.positioning``, :func:`~tollcli.integrity.trajectory.with_trajectory`; ``used`` receives the positioning
+    it used); from there on the chunks take the same path as a navigation log's."""
     epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
+    epochs, meas, positioning = with_trajectory(epochs, meas, settings.positioning)
+    used.append(positioning)
     for start in range(0, len(epochs), CHUNK_EPOCHS):
         rows = np.arange(start, min(start + CHUNK_EPOCHS, len(epochs)))
         yield epochs.iloc[rows].reset_index(drop=True), meas.take(rows), None
@@ -342,6 +358,8 @@ def settings_from_invoice(invoice: dict) -> ChargeSettings:
     settings = ChargeSettings(**{k: recorded[k] for k in fields if k in recorded})
     if "environment" not in recorded:  # an invoice from before the environment was measured: the nominal model throughout
         settings.environment = "open"
+    if "positioning" not in recorded:  # a navigation log's, or from before the trajectory estimator: snapshot positions
+        settings.positioning = "snapshot"
     return settings
 
 

@@ -1,0 +1,140 @@
+"""The trajectory estimator (``--positioning``): the real Berlin city drive audited against its truth, the estimator's
+pieces on known answers, and what an invoice records.
+
+The Berlin figures are the tool's own (``tollcli integrity`` then ``tollcli audit --epochs --truth``), with the
+default settings: the estimator never reads the truth.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import run_cli, shared
+
+from tollcli.gnss.odometry import interval_odometry
+from tollcli.integrity.trajectory import sigma_major_m
+from tollcli.integrity.trajectory_noise import correlation_inflation, sigma_by_cn0
+
+BERLIN = ("smartloc", "Berlin_Potsdamer_Platz_Input.txt")
+TRUTH = ("smartloc", "Berlin_Potsdamer_Platz_GT.txt")
+
+
+def _audited(tmp_path, log, *options: str) -> tuple[dict, dict]:
+    """The integrity summary and the audit against the Berlin truth of one run of ``tollcli integrity``."""
+    table = tmp_path / "epochs.csv"
+    proc = run_cli("integrity", str(log), "-o", str(table), "--json", "-q", *options)
+    assert proc.returncode == 0, proc.stderr.decode()
+    summary = json.loads(proc.stdout)
+    report = tmp_path / "audit.json"
+    proc = run_cli("audit", "--epochs", str(table), "--truth", str(shared(*TRUTH)), "-o", str(report), "-q")
+    assert proc.returncode == 0, proc.stderr.decode()
+    return summary, json.loads(report.read_text())["integrity"]
+
+
+def test_berlin_smoothed_by_default_is_available_and_never_misleading(tmp_path):
+    """Defaults on the real city drive: ≥ 95 % of epochs valid at HAL 50 m and ≥ 70 % at 30 m (the snapshot RAIM:
+    0 %), no epoch misleading or hazardous, the error of the smoothed positions small."""
+    log = shared(*BERLIN)
+    for hal, share in ((50, 0.95), (30, 0.70)):
+        summary, audit = _audited(tmp_path, log, "--hal", str(hal))
+        assert summary["positioning"] == "smoothed" and summary["integrity_sources"] == {"smoothed": 1372}
+        assert summary["statuses"].get("valid", 0) >= share * 1372
+        assert audit["regions"]["misleading"] == 0 and audit["regions"]["hazardous"] == 0 and audit["undetected"] == 0
+    error = audit["horizontal_error_m"]
+    assert error["median"] <= 9.0 and error["p95"] <= 20.0 and error["max"] <= 25.0  # snapshot WLS: 27 / 62 m
+
+
+def test_berlin_filtered_forward_only(tmp_path):
+    """Forward only (what an on-board unit could do): ≥ 80 % valid at HAL 50 m, none misleading."""
+    summary, audit = _audited(tmp_path, shared(*BERLIN), "--positioning", "filtered")
+    assert summary["positioning"] == "filtered" and summary["statuses"].get("valid", 0) >= 0.80 * 1372
+    assert audit["regions"]["misleading"] == 0 and audit["regions"]["hazardous"] == 0
+
+
+def test_berlin_snapshot_is_todays(tmp_path):
+    """``--positioning snapshot``: each epoch alone, judged by the RAIM: nothing valid in the canyon, nothing
+    misleading either (the positioning the tool had before the estimator)."""
+    summary, audit = _audited(tmp_path, shared(*BERLIN), "--positioning", "snapshot")
+    assert summary["positioning"] == "snapshot" and "smoothed" not in summary["integrity_sources"]
+    assert summary["statuses"].get("valid", 0) == 0
+    assert audit["horizontal_error_m"]["median"] > 20
+
+
+def test_interval_odometry_integrates_what_moved_between_epochs():
+    """Known answer: a constant 10 m/s and 0.1 rad/s sampled at 5 Hz give exactly those over every interval between
+    3 Hz epochs; an interval across a 2 s hole in the samples is unknown (NaN), and so is the first."""
+    t = np.arange(0, 20, 0.2)
+    keep = (t < 8) | (t > 10)
+    speed, yaw = interval_odometry(t[keep], np.full(keep.sum(), 10.0), np.full(keep.sum(), 0.1), np.arange(0.1, 19, 1 / 3))
+    epochs = np.arange(0.1, 19, 1 / 3)
+    hole = (epochs > 7.8) & (epochs < 10.5)
+    assert np.isnan(speed[0]) and np.isnan(speed[1:][hole[1:]]).all()
+    ok = ~np.isnan(speed)
+    assert ok.sum() > 40 and np.allclose(speed[ok], 10.0) and np.allclose(yaw[ok], 0.1)
+
+
+def test_noise_per_cn0_bin_and_its_correlation():
+    """Properties: white residuals give a correlation factor near 1; the same residuals held for 20 epochs each
+    (a reflection that lasts) give about 20 (the variance of a mean of 20 equal errors is 20× a white mean's);
+    σ per C/N0 bin is the bin's spread with its bias, and a bin with too few residuals takes the largest."""
+    rng = np.random.default_rng(4)
+    n_epochs, n_sats = 4000, 8
+    white = rng.normal(size=(n_epochs, n_sats))
+    sv = np.tile(np.array([f"G{k:02d}" for k in range(n_sats)], dtype=object), (n_epochs, 1))
+    mask = np.ones(white.shape, bool)
+    factor, _ = correlation_inflation(white, sv, mask)
+    assert 0.8 < factor < 1.3
+    held = np.repeat(rng.normal(size=(n_epochs // 20, n_sats)), 20, axis=0)
+    factor, rho = correlation_inflation(held, sv, mask)
+    assert 15 < factor < 25 and rho[10] > 0.4
+    cn0 = np.where(np.arange(n_sats) < 4, 42.0, 27.0)[None, :].repeat(n_epochs, 0)
+    cn0[0, 0] = 10.0  # one lonely residual below 25 dB-Hz
+    residual = np.where(cn0 > 40, 2.0 * white, 30.0 + 10.0 * white)
+    table = sigma_by_cn0(residual, cn0, mask)
+    assert table[4] == pytest.approx(3.0, abs=0.3)  # 40–45 dB-Hz: σ 2 m, floored at 3 m
+    assert table[1] == pytest.approx(np.hypot(30.0, 10.0), rel=0.05)  # 25–30 dB-Hz: bias and spread
+    assert table[0] == table.max()
+
+
+def test_sigma_major_is_the_ellipse_semi_major_axis():
+    """Known answers: a diagonal covariance's larger σ; a rotated one's."""
+    angle = np.radians(30.0)
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    cov = np.stack([np.diag([9.0, 4.0]), rot @ np.diag([25.0, 1.0]) @ rot.T])
+    assert np.allclose(sigma_major_m(cov), [3.0, 5.0])
+
+
+def test_the_invoice_says_which_positioning_and_verify_reproduces_it(tmp_path):
+    """``process`` of the Berlin drive with roads laid along its snapshot track: by default the smoothed trajectory
+    charges (``parameters.positioning``/``positioning_used``), ``verify`` reproduces the invoice from its recorded
+    settings, and ``--positioning snapshot`` charges nothing there (each epoch alone is unavailable)."""
+    from conftest import REPO
+
+    from tollcli.geoobjects.build import build_geoobjects
+    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+    from tollcli.gnss.sigma_models import NominalModel
+
+    log = str(shared(*BERLIN))
+    epochs, _ = pseudorange_epochs(log, "librsf", None, "nominal", 5.0, NominalModel())
+    lon_lat = epochs[["lon_deg", "lat_deg"]].dropna().to_numpy()[::20]
+    features = [{"type": "Feature", "properties": {"id": f"B{k}", "road_class": "motorway", "tolled": True},
+                 "geometry": {"type": "LineString", "coordinates": lon_lat[k * 4 : k * 4 + 5].tolist()}}
+                for k in range(len(lon_lat) // 4)]  # fmt: skip
+    (tmp_path / "roads.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": features}))
+    geo = tmp_path / "geo.geojson"
+    geo.write_text(json.dumps(build_geoobjects(str(tmp_path / "roads.geojson"))))
+    tariff = str(REPO / "geoobjects" / "example-tariff.toml")
+    invoices = {}
+    for positioning in ("smoothed", "snapshot"):
+        out = tmp_path / f"{positioning}.json"
+        extra = () if positioning == "smoothed" else ("--positioning", positioning)
+        proc = run_cli("process", log, "--geo", str(geo), "--tariff", tariff, "-o", str(out), "-q", *extra)
+        assert proc.returncode == 0, proc.stderr.decode()
+        invoices[positioning] = json.loads(out.read_text())
+        assert invoices[positioning]["parameters"]["positioning"] == positioning
+        assert invoices[positioning]["parameters"]["positioning_used"] == positioning
+    assert invoices["smoothed"]["lines"] and not invoices["snapshot"]["lines"]
+    proc = run_cli("verify", str(tmp_path / "smoothed.json"))
+    assert proc.returncode == 0, proc.stderr.decode()

@@ -1,0 +1,232 @@
+"""The trajectory of a whole log and its protection level: the city's positioning (``--positioning``).
+
+* ``smoothed`` (after the trip): the robust filter (:mod:`tollcli.integrity.trajectory_filter`) run forward and
+  backward over the log; at each epoch the forward posterior and the backward prior (two estimates from disjoint
+  measurements, but with correlated errors: reflections last) are combined by **covariance intersection**, which is
+  consistent whatever their correlation: P⁻¹ = ω P_f⁻¹ + (1 − ω) P_b⁻¹, ω minimising the horizontal variance;
+* ``filtered`` (what an on-board unit could do): the forward pass alone.
+
+The noise is the log's own (:mod:`tollcli.integrity.trajectory_noise`): the error model's σ scaled so the median
+normalised innovation is χ²₁'s, then :data:`NOISE_ROUNDS` times σ per C/N0 bin from the residuals at the current
+trajectory, inflated for their time correlation (``filtered`` learns from its forward residuals only).
+
+The protection level is HPL = :data:`K_FUSED` · σ_major of the horizontal covariance. No truth is read here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tollcli.integrity.trajectory_filter import FilterPass, MotionNoise, motion_states, run_pass
+from tollcli.integrity.trajectory_inputs import TrajectoryInputs
+from tollcli.integrity.trajectory_noise import (
+    cn0_bins,
+    correlation_inflation,
+    postfit_residuals,
+    sigma_by_cn0,
+)
+
+POSITIONINGS = ("smoothed", "filtered", "snapshot")
+#: HPL = K_FUSED · σ_major (a Gaussian's two-sided 5σ is 6e-7; the margin covers the heavy tail of city errors)
+K_FUSED = 5.0
+#: rounds of noise estimation from the residuals
+NOISE_ROUNDS = 2
+#: epochs of the window the initial heading is fitted over
+HEADING_WINDOW = 300
+#: the σ of a measurement the error model gives none (m)
+FALLBACK_SIGMA_M = 30.0
+#: the median of χ²₁
+CHI2_1_MEDIAN = 0.4549364231195724
+
+
+@dataclass
+class Trajectory:
+    """Per epoch: the ENU position (E, 3), its horizontal covariance (E, 2, 2), σ_major and HPL (m), and how many
+    of its measurements the robust loss kept (weight ≥ 0.5) and set aside."""
+
+    enu_m: np.ndarray
+    cov_en_m2: np.ndarray
+    sigma_major_m: np.ndarray
+    hpl_m: np.ndarray
+    n_kept: np.ndarray
+    n_set_aside: np.ndarray
+    test_stat: np.ndarray  # the fault test's statistic (χ²_dof when fault-free): see :func:`fault_test`
+    dof: np.ndarray
+    sigma_by_cn0_m: np.ndarray  # the noise table of the last round (per C/N0 bin)
+    inflation: float  # the correlation factor of the last round
+    positioning: str
+    odometry: bool
+
+
+def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", noise: MotionNoise = MotionNoise()) -> Trajectory:
+    """The log's trajectory and protection levels (``positioning``: smoothed or filtered)."""
+    if positioning not in ("smoothed", "filtered"):
+        raise ValueError(f"positioning {positioning!r}: smoothed or filtered")
+    odometry = inp.has_odometry
+    m = motion_states(odometry)
+    sigma = np.where(inp.mask & np.isfinite(inp.sigma_m) & (inp.sigma_m > 0), inp.sigma_m, FALLBACK_SIGMA_M)
+    sigma2 = sigma**2
+    start_f, start_b = _starts(inp, odometry, m)
+    forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise)
+    kept = forward.weight >= 0.5
+    if kept.any():
+        sigma2 = sigma2 * max(1.0, float(np.median(forward.z[kept] ** 2)) / CHI2_1_MEDIAN)
+        forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise)
+    backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise) if positioning == "smoothed" else None
+    table, factor = np.full(1, np.nan), 1.0
+    bins = cn0_bins(inp.cn0_dbhz)
+    for _ in range(NOISE_ROUNDS):
+        x, _p = _combined(forward, backward)
+        res = postfit_residuals(inp, x, m)
+        table = sigma_by_cn0(res, inp.cn0_dbhz, inp.mask)
+        factor, _rho = correlation_inflation(res / table[bins], inp.sv, inp.mask)
+        sigma2 = np.where(inp.mask, (table[bins] ** 2) * max(factor, 1.0), FALLBACK_SIGMA_M**2)
+        forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise)
+        if backward is not None:
+            backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise)
+    x, p = _combined(forward, backward)
+    cov = p[:, :2, :2]
+    major = sigma_major_m(cov)
+    weight = forward.weight if backward is None else np.minimum(forward.weight, backward.weight)
+    n_kept = (inp.mask & (weight >= 0.5)).sum(axis=1)
+    test_stat, dof = fault_test(forward, backward)
+    return Trajectory(x[:, :3], cov, major, K_FUSED * major, n_kept, inp.mask.sum(axis=1) - n_kept, test_stat, dof, table, factor,
+                      positioning, odometry)  # fmt: skip
+
+
+def fault_test(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndarray, np.ndarray]:
+    """The fault test's statistic and degrees of freedom per epoch.
+
+    After the trip (a backward pass): the horizontal disagreement d = x_f − x_b of the forward posterior and the
+    backward prior, against the largest spread it can have whatever the correlation of the two passes' errors
+    (σ_d ≤ σ_f + σ_b along any direction, their semi-major axes): t = |d|² / (σ_f + σ_b)², below χ²₂ with at least its
+    confidence when both are fault-free. A fault that one pass took in and the other did not (a satellite's bias, an
+    odometry step) shows as a disagreement.
+
+    Forward only: the normalised innovations of the measurements the robust loss kept, t = Σ z², χ²_n.
+    """
+    if backward is None:
+        kept = forward.weight >= 0.5
+        z2 = np.where(kept, np.nan_to_num(forward.z) ** 2, 0.0)
+        return z2.sum(axis=1), kept.sum(axis=1)
+    d = forward.post_x[:, :2] - backward.prior_x[:, :2]
+    spread = sigma_major_m(forward.post_p[:, :2, :2]) + sigma_major_m(backward.prior_p[:, :2, :2])
+    t = (d**2).sum(axis=1) / spread**2
+    return t, np.full(t.size, 2)
+
+
+def sigma_major_m(cov_en_m2: np.ndarray) -> np.ndarray:
+    """The semi-major axis (1σ, m) of horizontal covariances (E, 2, 2)."""
+    a, b, c = cov_en_m2[:, 0, 0], cov_en_m2[:, 1, 1], cov_en_m2[:, 0, 1]
+    return np.sqrt((a + b) / 2 + np.sqrt(((a - b) / 2) ** 2 + c**2))
+
+
+def _combined(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndarray, np.ndarray]:
+    """The forward posterior, or with a backward pass the covariance intersection of the forward posterior and the
+    backward prior at every epoch (ω on a grid of 19, the one with the least horizontal variance)."""
+    if backward is None:
+        return forward.post_x, forward.post_p
+    xf, pf, xb, pb = forward.post_x, forward.post_p, backward.prior_x, backward.prior_p
+    if forward.odometry:  # headings compared on the same turn
+        xb = xb.copy()
+        xb[:, 3] = xf[:, 3] + (xb[:, 3] - xf[:, 3] + np.pi) % (2 * np.pi) - np.pi
+    info_f, info_b = np.linalg.inv(pf), np.linalg.inv(pb)
+    best_tr = np.full(xf.shape[0], np.inf)
+    best_p = np.empty_like(pf)
+    best_w = np.empty(xf.shape[0])
+    for omega in np.linspace(0.05, 0.95, 19):
+        p = np.linalg.inv(omega * info_f + (1 - omega) * info_b)
+        tr = p[:, 0, 0] + p[:, 1, 1]
+        better = tr < best_tr
+        best_tr[better], best_p[better], best_w[better] = tr[better], p[better], omega
+    w = best_w[:, None]
+    x = np.einsum("eij,ej->ei", best_p, w * np.einsum("eij,ej->ei", info_f, xf) + (1 - w) * np.einsum("eij,ej->ei", info_b, xb))
+    return x, best_p
+
+
+def _starts(inp: TrajectoryInputs, odometry: bool, m: int):
+    """The forward and backward passes' first states and covariances."""
+    n_states = m + inp.n_clocks
+    fixed = np.flatnonzero(np.isfinite(inp.fix_enu_m).all(axis=1))
+    if fixed.size == 0:
+        raise ValueError("no snapshot fix to start the trajectory from")
+    p0 = np.zeros((n_states, n_states))
+    p0[[0, 1, 2], [0, 1, 2]] = 30.0**2
+    p0[m - 1, m - 1] = 10.0**2  # drift
+    p0[np.arange(m, n_states), np.arange(m, n_states)] = 100.0**2
+    starts = []
+    for window in (fixed[:HEADING_WINDOW], fixed[-HEADING_WINDOW:][::-1]):
+        x0 = np.zeros(n_states)
+        p = p0.copy()
+        if odometry:
+            psi, start = _fitted_start(inp, window)
+            x0[3], x0[:2] = psi, start
+            p[3, 3] = 0.3**2
+        else:
+            x0[:2] = inp.fix_enu_m[window[0], :2]
+            p[3, 3] = p[4, 4] = 20.0**2
+        x0[2] = np.median(inp.fix_enu_m[window[: min(30, window.size)], 2])
+        starts.append((x0, p))
+    return starts[0], starts[1]
+
+
+def _fitted_start(inp: TrajectoryInputs, window: np.ndarray) -> tuple[float, np.ndarray]:
+    """Heading (rad) and east-north position at ``window[0]``: the odometry's dead-reckoned shape over ``window``
+    (epochs in the pass's order) rotated and shifted to fit the snapshot fixes best (Cauchy cost, 2° steps)."""
+    lo, hi = int(window.min()), int(window.max())
+    span = np.arange(lo, hi + 1)
+    t = inp.t_s[span]
+    dt = np.diff(t)
+    v = np.nan_to_num(inp.speed_mps[span[1:]])
+    w = np.nan_to_num(inp.yaw_rate_radps[span[1:]])
+    turn = np.concatenate([[0.0], np.cumsum(-w * dt)])  # heading change since span[0] (clockwise positive)
+    psi0 = np.radians(np.arange(0.0, 360.0, 2.0))[:, None]
+    psi = psi0 + turn[None, :-1]
+    de = np.concatenate([np.zeros((psi0.size, 1)), np.cumsum(v * dt * np.sin(psi), axis=1)], axis=1)
+    dn = np.concatenate([np.zeros((psi0.size, 1)), np.cumsum(v * dt * np.cos(psi), axis=1)], axis=1)
+    at = window - lo
+    fe, fn = inp.fix_enu_m[window, 0], inp.fix_enu_m[window, 1]
+    off_e = np.median(fe[None, :] - de[:, at], axis=1)
+    off_n = np.median(fn[None, :] - dn[:, at], axis=1)
+    r = np.hypot(fe[None, :] - de[:, at] - off_e[:, None], fn[None, :] - dn[:, at] - off_n[:, None])
+    best = int(np.argmin(np.log1p((r / 15.0) ** 2).sum(axis=1)))
+    first = at[0]  # window[0]: the pass's first epoch (the span's last for a backward pass)
+    heading = float(psi0[best, 0] + turn[first])
+    return heading, np.array([off_e[best] + de[best, first], off_n[best] + dn[best, first]])
+
+
+#: the fewest snapshot fixes a log needs for a trajectory (fewer: its snapshot positions stay)
+MIN_FIXES = 10
+
+
+def with_trajectory(epochs, meas, positioning: str):
+    """A pseudorange log's epochs placed by the trajectory estimator (``positioning``: smoothed or filtered; snapshot
+    leaves them as they are), and its measurements with the estimator's bound and fault test for the verdicts.
+
+    Returns (epochs, measurements, the positioning used): ``snapshot`` where the log cannot carry a trajectory (no
+    satellites and pseudoranges in its measurements, fewer than :data:`MIN_FIXES` snapshot fixes). The epoch table
+    keeps the snapshot fix as ``snapshot_lat_deg``/``snapshot_lon_deg``; ``lat_deg``/``lon_deg``/``height_m`` become
+    the trajectory's, ``sigma_major_m`` its 1σ semi-major axis, and ``positioning`` says which.
+    """
+    from dataclasses import replace
+
+    from tollcli.integrity.trajectory_inputs import has_pseudoranges, trajectory_inputs
+
+    if positioning == "snapshot" or not has_pseudoranges(meas):
+        return epochs, meas, "snapshot"
+    fixes = np.isfinite(epochs["lat_deg"].to_numpy(float)).sum()
+    if fixes < MIN_FIXES:
+        return epochs, meas, "snapshot"
+    inp = trajectory_inputs(epochs, meas)
+    traj = estimate_trajectory(inp, positioning)
+    lat, lon, height = inp.enu2geodetic(traj.enu_m)
+    n = len(epochs)
+    placed = epochs.assign(snapshot_lat_deg=epochs["lat_deg"].to_numpy(float), snapshot_lon_deg=epochs["lon_deg"].to_numpy(float),
+                           lat_deg=lat, lon_deg=lon, height_m=height, sigma_major_m=traj.sigma_major_m,
+                           positioning=np.full(n, positioning, dtype=object))  # fmt: skip
+    placed.attrs.update(epochs.attrs)
+    meas = replace(meas, trajectory_source=np.full(n, positioning, dtype=object), trajectory_hpl_m=traj.hpl_m,
+                   trajectory_test_stat=traj.test_stat, trajectory_dof=traj.dof, trajectory_set_aside=traj.n_set_aside)  # fmt: skip
+    return placed, meas, positioning

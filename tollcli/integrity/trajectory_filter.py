@@ -1,0 +1,205 @@
+"""One pass of the robust trajectory filter over a log, forward or backward in time.
+
+An extended Kalman filter in a local east-north-up frame (:class:`TrajectoryInputs`). State:
+
+* with odometry: east, north, up (m), heading ψ (rad, clockwise from north), clock drift (m/s), one receiver clock
+  per constellation (m); the motion is the odometer's distance along ψ and the gyro's turn;
+* without: east, north, up, velocity east and north (m/s), drift, clocks; the motion is constant velocity with a
+  white acceleration.
+
+Each epoch's pseudoranges (Sagnac-corrected ranges to the satellites plus the constellation's clock) update the
+state with a Cauchy loss: a measurement whose innovation is c normalised standard deviations out counts half, one
+far out hardly at all (iteratively reweighted, :data:`ITERATIONS` at most). A clock group is started at its first
+epoch from that epoch's measurements. The backward pass runs the same equations with time reversed; the two are
+combined in :mod:`tollcli.integrity.trajectory`.
+
+The per-epoch step is sequential by nature (each epoch's prior is the last posterior): the loop is over epochs, its
+body a few small numpy calls on 5 + C states.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tollcli.geodesy import OMEGA_EARTH_RADPS
+from tollcli.integrity.trajectory_inputs import TrajectoryInputs
+
+C_MPS = 299_792_458.0
+#: reweighting iterations per epoch at most
+ITERATIONS = 5
+#: the Cauchy loss's scale, in normalised innovations
+CAUCHY_C = 2.5
+
+
+@dataclass(frozen=True)
+class MotionNoise:
+    """Process noise of the motion models (variances per second unless said)."""
+
+    along_track_mps: float = 0.1  # odometer speed error, plus ...
+    along_track_share: float = 0.03  # ... this share of the speed
+    position_m2ps: float = 0.01  # position random walk beside the odometry (lateral slip: ~1 m in 100 s)
+    no_odometry_m2ps: float = 25.0  # position random walk where an odometry interval is missing
+    yaw_rate_radps: float = 0.01  # gyro error
+    heading_rad2ps: float = 1e-5  # heading random walk
+    up_m2ps: float = 0.01  # height random walk
+    clock_m2ps: float = 0.5  # receiver clock random walk
+    drift_m2ps3: float = 2.0  # clock drift random walk
+    acceleration_m2ps3: float = 4.0  # without odometry: white acceleration (constant-velocity model)
+
+
+@dataclass
+class FilterPass:
+    """One pass's states per epoch (E, S), their covariances (E, S, S), and each measurement's normalised innovation
+    and Cauchy weight (E, N; NaN/0 for empty slots)."""
+
+    prior_x: np.ndarray
+    prior_p: np.ndarray
+    post_x: np.ndarray
+    post_p: np.ndarray
+    z: np.ndarray
+    weight: np.ndarray
+    odometry: bool
+
+    @property
+    def motion_states(self) -> int:
+        return 5 if self.odometry else 6
+
+
+def motion_states(odometry: bool) -> int:
+    """States before the clocks: e, n, u, ψ, drift (odometry) or e, n, u, v_e, v_n, drift."""
+    return 5 if odometry else 6
+
+
+def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start_x: np.ndarray, start_p: np.ndarray,
+             odometry: bool, noise: MotionNoise = MotionNoise()) -> FilterPass:  # fmt: skip
+    """The filter over every epoch, forward (``direction`` 1) or backward (-1), from ``start_x``/``start_p`` at the
+    first epoch it visits (its clocks are started from that epoch's measurements)."""
+    n_epochs, n_slots = inp.mask.shape
+    m = motion_states(odometry)
+    n_states = m + inp.n_clocks
+    prior_x = np.full((n_epochs, n_states), np.nan)
+    prior_p = np.full((n_epochs, n_states, n_states), np.nan)
+    post_x, post_p = prior_x.copy(), prior_p.copy()
+    z_all = np.full((n_epochs, n_slots), np.nan)
+    w_all = np.zeros((n_epochs, n_slots))
+    order = range(n_epochs) if direction > 0 else range(n_epochs - 1, -1, -1)
+    x, p = start_x.astype(float).copy(), start_p.astype(float).copy()
+    started = np.zeros(inp.n_clocks, bool)
+    rot_t = inp.ecef2enu.T
+    previous = None
+    for k in order:
+        if previous is not None:
+            interval = max(k, previous)  # the interval's end epoch (its odometry)
+            x, p = _predict(x, p, abs(inp.t_s[k] - inp.t_s[previous]), direction, inp, interval, odometry, m, noise)
+        used = np.flatnonzero(inp.mask[k])
+        if used.size:
+            groups = inp.clock_index[k, used] + m
+            x, p, started = _start_clocks(x, p, started, inp.sat_ecef_m[k, used], inp.pr_m[k, used], groups, m, inp, rot_t)
+        prior_x[k], prior_p[k] = x, p
+        if used.size:
+            x, p, z, w = _update(x, p, inp.sat_ecef_m[k, used], inp.pr_m[k, used], sigma2_m2[k, used], groups, inp, rot_t)
+            z_all[k, used], w_all[k, used] = z, w
+        post_x[k], post_p[k] = x, p
+        previous = k
+    return FilterPass(prior_x, prior_p, post_x, post_p, z_all, w_all, odometry)
+
+
+def _predict(x, p, dt_s, direction, inp, interval, odometry, m, noise: MotionNoise):
+    """The state ``dt_s`` later (``direction`` -1: earlier), through the interval ending at epoch ``interval``."""
+    s = direction * dt_s  # signed time step
+    dt = abs(dt_s)
+    x = x.copy()
+    f = np.eye(x.size)
+    q = np.zeros(x.size)
+    drift = m - 1
+    x[m:] += x[drift] * s
+    f[m:, drift] = s
+    if odometry:
+        v, w = inp.speed_mps[interval], inp.yaw_rate_radps[interval]
+        psi = x[3]
+        if np.isfinite(v) and np.isfinite(w):
+            sin, cos = np.sin(psi), np.cos(psi)
+            x[0] += v * s * sin
+            x[1] += v * s * cos
+            x[3] -= w * s
+            f[0, 3], f[1, 3] = v * s * cos, -v * s * sin
+            sv = noise.along_track_mps + noise.along_track_share * abs(v)
+            q[0] = (sv * dt * sin) ** 2 + noise.position_m2ps * dt
+            q[1] = (sv * dt * cos) ** 2 + noise.position_m2ps * dt
+            q[3] = (noise.yaw_rate_radps * dt) ** 2 + noise.heading_rad2ps * dt
+        else:  # an interval without odometry: the position wanders, the heading too
+            q[0] = q[1] = noise.no_odometry_m2ps * dt
+            q[3] = 0.1 * dt
+        q[2] = noise.up_m2ps * dt
+        q[m:] = noise.clock_m2ps * dt
+        q[drift] = noise.drift_m2ps3 * dt
+        p = f @ p @ f.T + np.diag(q)
+        return x, p
+    x[0] += x[3] * s
+    x[1] += x[4] * s
+    f[0, 3] = f[1, 4] = s
+    qa = noise.acceleration_m2ps3
+    p = f @ p @ f.T
+    for pos, vel in ((0, 3), (1, 4)):
+        p[pos, pos] += qa * dt**3 / 3
+        p[pos, vel] += qa * s * dt / 2
+        p[vel, pos] += qa * s * dt / 2
+        p[vel, vel] += qa * dt
+    p[2, 2] += noise.up_m2ps * dt
+    idx = np.arange(m, x.size)
+    p[idx, idx] += noise.clock_m2ps * dt
+    p[drift, drift] += noise.drift_m2ps3 * dt
+    return x, p
+
+
+def _ranges(x, sat, inp, rot_t):
+    """Sagnac-corrected ranges (m) from the state's position to ``sat`` (K, 3) and the ENU unit vectors (K, 3)."""
+    pos = inp.origin_ecef_m + rot_t @ x[:3]
+    rough = np.sqrt(((sat - pos) ** 2).sum(axis=1))
+    theta = OMEGA_EARTH_RADPS * rough / C_MPS
+    c, s = np.cos(theta), np.sin(theta)
+    vec = np.stack([c * sat[:, 0] + s * sat[:, 1], -s * sat[:, 0] + c * sat[:, 1], sat[:, 2]], axis=1) - pos
+    rng = np.sqrt((vec**2).sum(axis=1))
+    return rng, (vec / rng[:, None]) @ rot_t
+
+
+def _start_clocks(x, p, started, sat, pr, groups, m, inp, rot_t):
+    """Clock groups seen for the first time: their clock from this epoch's measurements (median), variance 100² m²."""
+    new = np.unique(groups[~started[groups - m]])
+    if new.size == 0:
+        return x, p, started
+    rng, _ = _ranges(x, sat, inp, rot_t)
+    x, p, started = x.copy(), p.copy(), started.copy()
+    for g in new.tolist():
+        x[g] = np.median((pr - rng)[groups == g])
+        p[g, :] = p[:, g] = 0.0
+        p[g, g] = 100.0**2 + p[0, 0] + p[1, 1] + p[2, 2]
+        started[g - m] = True
+    return x, p, started
+
+
+def _update(x_prior, p_prior, sat, pr, sigma2, groups, inp, rot_t):
+    """The robust (Cauchy, iteratively reweighted) measurement update of one epoch, in information form."""
+    k = pr.size
+    info_prior = np.linalg.inv(p_prior)
+    x = x_prior
+    h = np.zeros((k, x_prior.size))
+    rows = np.arange(k)
+    for _ in range(ITERATIONS):
+        rng, u_enu = _ranges(x, sat, inp, rot_t)
+        h[:, :3] = -u_enu
+        h[rows, groups] = 1.0
+        r = pr - rng - x[groups] - h @ (x_prior - x)  # the innovation, linearised at x
+        s_diag = np.einsum("ij,jk,ik->i", h, p_prior, h) + sigma2
+        z = r / np.sqrt(s_diag)
+        w = 1.0 / (1.0 + (z / CAUCHY_C) ** 2)
+        wd = w / sigma2
+        p_post = np.linalg.inv(info_prior + (h.T * wd) @ h)
+        x_new = x_prior + p_post @ (h.T @ (wd * r))
+        done = np.abs(x_new[:3] - x[:3]).max() < 1e-3
+        x = x_new
+        if done:
+            break
+    return x, 0.5 * (p_post + p_post.T), z, w

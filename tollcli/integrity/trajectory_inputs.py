@@ -1,0 +1,80 @@
+"""What the trajectory estimator reads, gathered once from a pseudorange log's epochs and measurements.
+
+A pseudorange log's :class:`~tollcli.gnss.measurements.Measurements` carry, beside the RAIM's arrays, each
+measurement's satellite (ECEF at transmission, ``sat_ecef_m``), its corrected pseudorange (``pr_m``: satellite
+clock and atmosphere removed) and its receiver-clock group (``clock_index``: one clock per constellation). The
+epoch table gives the times and, where the log has odometry (libRSF ``odom3``), the wheel speed and yaw rate
+(``odometer_speed_mps``, ``yaw_rate_radps``). Everything is in a local east-north-up frame at the log's first fix.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from tollcli.geodesy import enu_rotation, geodetic2ecef
+from tollcli.gnss.measurements import Measurements
+
+
+@dataclass
+class TrajectoryInputs:
+    """Arrays of E epochs × N measurement slots (padded as :class:`Measurements`)."""
+
+    t_s: np.ndarray  # (E,) seconds from the first epoch
+    sat_ecef_m: np.ndarray  # (E, N, 3) satellite at transmission, ECEF of that time
+    pr_m: np.ndarray  # (E, N) corrected pseudorange
+    mask: np.ndarray  # (E, N) real measurements
+    cn0_dbhz: np.ndarray  # (E, N) NaN where not reported
+    sigma_m: np.ndarray  # (E, N) the error model's σ (the estimator's first guess)
+    clock_index: np.ndarray  # (E, N) receiver-clock group
+    sv: np.ndarray  # (E, N) measurement labels ('' for empty slots)
+    origin_ecef_m: np.ndarray  # (3,) the frame's origin (the first fix)
+    ecef2enu: np.ndarray  # (3, 3) rotation, rows east, north, up
+    fix_enu_m: np.ndarray  # (E, 3) the snapshot fixes (NaN where none): the start and the initial heading only
+    speed_mps: np.ndarray  # (E,) mean odometer speed over the interval ending at each epoch (NaN: none)
+    yaw_rate_radps: np.ndarray  # (E,) mean yaw rate (counter-clockwise positive) over that interval (NaN: none)
+
+    @property
+    def n_clocks(self) -> int:
+        return int(self.clock_index[self.mask].max(initial=0)) + 1
+
+    @property
+    def has_odometry(self) -> bool:
+        """Odometry over at least half of the log's intervals."""
+        return bool(np.isfinite(self.speed_mps[1:]).mean() >= 0.5) if self.t_s.size > 1 else False
+
+    def enu2geodetic(self, enu_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Latitude, longitude (deg) and height (m) of east-north-up points (E, 3) of this frame."""
+        from tollcli.geodesy import ecef2geodetic
+
+        ecef = self.origin_ecef_m + enu_m @ self.ecef2enu
+        return ecef2geodetic(ecef[:, 0], ecef[:, 1], ecef[:, 2])
+
+
+def has_pseudoranges(meas: Measurements) -> bool:
+    """The measurements carry what the estimator needs (a pseudorange log's)."""
+    return meas.sat_ecef_m is not None and meas.pr_m is not None and meas.clock_index is not None
+
+
+def trajectory_inputs(epochs: pd.DataFrame, meas: Measurements) -> TrajectoryInputs:
+    """The estimator's inputs from a pseudorange log's epoch table and measurements (``has_pseudoranges``)."""
+    t = _seconds(epochs["time_utc"])
+    lat, lon, h = (epochs[c].to_numpy(float) for c in ("lat_deg", "lon_deg", "height_m"))
+    fixed = np.flatnonzero(np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h))
+    first = int(fixed[0]) if fixed.size else 0
+    origin = np.asarray(geodetic2ecef(lat[first], lon[first], h[first]), float).ravel()
+    rot = np.asarray(enu_rotation(lat[first], lon[first]), float).reshape(3, 3)
+    ecef = np.stack([np.asarray(a, float) for a in geodetic2ecef(lat, lon, h)], axis=-1)
+    fix_enu = (ecef - origin) @ rot.T
+    speed = epochs["odometer_speed_mps"].to_numpy(float) if "odometer_speed_mps" in epochs else np.full(t.size, np.nan)
+    yaw = epochs["yaw_rate_radps"].to_numpy(float) if "yaw_rate_radps" in epochs else np.full(t.size, np.nan)
+    cn0 = meas.cn0_dbhz if meas.cn0_dbhz is not None else np.full(meas.mask.shape, np.nan)
+    return TrajectoryInputs(t, meas.sat_ecef_m, meas.pr_m, meas.mask & np.isfinite(meas.pr_m), cn0, meas.sigma_m,
+                            meas.clock_index, meas.sv, origin, rot, fix_enu, speed, yaw)  # fmt: skip
+
+
+def _seconds(time_utc: pd.Series) -> np.ndarray:
+    ns = pd.DatetimeIndex(time_utc).as_unit("ns").asi8.astype(np.int64)
+    return (ns - ns[0]) / 1e9 if ns.size else np.zeros(0)

@@ -1,0 +1,92 @@
+"""The pseudorange noise a log's own residuals show, for the trajectory estimator.
+
+* :func:`postfit_residuals`: each measurement's residual at an estimated trajectory (m), every epoch at once;
+* :func:`sigma_by_cn0`: the residuals' spread and bias per C/N0 bin, σ = √(median² + (1.4826·MAD)²): a city's
+  weak signals come late (reflections), so their bias is part of their error;
+* :func:`correlation_inflation`: how much less a correlated error tells than a white one. A reflection lasts tens of
+  seconds; the filter averages over time as if every epoch's error were new. The residuals' autocorrelation ρ (per
+  measurement, summed over all, by FFT) gives the factor 1 + 2 Σ ρ(lag) (lags until ρ < :data:`RHO_CUT`) by which the
+  variance of an average of correlated errors exceeds the white one; the σ are inflated by its square root.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tollcli.geodesy import OMEGA_EARTH_RADPS
+from tollcli.integrity.trajectory_inputs import TrajectoryInputs
+
+C_MPS = 299_792_458.0
+#: C/N0 bin edges (dB-Hz)
+CN0_BINS_DBHZ = np.array([25.0, 30.0, 35.0, 40.0, 45.0])
+#: fewest residuals a bin needs for its own σ (else the largest σ of the bins that have one)
+MIN_BIN_COUNT = 20
+#: the smallest σ a bin is given (m): a code measurement in a moving car is not better
+SIGMA_FLOOR_M = 3.0
+#: the autocorrelation below which lags stop counting
+RHO_CUT = 0.05
+#: the longest lag counted (epochs)
+MAX_LAG = 400
+
+
+def postfit_residuals(inp: TrajectoryInputs, x: np.ndarray, motion_states: int) -> np.ndarray:
+    """Pseudorange minus the range from the trajectory ``x`` (E, S: ENU position first, clocks from
+    ``motion_states``) minus the constellation's clock (E, N; NaN in empty slots)."""
+    pos = inp.origin_ecef_m + x[:, :3] @ inp.ecef2enu  # (E, 3) ECEF
+    sat = inp.sat_ecef_m
+    rough = np.sqrt(((sat - pos[:, None, :]) ** 2).sum(axis=-1))
+    theta = OMEGA_EARTH_RADPS * rough / C_MPS
+    c, s = np.cos(theta), np.sin(theta)
+    rotated = np.stack([c * sat[..., 0] + s * sat[..., 1], -s * sat[..., 0] + c * sat[..., 1], sat[..., 2]], axis=-1)
+    rng = np.sqrt(((rotated - pos[:, None, :]) ** 2).sum(axis=-1))
+    clock = np.take_along_axis(x[:, motion_states:], np.maximum(inp.clock_index, 0), axis=1)
+    return np.where(inp.mask, inp.pr_m - rng - clock, np.nan)
+
+
+def cn0_bins(cn0_dbhz: np.ndarray) -> np.ndarray:
+    """Each measurement's C/N0 bin (0 … len(CN0_BINS_DBHZ)); the last bin + 1 where C/N0 is not reported."""
+    b = np.searchsorted(CN0_BINS_DBHZ, np.nan_to_num(cn0_dbhz, nan=-1.0), side="right")
+    return np.where(np.isfinite(cn0_dbhz), b, CN0_BINS_DBHZ.size + 1)
+
+
+def sigma_by_cn0(residual_m: np.ndarray, cn0_dbhz: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """σ (m) per C/N0 bin (:func:`cn0_bins`) from the residuals: √(median² + (1.4826·MAD)²), at least
+    :data:`SIGMA_FLOOR_M`; a bin with too few residuals takes the largest σ of the others."""
+    bins = cn0_bins(cn0_dbhz)
+    ok = mask & np.isfinite(residual_m)
+    table = np.full(CN0_BINS_DBHZ.size + 2, np.nan)
+    for b in range(table.size):  # a handful of bins
+        r = residual_m[ok & (bins == b)]
+        if r.size >= MIN_BIN_COUNT:
+            med = np.median(r)
+            table[b] = np.hypot(med, 1.4826 * np.median(np.abs(r - med)))
+    worst = np.nanmax(table) if np.isfinite(table).any() else 30.0
+    return np.maximum(np.where(np.isfinite(table), table, worst), SIGMA_FLOOR_M)
+
+
+def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tuple[float, np.ndarray]:
+    """The variance factor 1 + 2 Σ ρ(lag) of normalised residuals ``z`` (E, N) and ρ itself (lags in epochs).
+
+    Each measurement label's series (its median removed) is one time series; their products at every lag are summed
+    over all series (FFT, zero where a series has no value)."""
+    n_epochs = z.shape[0]
+    ok = mask & np.isfinite(z)
+    labels, inverse = np.unique(sv[ok], return_inverse=True)
+    if labels.size == 0 or n_epochs < 3:
+        return 1.0, np.ones(1)
+    series = np.zeros((labels.size, n_epochs))
+    rows = np.nonzero(ok)[0]
+    series[inverse, rows] = z[ok]
+    counts = np.zeros((labels.size, n_epochs))
+    counts[inverse, rows] = 1.0
+    med = np.array([np.median(series[i, counts[i] > 0]) for i in range(labels.size)])  # one per satellite
+    series = np.where(counts > 0, series - med[:, None], 0.0)
+    size = 1 << int(np.ceil(np.log2(2 * n_epochs)))
+    spec = np.fft.rfft(series, size, axis=1)
+    acf = np.fft.irfft((spec * spec.conj()).sum(axis=0), size)[: min(MAX_LAG + 1, n_epochs)]
+    if not acf[0] > 0:
+        return 1.0, np.ones(1)
+    rho = acf / acf[0]
+    below = np.flatnonzero(rho < RHO_CUT)
+    cut = int(below[0]) if below.size else rho.size
+    return float(1.0 + 2.0 * rho[1:cut].sum()), rho
