@@ -59,6 +59,7 @@ class Drive:
     truth: str
     sigma_model: str = "nominal"
     hals: tuple[float, ...] = (50.0, 30.0)
+    positionings: tuple[str, ...] | None = None  # only the settings of these positionings (None: all)
 
 
 def drives() -> list[Drive]:
@@ -75,6 +76,7 @@ def drives() -> list[Drive]:
     if os.path.exists(os.path.join(g22, "device_gnss.csv")):
         out.append(Drive("GSDC 2022 (standing)", os.path.join(g22, "device_gnss.csv"), "device-gnss",
                          os.path.join(g22, "ground_truth.csv")))  # fmt: skip
+    out += city_drives()
     for name in ("rural-clean", "urban-clean", "rural-fault", "urban-fault"):
         d = os.path.join(ROOT, "samples", "sim", name)
         out.append(Drive(f"simulated {name} (pseudoranges, one clock)", os.path.join(d, "drive-derived.csv"), "gsdc-derived",
@@ -84,15 +86,39 @@ def drives() -> list[Drive]:
     return out
 
 
-SETTINGS = [  # label, raim mode, fde, environment
-    ("ss (default)", "ss", False, "auto"),
-    ("ss + FDE", "ss", True, "auto"),
-    ("ss, nominal σ", "ss", False, "open"),
-    ("etc", "etc", False, "auto"),
-    ("etc, nominal σ (before)", "etc", False, "open"),
-    ("etc + FDE, nominal σ", "etc", True, "open"),
-    ("classic, nominal σ", "classic", False, "open"),
-    ("classic + FDE, nominal σ", "classic", True, "open"),
+#: simulated city drives with odometry (``tollcli simulate --nlos --odometry``, 2 000 s at 5 Hz): fault-free, and with
+#: a 100 m fault on one satellite for 60 s and a 60 s outage (every satellite 40 dB down)
+CITY_SIMULATIONS = (("city-clean", ("--seed", "11")),
+                    ("city-fault", ("--seed", "12", "--fault-at", "600", "--fault-bias", "100", "--fault-duration", "60",
+                                    "--jam-at", "1200", "--jam-duration", "60", "--jam-db", "40")))  # fmt: skip
+
+
+def city_drives() -> list[Drive]:
+    """The simulated city drives, written once into ``benchmarks/integrity_truth/sim/`` (not kept in git)."""
+    import subprocess
+
+    out = []
+    for name, extra in CITY_SIMULATIONS:
+        folder = os.path.join(OUT, "sim", name)
+        if not os.path.exists(os.path.join(folder, "truth-librsf.txt")):
+            subprocess.run([sys.executable, "-m", "tollcli", "simulate", "--nlos", "--odometry", "--duration", "2000", "--rate", "5",
+                            *extra, "-o", folder, "-q"], check=True)  # fmt: skip
+        out.append(Drive(f"simulated {name} (libRSF, odometry, 10 000 epochs)", os.path.join(folder, "drive-librsf.txt"), "librsf",
+                         os.path.join(folder, "truth-librsf.txt"), positionings=("smoothed", "filtered")))  # fmt: skip
+    return out
+
+
+SETTINGS = [  # label, raim mode, fde, environment, positioning (a pseudorange log's; a navigation log's is its receiver's)
+    ("smoothed trajectory (default)", "ss", False, "auto", "smoothed"),
+    ("filtered trajectory (forward only)", "ss", False, "auto", "filtered"),
+    ("ss (default)", "ss", False, "auto", "snapshot"),
+    ("ss + FDE", "ss", True, "auto", "snapshot"),
+    ("ss, nominal σ", "ss", False, "open", "snapshot"),
+    ("etc", "etc", False, "auto", "snapshot"),
+    ("etc, nominal σ (before)", "etc", False, "open", "snapshot"),
+    ("etc + FDE, nominal σ", "etc", True, "open", "snapshot"),
+    ("classic, nominal σ", "classic", False, "open", "snapshot"),
+    ("classic + FDE, nominal σ", "classic", True, "open", "snapshot"),
 ]
 
 
@@ -105,10 +131,10 @@ def counts(err: np.ndarray, valid: np.ndarray, hpl: np.ndarray, hal: float) -> d
                 "max_hpe_valid_m": float(np.max(err[v])) if v.any() else float("nan")}  # fmt: skip
 
 
-def run_setting(drive: Drive, truth: pd.DataFrame, mode: str, fde: bool, environment: str, hal: float):
+def run_setting(drive: Drive, truth: pd.DataFrame, mode: str, fde: bool, environment: str, hal: float, positioning: str = "snapshot"):
     params = RaimParams(mode=mode, hal_m=hal, fde=fde)
     table = pd.concat([c.table for c in iter_integrity(drive.log, drive.kind, params, drive.sigma_model,
-                                                          environment=environment)], ignore_index=True)  # fmt: skip
+                                                          environment=environment, positioning=positioning)], ignore_index=True)  # fmt: skip
     vouched = table.assign(lat_deg=table["raim_lat_deg"], lon_deg=table["raim_lon_deg"])  # the position the RAIM vouches for
     err, _ = errors_against_truth(vouched, truth, tolerance_s=0.2)
     valid = table["raim_status"].astype(str).isin(VALID).to_numpy()
@@ -221,33 +247,44 @@ def main(argv: list[str] | None = None) -> int:
              "HPE is measured at the position each setting vouches for: its own weighted solution, after any exclusion.", ""]  # fmt: skip
     for drive in drives():
         truth = truth_trajectory(drive.truth)
-        lines += [f"## {drive.name}", "", "| setting | HAL m | valid / epochs | availability | MI | HMI | worst HPE while valid |",
-                  "|---|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+        lines += [f"## {drive.name}", "", "| setting | HAL m | valid / epochs | availability | MI | HMI | worst HPE while valid | largest HPE/HPL while valid |",
+                  "|---|---:|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+        extra_png: list[str] = []
+        settings = [row for row in SETTINGS if (drive.kind != "nmea" or row[4] == "snapshot")
+                    and (drive.positionings is None or row[4] in drive.positionings)]  # fmt: skip
+        default = settings[0][0]  # a pseudorange log's: the smoothed trajectory; a navigation log's: the RAIM's
         for hal in drive.hals:
-            for label, mode, fde, environment in SETTINGS:
-                table, err, valid = run_setting(drive, truth, mode, fde, environment, hal)
-                c = counts(err, valid, table["hpl_m"].to_numpy(float), hal)
+            for label, mode, fde, environment, positioning in settings:
+                table, err, valid = run_setting(drive, truth, mode, fde, environment, hal, positioning)
+                hpl = table["hpl_m"].to_numpy(float)
+                c = counts(err, valid, hpl, hal)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    margin = np.nanmax(np.where(valid, err / hpl, np.nan)) if valid.any() else float("nan")
                 lines.append(f"| {label} | {hal:g} | {c['valid']} / {c['epochs']} | {c['availability_pct']:.1f} % | {c['MI']} | "
-                             f"**{c['HMI']}** | {c['max_hpe_valid_m']:.1f} |")  # fmt: skip
-                if label.startswith("ss (default)") and hal == drive.hals[0] and not args.no_plots:
+                             f"**{c['HMI']}** | {c['max_hpe_valid_m']:.1f} | {margin:.2f} |")  # fmt: skip
+                if positioning != "snapshot" and hal == drive.hals[0] and not args.no_plots:
+                    png = f"stanford-{drive.name.split(' (')[0].lower().replace(' ', '-')}-{positioning}.png"
+                    stanford(os.path.join(OUT, png), f"{drive.name}: {positioning}, HAL {hal:g} m", err, hpl, valid, hal)
+                    extra_png.append(f"![Stanford diagram, {positioning}]({png})")
+                if label == "ss (default)" and hal == drive.hals[0] and not args.no_plots:
                     png = (f"stanford-{drive.name.split(' (')[0].lower().replace(' ', '-')}"
                            f"{'-' + drive.sigma_model if drive.sigma_model != 'nominal' else ''}{'-nmea' if drive.kind == 'nmea' else ''}.png")
-                    stanford(os.path.join(OUT, png), f"{drive.name}: defaults, HAL {hal:g} m", err, table["hpl_m"].to_numpy(float), valid, hal)
+                    stanford(os.path.join(OUT, png), f"{drive.name}: ss on snapshot positions, HAL {hal:g} m", err, hpl, valid, hal)
                     lines_png = f"![Stanford diagram]({png})"
-                if label.startswith("ss (default)") and hal == drive.hals[0]:
+                if label == "ss (default)" and hal == drive.hals[0]:
                     environments = table["environment"].astype(str).value_counts().to_dict()
                     f = table["variance_factor"].to_numpy(float)
-                    env_line = (f"Defaults: environment {environments}; variance factor over 30 s "
+                    env_line = (f"Snapshot RAIM: environment {environments}; variance factor over 30 s "
                                 f"{np.nanmin(f):.2f}–{np.nanmax(f):.2f} (median {np.nanmedian(f):.2f}).") if np.isfinite(f).any() else ""
                     if len(table) > 100:
                         env_line += f" Error correlation time (1/e): {correlation_time_s(table, truth):.0f} s."
-            for label, c in model_level(drive, truth, hal):
+            for label, c in model_level(drive, truth, hal) if drive.positionings is None else ():
                 lines.append(f"| {label} | {hal:g} | {c['valid']} / {c['epochs']} | {c['availability_pct']:.1f} % | {c['MI']} | "
-                             f"**{c['HMI']}** | {c['max_hpe_valid_m']:.1f} |")  # fmt: skip
-        lines += ["", env_line, ""]
+                             f"**{c['HMI']}** | {c['max_hpe_valid_m']:.1f} | |")  # fmt: skip
+        lines += ["", f"Default for this log: {default}. " + (env_line if drive.positionings is None else ""), ""]
         if not args.no_plots:
-            lines += [lines_png, ""]
-        print("\n".join(lines[-(len(drive.hals) * (len(SETTINGS) + 2) + 6):]), flush=True)
+            lines += [*extra_png, *([lines_png] if drive.positionings is None else []), ""]
+        print("\n".join(lines[-(len(drive.hals) * (len(settings) + 2) + 8):]), flush=True)
     nlos = nlos_weights()
     if nlos is not None:
         lines += ["## NLOS signals under the urban σ (smartLoc berlin_1_raw.csv labels)", "",

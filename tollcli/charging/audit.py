@@ -348,7 +348,8 @@ def risk_report(invoices: list[dict], fees: dict[str, Decimal], pricer=None) -> 
     money, complete = Decimal(0), True
     for inv in invoices:
         p_md = float(inv.get("parameters", {}).get("p_md", 5e-5))
-        tc_s = float(inv.get("parameters", {}).get("tc_s", 5.0))
+        recorded = inv.get("parameters", {})
+        tc_s = float(recorded.get("tc_used_s", recorded.get("tc_s", 5.0)))  # a trajectory's correlation time, if longer
         for item in inv.get("not_charged", []):
             row = {"vehicle": inv.get("vehicle", ""), "geoobject": item["geoobject"], "entry_utc": item["entry_utc"],
                    "n_inside": item["n_inside"], "n_valid": item["n_valid"], "why": item.get("statuses", {})}  # fmt: skip

@@ -28,7 +28,7 @@ CHARGE_PARAMETERS = (
     ("geo", Geo, _REQUIRED), ("tariff", Tariff, _REQUIRED),
     ("vehicle_class", opt.TariffVehicleClass, "car"), ("vehicle_attr", opt.VehicleAttr, None),
     ("input_format", opt.InputFormat, "auto"), ("nav", opt.Nav, None), ("roads", Roads, None), ("policy", Policy, None),
-    ("integrity_sources", opt.IntegritySources, "auto"), ("raim", opt.RaimMode, "ss"), ("positioning", opt.Positioning, "smoothed"),
+    ("integrity_sources", opt.IntegritySources, "auto"), ("raim", opt.RaimMode, "ss"), ("positioning", opt.Positioning, "auto"),
     ("environment", opt.Environment, "auto"),
     ("p_sat", opt.PSat, 1e-5), ("p_const", opt.PConst, 1e-8), ("p_md", opt.PMd, 5e-5), ("p_fa", opt.PFa, 5e-3),
     ("fde", opt.Fde, False), ("sigma_model", opt.SigmaModel, "nominal"), ("sigma", opt.Sigma, 5.0), ("tc", opt.Tc, 5.0),

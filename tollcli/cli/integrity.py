@@ -34,7 +34,7 @@ def integrity(
     integrity_sources: opt.IntegritySources = "auto",
     raim: opt.RaimMode = "ss",
     environment: opt.Environment = "auto",
-    positioning: opt.Positioning = "smoothed",
+    positioning: opt.Positioning = "auto",
     p_sat: opt.PSat = 1e-5,
     p_const: opt.PConst = 1e-8,
     hal: opt.Hal = 50.0,
@@ -110,12 +110,14 @@ def integrity(
                 if kind in NAVIGATION_KINDS:
                     check_usable(stats)  # a log without one epoch: the data error, before any check runs
                 table = with_epoch_checks(pd.concat(tables, ignore_index=True), roads)
+                used = table["positioning"].iat[0] if "positioning" in table and len(table) else "snapshot"
                 _tally(table, counts)
                 writer.write(table)
             elif kind in NAVIGATION_KINDS:
                 _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
             else:
                 table = _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment, strict, positioning)
+                used = table["positioning"].iat[0] if "positioning" in table and len(table) else "snapshot"
                 counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
                 _tally(table, counts)
                 writer.write(table)
@@ -130,7 +132,7 @@ def integrity(
                "environments": {k[1]: n for k, n in sorted(counts.items()) if k[0] == "environment"},
                "skipped_lines": counts["skipped", "lines"]}  # fmt: skip
     if kind not in NAVIGATION_KINDS:
-        summary["positioning"] = positioning
+        summary.update(positioning=positioning, positioning_used=used)
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
     else:
@@ -173,6 +175,6 @@ def _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, str
 
 
 def _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment="auto", strict=False,
-                  positioning="smoothed") -> pd.DataFrame:  # fmt: skip
+                  positioning="auto") -> pd.DataFrame:  # fmt: skip
     return next(iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, nav=nav, environment=environment,
                                positioning=positioning)).table

@@ -16,7 +16,7 @@ SIGMA_MODELS = ("nominal", "urban", "rural", "constant", "input")
 IONO_MODELS = ("single", "sbas", "iono-free")
 INPUT_KINDS = ("auto", "nmea", "ubx-nav", "gpsd-json", "rtklib-pos", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
 POLICIES = ("raim", "raim+speed", "raim+mm", "all")
-POSITIONINGS = ("smoothed", "filtered", "snapshot")
+POSITIONINGS = ("auto", "smoothed", "filtered", "snapshot")
 
 LogArg = Annotated[
     str,
@@ -113,7 +113,7 @@ DateOpt = Annotated[
 ]
 
 RaimMode = Annotated[Literal[RAIM_MODES], typer.Option("--raim", help="RAIM: ss (solution separation over every satellite and constellation left out: several faults at once, HPL from the fault modes; the default), etc (paper 001's toll RAIM: HPL = HAL, P_FA per epoch, one fault) or classic (paper 001's civil-aviation RAIM: fixed P_FA, HPL ≤ HAL, one fault).")]
-Positioning = Annotated[Literal[POSITIONINGS], typer.Option("--positioning", help="Pseudorange logs: where each position comes from. smoothed (the default): a robust filter with the odometry where the log has it, run forward and backward over the whole trip and combined (covariance intersection), HPL from its covariance with the noise the log's own residuals show; filtered: the forward filter alone (what an on-board unit could do); snapshot: each epoch alone (weighted least squares), judged by the RAIM. Recorded in the invoice.")]
+Positioning = Annotated[Literal[POSITIONINGS], typer.Option("--positioning", help="Pseudorange logs: where each position comes from. smoothed: a robust filter with the log's odometry (or a GNSS-only motion model), run forward and backward over the whole trip and combined (covariance intersection), HPL from its covariance with the noise the log's own residuals show, a fault where the two runs disagree; filtered: the forward filter alone (what an on-board unit could do); snapshot: each epoch alone (weighted least squares), judged by the RAIM; auto (the default): smoothed where the log has odometry, else snapshot. Recorded in the invoice (positioning, positioning_used).")]
 Environment = Annotated[Literal[ENVIRONMENTS], typer.Option("--environment", help="Error model's environment: auto (urban where the residuals of the last 30 s exceed the nominal model 1.5-fold: C/N0-weighted urban σ there), open (the nominal model throughout) or urban (the urban σ throughout).")]
 PSat = Annotated[float, typer.Option("--p-sat", help="--raim ss: prior probability of a satellite fault.")]
 PConst = Annotated[float, typer.Option("--p-const", help="--raim ss: prior probability of a constellation-wide fault.")]

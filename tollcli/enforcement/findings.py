@@ -123,11 +123,15 @@ def trip_findings(epochs: pd.DataFrame, satellites: pd.DataFrame | None = None, 
     satellite table itself is not kept (a long log read in chunks). ``keep_rows``: each finding keeps
     its first and last epoch rows under ``_rows`` (for the streaming charge, :mod:`tollcli.job.streaming`).
     ``times_increase``: whether the trailing baselines may use time windows (default: the times of
-    ``epochs`` are all known and never go back).
+    ``epochs`` are all known and never go back). Epochs a trajectory placed (``--positioning``) are judged at their
+    snapshot fixes (``snapshot_lat_deg``/``snapshot_lon_deg``): a jump or a gap the receiver's own positions show is
+    evidence, whatever the smoothed trajectory made of it.
     """
     epochs = epochs.reset_index(drop=True)
     if epochs.empty:
         return []
+    if "snapshot_lat_deg" in epochs:  # a trajectory placed the epochs: the findings read what the receiver measured
+        epochs = epochs.assign(lat_deg=epochs["snapshot_lat_deg"], lon_deg=epochs["snapshot_lon_deg"])
     fill = {c: np.nan for c in ("speed_mps", "hdop") if c not in epochs}  # pseudorange inputs have no NMEA extras
     fill.update({c: -1 for c in ("line",) if c not in epochs})
     if "epoch" not in epochs:

@@ -22,19 +22,24 @@ import numpy as np
 from tollcli.integrity.trajectory_filter import FilterPass, MotionNoise, motion_states, run_pass
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 from tollcli.integrity.trajectory_noise import (
+    RHO_CUT,
     cn0_bins,
     correlation_inflation,
     postfit_residuals,
     sigma_by_cn0,
 )
 
-POSITIONINGS = ("smoothed", "filtered", "snapshot")
+#: ``auto``: smoothed where the log has odometry, else snapshot (without odometry the GNSS-only motion model bounds
+#: less than the snapshot RAIM does: measured on the simulator's drives, docs/integrity.md)
+POSITIONINGS = ("auto", "smoothed", "filtered", "snapshot")
 #: HPL = K_FUSED · σ_major (a Gaussian's two-sided 5σ is 6e-7; the margin covers the heavy tail of city errors)
 K_FUSED = 5.0
 #: rounds of noise estimation from the residuals
 NOISE_ROUNDS = 2
 #: epochs of the window the initial heading is fitted over
 HEADING_WINDOW = 300
+#: the gyro bias's σ at the start (rad/s): a consumer MEMS gyro's turn-on bias, up to ~0.3 °/s
+GYRO_BIAS0_RADPS = 0.005
 #: the σ of a measurement the error model gives none (m)
 FALLBACK_SIGMA_M = 30.0
 #: the median of χ²₁
@@ -56,6 +61,7 @@ class Trajectory:
     dof: np.ndarray
     sigma_by_cn0_m: np.ndarray  # the noise table of the last round (per C/N0 bin)
     inflation: float  # the correlation factor of the last round
+    correlation_s: float  # how long the residuals stay correlated (ρ above RHO_CUT): the evidence's independence time
     positioning: str
     odometry: bool
 
@@ -75,25 +81,29 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
         sigma2 = sigma2 * max(1.0, float(np.median(forward.z[kept] ** 2)) / CHI2_1_MEDIAN)
         forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise)
     backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise) if positioning == "smoothed" else None
-    table, factor = np.full(1, np.nan), 1.0
+    table, factor, rho = np.full(1, np.nan), 1.0, np.ones(1)
     bins = cn0_bins(inp.cn0_dbhz)
     for _ in range(NOISE_ROUNDS):
         x, _p = _combined(forward, backward)
         res = postfit_residuals(inp, x, m)
         table = sigma_by_cn0(res, inp.cn0_dbhz, inp.mask)
-        factor, _rho = correlation_inflation(res / table[bins], inp.sv, inp.mask)
-        sigma2 = np.where(inp.mask, (table[bins] ** 2) * max(factor, 1.0), FALLBACK_SIGMA_M**2)
-        forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise)
+        factor, rho = correlation_inflation(res / table[bins], inp.sv, inp.mask)
+        white2 = np.where(inp.mask, table[bins] ** 2, FALLBACK_SIGMA_M**2)
+        sigma2 = white2 * max(factor, 1.0)
+        forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise, white2)
         if backward is not None:
-            backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise)
+            backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise, white2)
     x, p = _combined(forward, backward)
     cov = p[:, :2, :2]
     major = sigma_major_m(cov)
     weight = forward.weight if backward is None else np.minimum(forward.weight, backward.weight)
     n_kept = (inp.mask & (weight >= 0.5)).sum(axis=1)
     test_stat, dof = fault_test(forward, backward)
+    below = np.flatnonzero(rho < RHO_CUT)
+    lags = int(below[0]) if below.size else rho.size
+    step_s = float(np.median(np.diff(inp.t_s))) if inp.t_s.size > 1 else 1.0
     return Trajectory(x[:, :3], cov, major, K_FUSED * major, n_kept, inp.mask.sum(axis=1) - n_kept, test_stat, dof, table, factor,
-                      positioning, odometry)  # fmt: skip
+                      lags * step_s, positioning, odometry)  # fmt: skip
 
 
 def fault_test(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndarray, np.ndarray]:
@@ -164,9 +174,10 @@ def _starts(inp: TrajectoryInputs, odometry: bool, m: int):
             psi, start = _fitted_start(inp, window)
             x0[3], x0[:2] = psi, start
             p[3, 3] = 0.3**2
+            p[4, 4] = GYRO_BIAS0_RADPS**2
         else:
             x0[:2] = inp.fix_enu_m[window[0], :2]
-            p[3, 3] = p[4, 4] = 20.0**2
+            p[3, 3] = p[4, 4] = 20.0**2  # the velocity
         x0[2] = np.median(inp.fix_enu_m[window[: min(30, window.size)], 2])
         starts.append((x0, p))
     return starts[0], starts[1]
@@ -203,12 +214,15 @@ MIN_FIXES = 10
 
 def with_trajectory(epochs, meas, positioning: str):
     """A pseudorange log's epochs placed by the trajectory estimator (``positioning``: smoothed or filtered; snapshot
-    leaves them as they are), and its measurements with the estimator's bound and fault test for the verdicts.
+    leaves them as they are; auto: smoothed where the log has odometry over half its intervals, else snapshot), and its
+    measurements with the estimator's bound and fault test for the verdicts.
 
     Returns (epochs, measurements, the positioning used): ``snapshot`` where the log cannot carry a trajectory (no
     satellites and pseudoranges in its measurements, fewer than :data:`MIN_FIXES` snapshot fixes). The epoch table
     keeps the snapshot fix as ``snapshot_lat_deg``/``snapshot_lon_deg``; ``lat_deg``/``lon_deg``/``height_m`` become
-    the trajectory's, ``sigma_major_m`` its 1σ semi-major axis, and ``positioning`` says which.
+    the trajectory's, ``sigma_major_m`` its 1σ semi-major axis, and ``positioning`` says which; its attribute
+    ``trajectory_correlation_s`` is how long the trajectory's errors stay correlated (positions closer in time are
+    not independent evidence).
     """
     from dataclasses import replace
 
@@ -216,6 +230,11 @@ def with_trajectory(epochs, meas, positioning: str):
 
     if positioning == "snapshot" or not has_pseudoranges(meas):
         return epochs, meas, "snapshot"
+    if positioning == "auto":
+        speed = epochs["odometer_speed_mps"].to_numpy(float) if "odometer_speed_mps" in epochs else np.zeros(0)
+        if not (speed.size > 1 and np.isfinite(speed[1:]).mean() >= 0.5):  # TrajectoryInputs.has_odometry
+            return epochs, meas, "snapshot"
+        positioning = "smoothed"
     fixes = np.isfinite(epochs["lat_deg"].to_numpy(float)).sum()
     if fixes < MIN_FIXES:
         return epochs, meas, "snapshot"
@@ -227,6 +246,7 @@ def with_trajectory(epochs, meas, positioning: str):
                            lat_deg=lat, lon_deg=lon, height_m=height, sigma_major_m=traj.sigma_major_m,
                            positioning=np.full(n, positioning, dtype=object))  # fmt: skip
     placed.attrs.update(epochs.attrs)
+    placed.attrs["trajectory_correlation_s"] = round(traj.correlation_s, 1)
     meas = replace(meas, trajectory_source=np.full(n, positioning, dtype=object), trajectory_hpl_m=traj.hpl_m,
                    trajectory_test_stat=traj.test_stat, trajectory_dof=traj.dof, trajectory_set_aside=traj.n_set_aside)  # fmt: skip
     return placed, meas, positioning

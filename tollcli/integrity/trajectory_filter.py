@@ -2,8 +2,9 @@
 
 An extended Kalman filter in a local east-north-up frame (:class:`TrajectoryInputs`). State:
 
-* with odometry: east, north, up (m), heading ψ (rad, clockwise from north), clock drift (m/s), one receiver clock
-  per constellation (m); the motion is the odometer's distance along ψ and the gyro's turn;
+* with odometry: east, north, up (m), heading ψ (rad, clockwise from north), the gyro's bias (rad/s), clock drift
+  (m/s), one receiver clock per constellation (m); the motion is the odometer's distance along ψ and the gyro's turn
+  less its bias;
 * without: east, north, up, velocity east and north (m/s), drift, clocks; the motion is constant velocity with a
   white acceleration.
 
@@ -46,7 +47,8 @@ class MotionNoise:
     up_m2ps: float = 0.01  # height random walk
     clock_m2ps: float = 0.5  # receiver clock random walk
     drift_m2ps3: float = 2.0  # clock drift random walk
-    acceleration_m2ps3: float = 4.0  # without odometry: white acceleration (constant-velocity model)
+    acceleration_m2ps3: float = 4.0
+    gyro_bias_rad2ps3: float = 1e-8  # the gyro bias's random walk  # without odometry: white acceleration (constant-velocity model)
 
 
 @dataclass
@@ -64,18 +66,23 @@ class FilterPass:
 
     @property
     def motion_states(self) -> int:
-        return 5 if self.odometry else 6
+        return 6
 
 
 def motion_states(odometry: bool) -> int:
-    """States before the clocks: e, n, u, ψ, drift (odometry) or e, n, u, v_e, v_n, drift."""
-    return 5 if odometry else 6
+    """States before the clocks: e, n, u, ψ, gyro bias, drift (odometry) or e, n, u, v_e, v_n, drift."""
+    return 6
 
 
 def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start_x: np.ndarray, start_p: np.ndarray,
-             odometry: bool, noise: MotionNoise = MotionNoise()) -> FilterPass:  # fmt: skip
+             odometry: bool, noise: MotionNoise = MotionNoise(), robust_sigma2_m2: np.ndarray | None = None) -> FilterPass:  # fmt: skip
     """The filter over every epoch, forward (``direction`` 1) or backward (-1), from ``start_x``/``start_p`` at the
-    first epoch it visits (its clocks are started from that epoch's measurements)."""
+    first epoch it visits (its clocks are started from that epoch's measurements).
+
+    ``sigma2_m2``: each measurement's variance, what it tells the state; ``robust_sigma2_m2`` (default the same): the
+    variance its innovation is normalised by for the Cauchy weight — the white part of the error, so that a variance
+    inflated for time correlation does not hide a fault from the robust loss."""
+    robust = sigma2_m2 if robust_sigma2_m2 is None else robust_sigma2_m2
     n_epochs, n_slots = inp.mask.shape
     m = motion_states(odometry)
     n_states = m + inp.n_clocks
@@ -99,7 +106,8 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
             x, p, started = _start_clocks(x, p, started, inp.sat_ecef_m[k, used], inp.pr_m[k, used], groups, m, inp, rot_t)
         prior_x[k], prior_p[k] = x, p
         if used.size:
-            x, p, z, w = _update(x, p, inp.sat_ecef_m[k, used], inp.pr_m[k, used], sigma2_m2[k, used], groups, inp, rot_t)
+            x, p, z, w = _update(x, p, inp.sat_ecef_m[k, used], inp.pr_m[k, used], sigma2_m2[k, used], robust[k, used], groups, inp,
+                                 rot_t)  # fmt: skip
             z_all[k, used], w_all[k, used] = z, w
         post_x[k], post_p[k] = x, p
         previous = k
@@ -123,8 +131,9 @@ def _predict(x, p, dt_s, direction, inp, interval, odometry, m, noise: MotionNoi
             sin, cos = np.sin(psi), np.cos(psi)
             x[0] += v * s * sin
             x[1] += v * s * cos
-            x[3] -= w * s
+            x[3] -= (w - x[4]) * s
             f[0, 3], f[1, 3] = v * s * cos, -v * s * sin
+            f[3, 4] = s
             sv = noise.along_track_mps + noise.along_track_share * abs(v)
             q[0] = (sv * dt * sin) ** 2 + noise.position_m2ps * dt
             q[1] = (sv * dt * cos) ** 2 + noise.position_m2ps * dt
@@ -133,6 +142,7 @@ def _predict(x, p, dt_s, direction, inp, interval, odometry, m, noise: MotionNoi
             q[0] = q[1] = noise.no_odometry_m2ps * dt
             q[3] = 0.1 * dt
         q[2] = noise.up_m2ps * dt
+        q[4] = noise.gyro_bias_rad2ps3 * dt
         q[m:] = noise.clock_m2ps * dt
         q[drift] = noise.drift_m2ps3 * dt
         p = f @ p @ f.T + np.diag(q)
@@ -180,7 +190,7 @@ def _start_clocks(x, p, started, sat, pr, groups, m, inp, rot_t):
     return x, p, started
 
 
-def _update(x_prior, p_prior, sat, pr, sigma2, groups, inp, rot_t):
+def _update(x_prior, p_prior, sat, pr, sigma2, robust2, groups, inp, rot_t):
     """The robust (Cauchy, iteratively reweighted) measurement update of one epoch, in information form."""
     k = pr.size
     info_prior = np.linalg.inv(p_prior)
@@ -192,7 +202,7 @@ def _update(x_prior, p_prior, sat, pr, sigma2, groups, inp, rot_t):
         h[:, :3] = -u_enu
         h[rows, groups] = 1.0
         r = pr - rng - x[groups] - h @ (x_prior - x)  # the innovation, linearised at x
-        s_diag = np.einsum("ij,jk,ik->i", h, p_prior, h) + sigma2
+        s_diag = np.einsum("ij,jk,ik->i", h, p_prior, h) + robust2
         z = r / np.sqrt(s_diag)
         w = 1.0 / (1.0 + (z / CAUCHY_C) ** 2)
         wd = w / sigma2

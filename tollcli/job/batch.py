@@ -50,11 +50,11 @@ from tollcli import __version__
 from tollcli.charging.invoice import file_sha256, invoice_json
 from tollcli.charging.recognition import PASSAGE_GAP_S
 from tollcli.enforcement.locate import vehicle_from_log, vehicle_from_path
-from tollcli.errors import DataError, TollError, UsageError
+from tollcli.errors import DataError, UsageError
 from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
 from tollcli.job.epoch_schema import conform_epochs, epoch_schema
 from tollcli.job.fleet import read_fleet
-from tollcli.job.log_files import log_name
+from tollcli.job.log_files import is_pseudorange_log, log_name
 from tollcli.job.pipeline import ChargeSettings, charge_log
 
 
@@ -136,25 +136,13 @@ def _current(done: dict, job: Job, settings: ChargeSettings, log_sha) -> bool:
     compared = asdict(settings)
     del compared["continued"]
     if "positioning" not in recorded:  # a navigation log's invoice (no positioning to choose), or an older invoice of a
-        if _pseudorange_log(job.log, settings.input_format):  # pseudorange log: made with snapshot positions
+        if is_pseudorange_log(job.log, settings.input_format):  # pseudorange log: made with snapshot positions
             recorded["positioning"] = "snapshot"
         else:
             del compared["positioning"]
     if not all(k in recorded and recorded[k] == v for k, v in compared.items()):
         return False
     return inputs.get("log_sha256") == log_sha()
-
-
-def _pseudorange_log(log: str, input_format: str) -> bool:
-    """Whether ``log`` is a pseudorange log (its head read when its format is ``auto``; an unreadable one: no)."""
-    from tollcli.io.sources import sniff_format
-    from tollcli.readers.navigation import NAVIGATION_KINDS
-
-    try:
-        kind = sniff_format(log) if input_format == "auto" else input_format
-    except (OSError, TollError):
-        return False
-    return kind not in NAVIGATION_KINDS
 
 
 def run_one(job: Job) -> dict:

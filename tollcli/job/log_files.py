@@ -1,11 +1,11 @@
-"""Which files are receiver logs, and their names: from paths, globs, folders and ``@lists``."""
+"""Which files are receiver logs, and their names: from paths, globs, folders and ``@lists``; which are pseudorange logs."""
 
 from __future__ import annotations
 
 import glob
 import os
 
-from tollcli.errors import UsageError
+from tollcli.errors import TollError, UsageError
 from tollcli.io.sources import looks_like_log
 
 LOG_SUFFIXES = (".nmea", ".nmea.gz", ".log", ".log.gz", ".txt", ".gz", ".csv", ".ubx", ".obs", ".rnx", ".pos")
@@ -53,3 +53,15 @@ def expand_inputs(inputs: list[str], passed_over: list[str] | None = None) -> li
     if not logs:
         raise UsageError("no logs found in " + " ".join(inputs))
     return logs
+
+
+def is_pseudorange_log(log: str, input_format: str) -> bool:
+    """Whether ``log`` is a pseudorange log (its head read when its format is ``auto``; an unreadable one: no)."""
+    from tollcli.io.sources import sniff_format
+    from tollcli.readers.navigation import NAVIGATION_KINDS
+
+    try:
+        kind = sniff_format(log) if input_format == "auto" else input_format
+    except (OSError, TollError):
+        return False
+    return kind not in NAVIGATION_KINDS

@@ -39,7 +39,7 @@ def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
 def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
                    nominal: NominalModel | None = None, strict: bool = False, stats: ReadStats | None = None,
                    nav: str | tuple[str, ...] | None = None, date: dt.date | None = None, environment: str = "auto",
-                   positioning: str = "smoothed") -> Iterator[IntegrityChunk]:  # fmt: skip
+                   positioning: str = "auto") -> Iterator[IntegrityChunk]:  # fmt: skip
     """Integrity tables of ``log`` (``kind``: a navigation kind — nmea, ubx-nav, gpsd-json — streamed in chunks, or a
     pseudorange format). ``log``: a path, or the log's :class:`~tollcli.io.log_run.LogRun` (read through it: opened once).
 

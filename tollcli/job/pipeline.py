@@ -81,9 +81,9 @@ class ChargeSettings:
     #: integrity.nav_authentication.ACCEPTED): ``--require-authenticated``
     require_authenticated: bool = False
     #: where a pseudorange log's positions come from (integrity.trajectory.POSITIONINGS): smoothed (forward and
-    #: backward over the whole log), filtered (forward only) or snapshot (each epoch alone, the RAIM's); recorded for
-    #: pseudorange logs only (a navigation log's positions are its receiver's)
-    positioning: str = "smoothed"
+    #: backward over the whole log), filtered (forward only), snapshot (each epoch alone, the RAIM's) or auto (smoothed
+    #: with odometry, else snapshot); recorded for pseudorange logs only (a navigation log's positions are its receiver's)
+    positioning: str = "auto"
 
 
 #: the shortest correlation time accepted, s (a 10 Hz receiver's epoch interval)
@@ -194,7 +194,7 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
             stats = ReadStats() if kind in NAVIGATION_KINDS else None
             used: list[str] = []  # the positioning a pseudorange log's chunks were placed by
             chunks = (_navigation_chunks(run, kind, settings, nominal, stats) if kind in NAVIGATION_KINDS
-                      else _pseudorange_chunks(run, kind, nav, settings, nominal, used))  # fmt: skip
+                      else _pseudorange_chunks(run, kind, nav, settings, nominal, used, charger))  # fmt: skip
             params = _charge_chunks(chunks, settings, geo_objects, params, epoch_raim, charger, epoch_table, osnma, auth_counts,
                                     failure_fixes)  # fmt: skip
             if stats is not None:
@@ -229,6 +229,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         del parameters["positioning"]  # the receiver's positions: nothing to choose
     else:
         parameters["positioning_used"] = used[0] if used else "snapshot"
+        if charger.passages.tc_s != settings.tc_s:  # a trajectory's errors stay correlated longer than --tc
+            parameters["tc_used_s"] = charger.passages.tc_s
     invoice = build_invoice(table, None, geo_objects, tariff_doc,
                             vehicle=settings.vehicle or printable_path(os.path.basename(log)), vehicle_class=settings.vehicle_class,
                             inputs=inputs, parameters=parameters, period=period, details=details,
@@ -260,7 +262,8 @@ def _check_notes(invoice: dict, period, step_s: float | None) -> None:
 
 #: epoch columns kept for the whole log after its chunks are read (policy checks, findings, the invoice's period)
 KEPT_EPOCH_COLUMNS = ("epoch", "time_utc", "tod_s", "line", "lat_deg", "lon_deg", "fix_valid", "n_used", "hdop", "speed_mps",
-                      "course_deg", "sigma_major_m", "pos_disagreement_m", "date_disagreement_days", "date_jump_days")  # fmt: skip
+                      "course_deg", "sigma_major_m", "pos_disagreement_m", "date_disagreement_days", "date_jump_days",
+                      "snapshot_lat_deg", "snapshot_lon_deg")  # fmt: skip
 #: per-epoch RAIM columns kept (the policy checks and the findings use them)
 KEPT_RAIM_COLUMNS = ("raim_status", "n_used", "test_stat", "threshold", "p_fa")
 #: epochs per chunk: the working set of the satellite-level steps (an hour at 1 Hz)
@@ -291,15 +294,18 @@ def _navigation_chunks(run: LogRun, kind: str, settings: ChargeSettings, nominal
 
 
 def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | None, settings: ChargeSettings,
-                        nominal: NominalModel, used: list[str]) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
+                        nominal: NominalModel, used: list[str], charger: TailCharger) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
     """A pseudorange log's (RINEX, GnssLogger, GSDC, u-blox RAWX, libRSF) epochs and measurements, in chunks of
     :data:`CHUNK_EPOCHS` epochs. The positions are solved for the whole log at once (its reader and solver read it
     whole, from the run's replay) — each epoch alone (snapshot WLS), then placed by the trajectory estimator
     (``settings.positioning``, :func:`~tollcli.integrity.trajectory.with_trajectory`; ``used`` receives the positioning
-    it used); from there on the chunks take the same path as a navigation log's."""
+    it used, and ``charger`` counts positions as independent evidence only the trajectory's correlation time apart);
+    from there on the chunks take the same path as a navigation log's."""
     epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
     epochs, meas, positioning = with_trajectory(epochs, meas, settings.positioning)
     used.append(positioning)
+    if "trajectory_correlation_s" in epochs.attrs:
+        charger.independent_after(epochs.attrs["trajectory_correlation_s"])
     for start in range(0, len(epochs), CHUNK_EPOCHS):
         rows = np.arange(start, min(start + CHUNK_EPOCHS, len(epochs)))
         yield epochs.iloc[rows].reset_index(drop=True), meas.take(rows), None

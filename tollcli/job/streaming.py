@@ -179,6 +179,11 @@ class TailCharger:
         self.first_utc = self.last_utc = None
         self.any_pairs = self.undated = False
 
+    def independent_after(self, seconds: float) -> None:
+        """Positions count as independent evidence only ``seconds`` apart or more (a trajectory's correlation time, when
+        it exceeds ``--tc``): call before the first chunk."""
+        self.passages.tc_s = max(self.passages.tc_s, float(seconds))
+
     def add(self, epochs: pd.DataFrame, raim: pd.DataFrame, cn0: pd.DataFrame, pairs: dict[str, np.ndarray]) -> None:
         """One chunk: its kept epoch columns, per-epoch RAIM columns, C/N0 summary and geo-object pairs."""
         part = pd.concat([epochs.reset_index(drop=True).add_prefix("epoch:"), raim.reset_index(drop=True).add_prefix("raim:"),
