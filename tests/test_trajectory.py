@@ -114,7 +114,8 @@ def test_the_invoice_says_which_positioning_and_verify_reproduces_it(tmp_path):
     """``process`` of the Berlin drive with roads laid along its snapshot track: by default the smoothed trajectory
     charges (``parameters.positioning``/``positioning_used``), its evidence positions a correlation time apart
     (``tc_used_s``), ``verify`` reproduces the invoice from its recorded settings, and ``--positioning snapshot``
-    charges nothing there (each epoch alone is unavailable)."""
+    charges nothing there (each epoch alone is unavailable) and records the settings as invoices did before (an
+    invoice made before the estimator verifies)."""
     import pandas as pd
 
     from conftest import REPO
@@ -140,8 +141,9 @@ def test_the_invoice_says_which_positioning_and_verify_reproduces_it(tmp_path):
         proc = run_cli("process", log, "--geo", str(geo), "--tariff", tariff, "-o", str(out), "-q", *extra)
         assert proc.returncode == 0, proc.stderr.decode()
         invoices[positioning] = json.loads(out.read_text())
-        assert invoices[positioning]["parameters"]["positioning"] == ("auto" if positioning == "smoothed" else positioning)
-        assert invoices[positioning]["parameters"]["positioning_used"] == positioning
+    assert invoices["smoothed"]["parameters"]["positioning"] == "auto"  # the default: smoothed, the log has odometry
+    assert invoices["smoothed"]["parameters"]["positioning_used"] == "smoothed"
+    assert "positioning" not in invoices["snapshot"]["parameters"]  # snapshot positions: recorded as before the estimator
     assert invoices["smoothed"]["lines"] and not invoices["snapshot"]["lines"]
     # smoothed positions' errors stay correlated for tens of seconds (the residuals' ρ): evidence counts that far apart
     tc_used = invoices["smoothed"]["parameters"]["tc_used_s"]
@@ -150,8 +152,9 @@ def test_the_invoice_says_which_positioning_and_verify_reproduces_it(tmp_path):
         times = sorted(pd.Timestamp(e["time_utc"]) for e in line["evidence"])
         assert all((b - a).total_seconds() >= tc_used for a, b in zip(times, times[1:]))
         assert line["n_valid_independent"] <= 1 + line["n_valid"] // 10
-    proc = run_cli("verify", str(tmp_path / "smoothed.json"))
-    assert proc.returncode == 0, proc.stderr.decode()
+    for positioning in ("smoothed", "snapshot"):
+        proc = run_cli("verify", str(tmp_path / f"{positioning}.json"))
+        assert proc.returncode == 0, proc.stderr.decode()
 
 
 def test_without_odometry_auto_keeps_the_snapshot_positions(tmp_path):

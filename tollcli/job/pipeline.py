@@ -225,10 +225,11 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         del parameters["vehicle_attrs"]  # recorded only for a tariff of per-km tables
     if not settings.require_authenticated:
         del parameters["require_authenticated"]  # recorded only when required: invoices made before it stay as they were
-    if kind in NAVIGATION_KINDS:
-        del parameters["positioning"]  # the receiver's positions: nothing to choose
+    positioning_used = used[0] if used else "snapshot"
+    if kind in NAVIGATION_KINDS or (positioning_used == "snapshot" and settings.positioning in ("auto", "snapshot")):
+        del parameters["positioning"]  # a receiver's positions, or snapshot ones as before: recorded as they were
     else:
-        parameters["positioning_used"] = used[0] if used else "snapshot"
+        parameters["positioning_used"] = positioning_used
         if charger.passages.tc_s != settings.tc_s:  # a trajectory's errors stay correlated longer than --tc
             parameters["tc_used_s"] = charger.passages.tc_s
     invoice = build_invoice(table, None, geo_objects, tariff_doc,
