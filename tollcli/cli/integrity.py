@@ -111,6 +111,7 @@ def integrity(
                     check_usable(stats)  # a log without one epoch: the data error, before any check runs
                 table = with_epoch_checks(pd.concat(tables, ignore_index=True), roads)
                 used = table["positioning"].iat[0] if "positioning" in table and len(table) else "snapshot"
+                note_why = tables[0].attrs.get("positioning_note") if tables else None
                 _tally(table, counts)
                 writer.write(table)
             elif kind in NAVIGATION_KINDS:
@@ -118,6 +119,7 @@ def integrity(
             else:
                 table = _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment, strict, positioning)
                 used = table["positioning"].iat[0] if "positioning" in table and len(table) else "snapshot"
+                note_why = table.attrs.get("positioning_note")
                 counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
                 _tally(table, counts)
                 writer.write(table)
@@ -133,6 +135,8 @@ def integrity(
                "skipped_lines": counts["skipped", "lines"]}  # fmt: skip
     if kind not in NAVIGATION_KINDS:
         summary.update(positioning=positioning, positioning_used=used)
+        if note_why:
+            summary["positioning_note"] = note_why
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
     else:

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError
-from tollcli.gnss.odometry import interval_odometry
+from tollcli.gnss.odometry import interval_displacement, interval_odometry
 from tollcli.gnss.measurements import Measurements, pad, slots, sv_labels
 from tollcli.gnss.pseudorange_wls import final_geometry, solve_positions
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
@@ -77,13 +77,15 @@ def librsf_epochs(log: LibrsfLog, sigma_model: str = "nominal", sigma_m: float =
 
 
 def _interval_odometry(odometry: pd.DataFrame, epoch_ms: np.ndarray) -> dict[str, np.ndarray]:
-    """The odometer's mean speed (m/s) and yaw rate (rad/s) over the interval ending at each epoch (NaN: none)."""
+    """The odometer's mean speed (m/s) and yaw rate (rad/s) over the interval ending at each epoch, and the distance
+    driven forward and to the left over it (m, in the frame of the heading at its start; NaN: none)."""
     if odometry.empty:
         nan = np.full(epoch_ms.size, np.nan)
-        return {"odometer_speed_mps": nan, "yaw_rate_radps": nan.copy()}
-    speed, yaw = interval_odometry(odometry["t_s"].to_numpy(float), odometry["vx_mps"].to_numpy(float),
-                                   odometry["wz_radps"].to_numpy(float), epoch_ms / 1e3)  # fmt: skip
-    return {"odometer_speed_mps": speed, "yaw_rate_radps": yaw}
+        return {"odometer_speed_mps": nan, "yaw_rate_radps": nan.copy(), "odometer_forward_m": nan.copy(), "odometer_left_m": nan.copy()}
+    samples = (odometry["t_s"].to_numpy(float), odometry["vx_mps"].to_numpy(float), odometry["wz_radps"].to_numpy(float), epoch_ms / 1e3)
+    speed, yaw = interval_odometry(*samples)
+    forward, left = interval_displacement(*samples)
+    return {"odometer_speed_mps": speed, "yaw_rate_radps": yaw, "odometer_forward_m": forward, "odometer_left_m": left}
 
 
 def _odometry_speed(odometry: pd.DataFrame, epoch_ms: np.ndarray) -> np.ndarray:

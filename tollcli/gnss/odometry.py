@@ -1,37 +1,73 @@
-"""A vehicle's odometry (wheel speed, yaw rate) resampled to the GNSS epochs: what moved between two epochs."""
+"""A vehicle's odometry (wheel speed, yaw rate) resampled to the GNSS epochs: what moved between two epochs.
+
+* :func:`interval_odometry`: the mean speed and yaw rate over each interval;
+* :func:`interval_displacement`: the distance driven forward and to the left over each interval, in the frame of
+  the heading at its start (the dead-reckoned arc, exact however long the interval and however the vehicle turned).
+
+Both integrate the samples by the trapezoid rule; an interval is unknown (NaN) where the samples that touch it are
+more than ``max_gap_s`` apart, and the first interval (before the first epoch) always is.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
 
-def interval_odometry(odometry_t_s: np.ndarray, speed_mps: np.ndarray, yaw_rate_radps: np.ndarray, epoch_t_s: np.ndarray,
-                      max_gap_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """Mean speed (m/s) and yaw rate (rad/s) over each interval between consecutive epochs (index: the interval's end
-    epoch; the first is NaN), from odometry samples integrated by the trapezoid rule; NaN where the samples are more
-    than ``max_gap_s`` apart inside or around the interval."""
-    n = epoch_t_s.size
-    nan = np.full(n, np.nan)
+def _integrals(odometry_t_s, speed_mps, yaw_rate_radps, epoch_t_s, max_gap_s):
+    """Cumulative distance, turn, ∫v·cos θ and ∫v·sin θ at the epochs (θ the turn since the first sample), and the
+    unknown intervals; None where there are too few samples."""
     ok = np.isfinite(odometry_t_s) & np.isfinite(speed_mps) & np.isfinite(yaw_rate_radps)
     t, v, w = odometry_t_s[ok], speed_mps[ok], yaw_rate_radps[ok]
-    if t.size < 2 or n < 2:
-        return nan, nan.copy()
+    if t.size < 2 or epoch_t_s.size < 2:
+        return None
     order = np.argsort(t, kind="stable")
     t, v, w = t[order], v[order], w[order]
-    dist = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
-    turn = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))])
-    d_at, p_at = np.interp(epoch_t_s, t, dist), np.interp(epoch_t_s, t, turn)
-    dt = np.diff(epoch_t_s)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        speed = np.concatenate([[np.nan], np.diff(d_at) / dt])
-        yaw = np.concatenate([[np.nan], np.diff(p_at) / dt])
+    dt = np.diff(t)
+
+    def cumulative(f):
+        return np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * dt)])
+
+    turn = cumulative(w)
+    at = [np.interp(epoch_t_s, t, c) for c in (cumulative(v), turn, cumulative(v * np.cos(turn)), cumulative(v * np.sin(turn)))]
     # an interval is unknown where a spacing of the samples that touch it exceeds max_gap_s (counted, not looped)
-    big = np.concatenate([[0], np.cumsum(np.diff(t) > max_gap_s)])
+    big = np.concatenate([[0], np.cumsum(dt > max_gap_s)])
     lo = np.searchsorted(t, epoch_t_s[:-1], side="right") - 1
     hi = np.searchsorted(t, epoch_t_s[1:], side="left")
     covered = (lo >= 0) & (hi < t.size)
-    lo_c, hi_c = lo.clip(0, t.size - 1), hi.clip(0, t.size - 1)
-    gapped = big[hi_c] - big[lo_c] > 0
-    bad = np.concatenate([[True], ~covered | gapped | ~(dt > 0)])
+    gapped = big[hi.clip(0, t.size - 1)] - big[lo.clip(0, t.size - 1)] > 0
+    bad = np.concatenate([[True], ~covered | gapped | ~(np.diff(epoch_t_s) > 0)])
+    return at, bad
+
+
+def interval_odometry(odometry_t_s: np.ndarray, speed_mps: np.ndarray, yaw_rate_radps: np.ndarray, epoch_t_s: np.ndarray,
+                      max_gap_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Mean speed (m/s) and yaw rate (rad/s, counter-clockwise positive) over each interval between consecutive epochs
+    (index: the interval's end epoch)."""
+    nan = np.full(epoch_t_s.size, np.nan)
+    found = _integrals(odometry_t_s, speed_mps, yaw_rate_radps, epoch_t_s, max_gap_s)
+    if found is None:
+        return nan, nan.copy()
+    (dist, turn, _, _), bad = found
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dt = np.diff(epoch_t_s)
+        speed = np.concatenate([[np.nan], np.diff(dist) / dt])
+        yaw = np.concatenate([[np.nan], np.diff(turn) / dt])
     speed[bad], yaw[bad] = np.nan, np.nan
     return speed, yaw
+
+
+def interval_displacement(odometry_t_s: np.ndarray, speed_mps: np.ndarray, yaw_rate_radps: np.ndarray, epoch_t_s: np.ndarray,
+                          max_gap_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Distance (m) driven forward and to the left over each interval, in the frame of the heading at the interval's
+    start: ∫v·cos(θ − θ₀) and ∫v·sin(θ − θ₀), θ the turn (counter-clockwise) since the first sample."""
+    nan = np.full(epoch_t_s.size, np.nan)
+    found = _integrals(odometry_t_s, speed_mps, yaw_rate_radps, epoch_t_s, max_gap_s)
+    if found is None:
+        return nan, nan.copy()
+    (_, turn, c, s), bad = found
+    c0, s0 = np.cos(turn[:-1]), np.sin(turn[:-1])
+    dc, ds = np.diff(c), np.diff(s)
+    forward = np.concatenate([[np.nan], c0 * dc + s0 * ds])
+    left = np.concatenate([[np.nan], c0 * ds - s0 * dc])
+    forward[bad], left[bad] = np.nan, np.nan
+    return forward, left

@@ -23,10 +23,10 @@ from tollcli.integrity.trajectory_filter import FilterPass, MotionNoise, motion_
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 from tollcli.integrity.trajectory_noise import (
     RHO_CUT,
-    cn0_bins,
     correlation_inflation,
+    noise_bins,
     postfit_residuals,
-    sigma_by_cn0,
+    sigma_by_bin,
 )
 
 #: ``auto``: smoothed where the log has odometry, else snapshot (without odometry the GNSS-only motion model bounds
@@ -59,7 +59,7 @@ class Trajectory:
     n_set_aside: np.ndarray
     test_stat: np.ndarray  # the fault test's statistic (χ²_dof when fault-free): see :func:`fault_test`
     dof: np.ndarray
-    sigma_by_cn0_m: np.ndarray  # the noise table of the last round (per C/N0 bin)
+    sigma_by_cn0_m: np.ndarray  # the noise table of the last round (per C/N0 bin, or per elevation bin: noise_bins)
     inflation: float  # the correlation factor of the last round
     correlation_s: float  # how long the residuals stay correlated (ρ above RHO_CUT): the evidence's independence time
     positioning: str
@@ -82,12 +82,13 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
         forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise)
     backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise) if positioning == "smoothed" else None
     table, factor, rho = np.full(1, np.nan), 1.0, np.ones(1)
-    bins = cn0_bins(inp.cn0_dbhz)
+    bins, n_bins, _by = noise_bins(inp.cn0_dbhz, inp.elev_deg, inp.mask)
     for _ in range(NOISE_ROUNDS):
         x, _p = _combined(forward, backward)
         res = postfit_residuals(inp, x, m)
-        table = sigma_by_cn0(res, inp.cn0_dbhz, inp.mask)
-        factor, rho = correlation_inflation(res / table[bins], inp.sv, inp.mask)
+        table = sigma_by_bin(res, bins, n_bins, inp.mask)
+        kept = inp.mask & ((forward.weight if backward is None else np.minimum(forward.weight, backward.weight)) >= 0.5)
+        factor, rho = correlation_inflation(np.clip(res / table[bins], -5.0, 5.0), inp.sv, kept)  # the kept, not the outliers
         white2 = np.where(inp.mask, table[bins] ** 2, FALLBACK_SIGMA_M**2)
         sigma2 = white2 * max(factor, 1.0)
         forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise, white2)
@@ -135,10 +136,14 @@ def sigma_major_m(cov_en_m2: np.ndarray) -> np.ndarray:
 
 def _combined(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndarray, np.ndarray]:
     """The forward posterior, or with a backward pass the covariance intersection of the forward posterior and the
-    backward prior at every epoch (ω on a grid of 19, the one with the least horizontal variance)."""
+    backward prior at every epoch (ω on a grid of 19, the one with the least horizontal variance). A clock group a
+    pass has not started by an epoch gives no information there (its variance set to :data:`UNKNOWN_M2`, its
+    correlations to zero): only the other pass's value of it counts."""
     if backward is None:
         return forward.post_x, forward.post_p
-    xf, pf, xb, pb = forward.post_x, forward.post_p, backward.prior_x, backward.prior_p
+    m = forward.motion_states
+    xf, pf = forward.post_x, _unknown_clocks(forward.post_p, forward.started, m)
+    xb, pb = backward.prior_x, _unknown_clocks(backward.prior_p, backward.started, m)
     if forward.odometry:  # headings compared on the same turn
         xb = xb.copy()
         xb[:, 3] = xf[:, 3] + (xb[:, 3] - xf[:, 3] + np.pi) % (2 * np.pi) - np.pi
@@ -152,8 +157,26 @@ def _combined(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndar
         better = tr < best_tr
         best_tr[better], best_p[better], best_w[better] = tr[better], p[better], omega
     w = best_w[:, None]
+    xf, xb = np.nan_to_num(xf), np.nan_to_num(xb)
     x = np.einsum("eij,ej->ei", best_p, w * np.einsum("eij,ej->ei", info_f, xf) + (1 - w) * np.einsum("eij,ej->ei", info_b, xb))
     return x, best_p
+
+
+#: the variance (m²) of a clock a pass has not started: no information
+UNKNOWN_M2 = 1e12
+
+
+def _unknown_clocks(p: np.ndarray, started: np.ndarray, m: int) -> np.ndarray:
+    """Covariances (E, S, S) with the clocks not ``started`` (E, C) made unknown: variance UNKNOWN_M2, uncorrelated."""
+    if started.all():
+        return p
+    p = p.copy()
+    for g in np.flatnonzero(~started.all(axis=0)).tolist():  # a few groups
+        rows = ~started[:, g]
+        p[rows, m + g, :] = 0.0
+        p[rows, :, m + g] = 0.0
+        p[rows, m + g, m + g] = UNKNOWN_M2
+    return p
 
 
 def _starts(inp: TrajectoryInputs, odometry: bool, m: int):
@@ -210,6 +233,10 @@ def _fitted_start(inp: TrajectoryInputs, window: np.ndarray) -> tuple[float, np.
 
 #: the fewest snapshot fixes a log needs for a trajectory (fewer: its snapshot positions stay)
 MIN_FIXES = 10
+#: the shortest log a trajectory is estimated for (s), and how many of its errors' correlation times it must last: the
+#: noise is measured from the log's own residuals, and a reflection that lasts the whole log looks like no error at all
+MIN_DURATION_S = 120.0
+DURATION_CORRELATIONS = 5.0
 
 
 def with_trajectory(epochs, meas, positioning: str):
@@ -218,7 +245,9 @@ def with_trajectory(epochs, meas, positioning: str):
     measurements with the estimator's bound and fault test for the verdicts.
 
     Returns (epochs, measurements, the positioning used): ``snapshot`` where the log cannot carry a trajectory (no
-    satellites and pseudoranges in its measurements, fewer than :data:`MIN_FIXES` snapshot fixes). The epoch table
+    satellites and pseudoranges in its measurements, fewer than :data:`MIN_FIXES` snapshot fixes, shorter than
+    :data:`MIN_DURATION_S` or than :data:`DURATION_CORRELATIONS` times its errors' correlation time: then
+    ``attrs['positioning_note']`` says why). The epoch table
     keeps the snapshot fix as ``snapshot_lat_deg``/``snapshot_lon_deg``; ``lat_deg``/``lon_deg``/``height_m`` become
     the trajectory's, ``sigma_major_m`` its 1σ semi-major axis, and ``positioning`` says which; its attribute
     ``trajectory_correlation_s`` is how long the trajectory's errors stay correlated (positions closer in time are
@@ -239,7 +268,13 @@ def with_trajectory(epochs, meas, positioning: str):
     if fixes < MIN_FIXES:
         return epochs, meas, "snapshot"
     inp = trajectory_inputs(epochs, meas)
+    duration_s = float(inp.t_s[-1] - inp.t_s[0]) if inp.t_s.size else 0.0
+    if duration_s < MIN_DURATION_S:
+        return _refused(epochs, f"the log lasts {duration_s:.0f} s, less than the {MIN_DURATION_S:.0f} s a trajectory needs"), meas, "snapshot"
     traj = estimate_trajectory(inp, positioning)
+    if duration_s < DURATION_CORRELATIONS * traj.correlation_s:
+        return _refused(epochs, f"the log lasts {duration_s:.0f} s, less than {DURATION_CORRELATIONS:g} times its errors' correlation time "
+                                f"({traj.correlation_s:.0f} s): its noise cannot be measured"), meas, "snapshot"  # fmt: skip
     lat, lon, height = inp.enu2geodetic(traj.enu_m)
     n = len(epochs)
     placed = epochs.assign(snapshot_lat_deg=epochs["lat_deg"].to_numpy(float), snapshot_lon_deg=epochs["lon_deg"].to_numpy(float),
@@ -250,3 +285,11 @@ def with_trajectory(epochs, meas, positioning: str):
     meas = replace(meas, trajectory_source=np.full(n, positioning, dtype=object), trajectory_hpl_m=traj.hpl_m,
                    trajectory_test_stat=traj.test_stat, trajectory_dof=traj.dof, trajectory_set_aside=traj.n_set_aside)  # fmt: skip
     return placed, meas, positioning
+
+
+def _refused(epochs, why: str):
+    """The epochs as they were, saying why no trajectory placed them (``attrs['positioning_note']``)."""
+    out = epochs.copy(deep=False)
+    out.attrs.update(epochs.attrs)
+    out.attrs["positioning_note"] = why
+    return out

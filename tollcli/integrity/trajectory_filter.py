@@ -64,6 +64,7 @@ class FilterPass:
     z: np.ndarray
     weight: np.ndarray
     odometry: bool
+    started: np.ndarray  # (E, C) the clock groups the pass had started by each epoch (a clock it has not tells nothing)
 
     @property
     def motion_states(self) -> int:
@@ -92,6 +93,7 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
     post_x, post_p = prior_x.copy(), prior_p.copy()
     z_all = np.full((n_epochs, n_slots), np.nan)
     w_all = np.zeros((n_epochs, n_slots))
+    started_all = np.zeros((n_epochs, inp.n_clocks), bool)
     order = range(n_epochs) if direction > 0 else range(n_epochs - 1, -1, -1)
     x, p = start_x.astype(float).copy(), start_p.astype(float).copy()
     started = np.zeros(inp.n_clocks, bool)
@@ -106,13 +108,14 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
             groups = inp.clock_index[k, used] + m
             x, p, started = _start_clocks(x, p, started, inp.sat_ecef_m[k, used], inp.pr_m[k, used], groups, m, inp, rot_t)
         prior_x[k], prior_p[k] = x, p
+        started_all[k] = started
         if used.size:
             x, p, z, w = _update(x, p, inp.sat_ecef_m[k, used], inp.pr_m[k, used], sigma2_m2[k, used], robust[k, used], groups, inp,
                                  rot_t)  # fmt: skip
             z_all[k, used], w_all[k, used] = z, w
         post_x[k], post_p[k] = x, p
         previous = k
-    return FilterPass(prior_x, prior_p, post_x, post_p, z_all, w_all, odometry)
+    return FilterPass(prior_x, prior_p, post_x, post_p, z_all, w_all, odometry, started_all)
 
 
 def _predict(x, p, dt_s, direction, inp, interval, odometry, m, noise: MotionNoise):
@@ -127,17 +130,22 @@ def _predict(x, p, dt_s, direction, inp, interval, odometry, m, noise: MotionNoi
     f[m:, drift] = s
     if odometry:
         v, w = inp.speed_mps[interval], inp.yaw_rate_radps[interval]
-        psi = x[3]
-        if np.isfinite(v) and np.isfinite(w):
-            sin, cos = np.sin(psi), np.cos(psi)
-            x[0] += v * s * sin
-            x[1] += v * s * cos
+        forward, left = inp.forward_m[interval], inp.left_m[interval]
+        if np.isfinite(v) and np.isfinite(w) and np.isfinite(forward) and np.isfinite(left):
+            # the heading at the interval's start: the state's (forward), or the state's turned back (backward)
             x[3] -= (w - x[4]) * s
-            f[0, 3], f[1, 3] = v * s * cos, -v * s * sin
             f[3, 4] = s
+            psi, dpsi_db = (x[3], s) if direction < 0 else (x[3] + (w - x[4]) * s, 0.0)
+            sin, cos = np.sin(psi), np.cos(psi)
+            de, dn = forward * sin - left * cos, forward * cos + left * sin  # the dead-reckoned arc, east and north
+            x[0] += direction * de
+            x[1] += direction * dn
+            f[0, 3], f[1, 3] = direction * dn, -direction * de
+            f[0, 4], f[1, 4] = direction * dn * dpsi_db, -direction * de * dpsi_db
             sv = noise.along_track_mps + noise.along_track_share * abs(v)
-            q[0] = (sv * dt * sin) ** 2 + noise.position_m2ps * dt
-            q[1] = (sv * dt * cos) ** 2 + noise.position_m2ps * dt
+            lateral = (0.5 * noise.yaw_rate_radps * dt * abs(forward)) ** 2  # the gyro's noise turning the arc
+            q[0] = (sv * dt * sin) ** 2 + noise.position_m2ps * dt + lateral
+            q[1] = (sv * dt * cos) ** 2 + noise.position_m2ps * dt + lateral
             q[3] = (noise.yaw_rate_radps * dt) ** 2 + noise.heading_rad2ps * dt
         else:  # an interval without odometry: the position wanders, the heading too
             q[0] = q[1] = noise.no_odometry_m2ps * dt

@@ -4,7 +4,8 @@ A pseudorange log's :class:`~tollcli.gnss.measurements.Measurements` carry, besi
 measurement's satellite (ECEF at transmission, ``sat_ecef_m``), its corrected pseudorange (``pr_m``: satellite
 clock and atmosphere removed) and its receiver-clock group (``clock_index``: one clock per constellation). The
 epoch table gives the times and, where the log has odometry (libRSF ``odom3``), the wheel speed and yaw rate
-(``odometer_speed_mps``, ``yaw_rate_radps``). Everything is in a local east-north-up frame at the log's first fix.
+(``odometer_speed_mps``, ``yaw_rate_radps``) and the distance driven between epochs (``odometer_forward_m``,
+``odometer_left_m``). Everything is in a local east-north-up frame at the log's first fix.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ class TrajectoryInputs:
     pr_m: np.ndarray  # (E, N) corrected pseudorange
     mask: np.ndarray  # (E, N) real measurements
     cn0_dbhz: np.ndarray  # (E, N) NaN where not reported
+    elev_deg: np.ndarray  # (E, N) the satellite's elevation seen from the frame's origin
     sigma_m: np.ndarray  # (E, N) the error model's σ (the estimator's first guess)
     clock_index: np.ndarray  # (E, N) receiver-clock group
     sv: np.ndarray  # (E, N) measurement labels ('' for empty slots)
@@ -35,6 +37,8 @@ class TrajectoryInputs:
     fix_enu_m: np.ndarray  # (E, 3) the snapshot fixes (NaN where none): the start and the initial heading only
     speed_mps: np.ndarray  # (E,) mean odometer speed over the interval ending at each epoch (NaN: none)
     yaw_rate_radps: np.ndarray  # (E,) mean yaw rate (counter-clockwise positive) over that interval (NaN: none)
+    forward_m: np.ndarray  # (E,) distance driven forward over that interval, in the frame of its start heading (NaN: none)
+    left_m: np.ndarray  # (E,) and to the left
 
     @property
     def n_clocks(self) -> int:
@@ -70,9 +74,14 @@ def trajectory_inputs(epochs: pd.DataFrame, meas: Measurements) -> TrajectoryInp
     fix_enu = (ecef - origin) @ rot.T
     speed = epochs["odometer_speed_mps"].to_numpy(float) if "odometer_speed_mps" in epochs else np.full(t.size, np.nan)
     yaw = epochs["yaw_rate_radps"].to_numpy(float) if "yaw_rate_radps" in epochs else np.full(t.size, np.nan)
+    forward = epochs["odometer_forward_m"].to_numpy(float) if "odometer_forward_m" in epochs else speed * np.diff(t, prepend=np.nan)
+    left = epochs["odometer_left_m"].to_numpy(float) if "odometer_left_m" in epochs else np.where(np.isfinite(forward), 0.0, np.nan)
     cn0 = meas.cn0_dbhz if meas.cn0_dbhz is not None else np.full(meas.mask.shape, np.nan)
-    return TrajectoryInputs(t, meas.sat_ecef_m, meas.pr_m, meas.mask & np.isfinite(meas.pr_m), cn0, meas.sigma_m,
-                            meas.clock_index, meas.sv, origin, rot, fix_enu, speed, yaw)  # fmt: skip
+    los = meas.sat_ecef_m - origin
+    with np.errstate(invalid="ignore", divide="ignore"):
+        elev = np.degrees(np.arcsin(np.clip((los @ rot[2]) / np.linalg.norm(los, axis=-1), -1.0, 1.0)))
+    return TrajectoryInputs(t, meas.sat_ecef_m, meas.pr_m, meas.mask & np.isfinite(meas.pr_m), cn0, elev, meas.sigma_m,
+                            meas.clock_index, meas.sv, origin, rot, fix_enu, speed, yaw, forward, left)  # fmt: skip
 
 
 def _seconds(time_utc: pd.Series) -> np.ndarray:

@@ -1,8 +1,9 @@
 """The pseudorange noise a log's own residuals show, for the trajectory estimator.
 
 * :func:`postfit_residuals`: each measurement's residual at an estimated trajectory (m), every epoch at once;
-* :func:`sigma_by_cn0`: the residuals' spread and bias per C/N0 bin, σ = √(median² + (1.4826·MAD)²): a city's
-  weak signals come late (reflections), so their bias is part of their error;
+* :func:`sigma_by_bin`: the residuals' spread and bias per C/N0 bin (elevation where C/N0 tells nothing,
+  :func:`noise_bins`), σ = √(median² + (1.4826·MAD)²): a city's weak signals come late (reflections), so their bias
+  is part of their error;
 * :func:`correlation_inflation`: how much less a correlated error tells than a white one. A reflection lasts tens of
   seconds; the filter averages over time as if every epoch's error were new. The residuals' autocorrelation ρ (per
   measurement, summed over all, by FFT) gives the factor 1 + 2 Σ ρ(lag) (lags until ρ < :data:`RHO_CUT`) by which the
@@ -19,6 +20,8 @@ from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 C_MPS = 299_792_458.0
 #: C/N0 bin edges (dB-Hz)
 CN0_BINS_DBHZ = np.array([25.0, 30.0, 35.0, 40.0, 45.0])
+#: elevation bin edges (deg), where C/N0 tells nothing
+ELEVATION_BINS_DEG = np.array([15.0, 30.0, 45.0, 60.0])
 #: fewest residuals a bin needs for its own σ (else the largest σ of the bins that have one)
 MIN_BIN_COUNT = 20
 #: the smallest σ a bin is given (m): a code measurement in a moving car is not better
@@ -49,19 +52,34 @@ def cn0_bins(cn0_dbhz: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(cn0_dbhz), b, CN0_BINS_DBHZ.size + 1)
 
 
-def sigma_by_cn0(residual_m: np.ndarray, cn0_dbhz: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """σ (m) per C/N0 bin (:func:`cn0_bins`) from the residuals: √(median² + (1.4826·MAD)²), at least
-    :data:`SIGMA_FLOOR_M`; a bin with too few residuals takes the largest σ of the others."""
+def noise_bins(cn0_dbhz: np.ndarray, elev_deg: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, int, str]:
+    """The bins the noise is measured in: C/N0 (:func:`cn0_bins`) where at least two of them hold
+    :data:`MIN_BIN_COUNT` measurements, else elevation (:data:`ELEVATION_BINS_DEG`: a log without C/N0, or with one
+    value for all, still tells a low satellite from a high one). Returns (bins, their number, ``cn0``/``elevation``)."""
     bins = cn0_bins(cn0_dbhz)
+    counts = np.bincount(bins[mask], minlength=CN0_BINS_DBHZ.size + 2)
+    if (counts[: CN0_BINS_DBHZ.size + 1] >= MIN_BIN_COUNT).sum() >= 2:
+        return bins, CN0_BINS_DBHZ.size + 2, "cn0"
+    return np.searchsorted(ELEVATION_BINS_DEG, np.nan_to_num(elev_deg, nan=0.0), side="right"), ELEVATION_BINS_DEG.size + 1, "elevation"
+
+
+def sigma_by_bin(residual_m: np.ndarray, bins: np.ndarray, n_bins: int, mask: np.ndarray) -> np.ndarray:
+    """σ (m) per bin from the residuals: √(median² + (1.4826·MAD)²), at least :data:`SIGMA_FLOOR_M`; a bin with too
+    few residuals takes the largest σ of the others."""
     ok = mask & np.isfinite(residual_m)
-    table = np.full(CN0_BINS_DBHZ.size + 2, np.nan)
-    for b in range(table.size):  # a handful of bins
+    table = np.full(n_bins, np.nan)
+    for b in range(n_bins):  # a handful of bins
         r = residual_m[ok & (bins == b)]
         if r.size >= MIN_BIN_COUNT:
             med = np.median(r)
             table[b] = np.hypot(med, 1.4826 * np.median(np.abs(r - med)))
     worst = np.nanmax(table) if np.isfinite(table).any() else 30.0
     return np.maximum(np.where(np.isfinite(table), table, worst), SIGMA_FLOOR_M)
+
+
+def sigma_by_cn0(residual_m: np.ndarray, cn0_dbhz: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """:func:`sigma_by_bin` over the C/N0 bins."""
+    return sigma_by_bin(residual_m, cn0_bins(cn0_dbhz), CN0_BINS_DBHZ.size + 2, mask)
 
 
 def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tuple[float, np.ndarray]:

@@ -61,6 +61,8 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
         meas, env_columns = measured_environment(epochs, meas, environment)
         table = with_raim_position(pd.concat([epochs, env_columns, run_raim(meas, params)], axis=1))
         table.attrs["skipped_lines"] = int(epochs.attrs.get("skipped_lines", 0))
+        if "positioning_note" in epochs.attrs:  # why no trajectory placed the epochs
+            table.attrs["positioning_note"] = epochs.attrs["positioning_note"]
         yield IntegrityChunk(table, None)
         return
     if sigma_model == "input":

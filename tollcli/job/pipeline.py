@@ -226,10 +226,13 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     if not settings.require_authenticated:
         del parameters["require_authenticated"]  # recorded only when required: invoices made before it stay as they were
     positioning_used = used[0] if used else "snapshot"
-    if kind in NAVIGATION_KINDS or (positioning_used == "snapshot" and settings.positioning in ("auto", "snapshot")):
+    refused = used[1] if len(used) > 1 else None  # why no trajectory placed the log's epochs
+    if kind in NAVIGATION_KINDS or (positioning_used == "snapshot" and settings.positioning in ("auto", "snapshot") and not refused):
         del parameters["positioning"]  # a receiver's positions, or snapshot ones as before: recorded as they were
     else:
         parameters["positioning_used"] = positioning_used
+        if refused:
+            parameters["positioning_note"] = refused
         if charger.passages.tc_s != settings.tc_s:  # a trajectory's errors stay correlated longer than --tc
             parameters["tc_used_s"] = charger.passages.tc_s
     invoice = build_invoice(table, None, geo_objects, tariff_doc,
@@ -305,6 +308,8 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
     epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
     epochs, meas, positioning = with_trajectory(epochs, meas, settings.positioning)
     used.append(positioning)
+    if "positioning_note" in epochs.attrs:
+        used.append(epochs.attrs["positioning_note"])
     if "trajectory_correlation_s" in epochs.attrs:
         charger.independent_after(epochs.attrs["trajectory_correlation_s"])
     for start in range(0, len(epochs), CHUNK_EPOCHS):
