@@ -43,6 +43,26 @@ def built_geoobjects(roads: Path, geo: Path, *extra: str) -> Path:
     return geo
 
 
+def roads_along_the_berlin_drive(tmp_path: Path) -> Path:
+    """Geo-objects (built by the product) of 500 m motorways laid along the Berlin drive's own snapshot track."""
+    import json
+
+    from tollcli.geoobjects.build import build_geoobjects
+    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+    from tollcli.gnss.sigma_models import NominalModel
+
+    epochs, _ = pseudorange_epochs(str(shared("smartloc", "Berlin_Potsdamer_Platz_Input.txt")), "librsf", None, "nominal", 5.0,
+                                   NominalModel())  # fmt: skip
+    lon_lat = epochs[["lon_deg", "lat_deg"]].dropna().to_numpy()[::20]
+    features = [{"type": "Feature", "properties": {"id": f"B{k}", "road_class": "motorway", "tolled": True},
+                 "geometry": {"type": "LineString", "coordinates": lon_lat[k * 4 : k * 4 + 5].tolist()}}
+                for k in range(len(lon_lat) // 4)]  # fmt: skip
+    (tmp_path / "roads.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": features}))
+    geo = tmp_path / "geo.geojson"
+    geo.write_text(json.dumps(build_geoobjects(str(tmp_path / "roads.geojson"))))
+    return geo
+
+
 def run_main(*args: str) -> tuple[int, str]:
     """Run the CLI's entry point in this process (the ``tollcli`` script's code path): (exit code, stderr).
 

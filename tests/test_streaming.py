@@ -66,20 +66,10 @@ def test_a_real_pseudorange_drive_streamed_is_the_whole_log(tmp_path, monkeypatc
     """The Berlin drive (libRSF pseudoranges and odometry speed, 1 372 epochs) through the one charge path in 37-epoch
     chunks, with 500 m roads laid along its own track: the invoice of the whole log, passages and findings included,
     with the smoothed trajectory (the default) and with snapshot positions."""
-    from conftest import shared
-
-    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
-    from tollcli.gnss.sigma_models import NominalModel
+    from conftest import roads_along_the_berlin_drive, shared
 
     log = str(shared("smartloc", "Berlin_Potsdamer_Platz_Input.txt"))
-    epochs, _ = pseudorange_epochs(log, "librsf", None, "nominal", 5.0, NominalModel())
-    lon_lat = epochs[["lon_deg", "lat_deg"]].dropna().to_numpy()[::20]
-    features = [{"type": "Feature", "properties": {"id": f"B{k}", "road_class": "motorway", "tolled": True},
-                 "geometry": {"type": "LineString", "coordinates": lon_lat[k * 4 : k * 4 + 5].tolist()}}
-                for k in range(len(lon_lat) // 4)]  # fmt: skip
-    (tmp_path / "roads.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": features}))
-    geo = tmp_path / "geo.geojson"
-    geo.write_text(json.dumps(build_geoobjects(str(tmp_path / "roads.geojson"))))
+    geo = roads_along_the_berlin_drive(tmp_path)
     for settings in ({}, {"positioning": "snapshot"}, {"environment": "open", "positioning": "snapshot"}):
         monkeypatch.setattr(pipeline, "STREAM_ROUNDS", False)
         monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 1_000_000)

@@ -118,21 +118,10 @@ def test_the_invoice_says_which_positioning_and_verify_reproduces_it(tmp_path):
     invoice made before the estimator verifies)."""
     import pandas as pd
 
-    from conftest import REPO
-
-    from tollcli.geoobjects.build import build_geoobjects
-    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
-    from tollcli.gnss.sigma_models import NominalModel
+    from conftest import REPO, roads_along_the_berlin_drive
 
     log = str(shared(*BERLIN))
-    epochs, _ = pseudorange_epochs(log, "librsf", None, "nominal", 5.0, NominalModel())
-    lon_lat = epochs[["lon_deg", "lat_deg"]].dropna().to_numpy()[::20]
-    features = [{"type": "Feature", "properties": {"id": f"B{k}", "road_class": "motorway", "tolled": True},
-                 "geometry": {"type": "LineString", "coordinates": lon_lat[k * 4 : k * 4 + 5].tolist()}}
-                for k in range(len(lon_lat) // 4)]  # fmt: skip
-    (tmp_path / "roads.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": features}))
-    geo = tmp_path / "geo.geojson"
-    geo.write_text(json.dumps(build_geoobjects(str(tmp_path / "roads.geojson"))))
+    geo = roads_along_the_berlin_drive(tmp_path)
     tariff = str(REPO / "geoobjects" / "example-tariff.toml")
     invoices = {}
     for positioning in ("smoothed", "snapshot"):
