@@ -1,4 +1,5 @@
-"""City positioning after the trip (issue 48, the design measured; not yet in the tool): a robust EKF with odometry
+"""City positioning after the trip (issue 48: the design study; the tool's estimator, which grew from it, is
+``tollcli/integrity/trajectory.py``, measured by ``integrity_truth.py`` and ``trajectory_settings.py``): a robust EKF with odometry
 run forward and backward over the real Berlin Potsdamer Platz drive (libRSF: pseudoranges, odom3 speed and yaw
 rate), the two combined, and a protection level K·σ_major audited against the drive's truth.
 
