@@ -139,9 +139,9 @@ def has_odometry(drive: Drive) -> bool:
     """The log has odometry over half its epochs (``--positioning auto`` then smooths it)."""
     if drive.kind != "librsf":
         return False
-    epochs, _ = measurements(drive)
-    speed = epochs["odometer_speed_mps"].to_numpy(float)
-    return bool(speed.size > 1 and np.isfinite(speed[1:]).mean() >= 0.5)
+    from tollcli.integrity.trajectory_inputs import epochs_have_odometry
+
+    return epochs_have_odometry(measurements(drive)[0])
 
 
 def run_setting(drive: Drive, truth: pd.DataFrame, mode: str, fde: bool, environment: str, hal: float, positioning: str = "snapshot"):

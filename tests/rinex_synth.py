@@ -113,6 +113,12 @@ def write_nav(path: Path, sats: list[dict]) -> None:
     path.write_text("\n".join(head + body) + "\n")
 
 
+def _epochs(rows, start: dt.datetime):
+    """(time, the rows of that epoch) for each epoch of ``rows`` (epoch seconds first in each row), in time order."""
+    for k in sorted({r[0] for r in rows}):
+        yield start + dt.timedelta(seconds=k), [r for r in rows if r[0] == k]
+
+
 def write_obs(path: Path, rows, start: dt.datetime) -> None:
     head = [
         f"{'3.04':>9}{'':11}{'OBSERVATION DATA':<20}{'M':<20}RINEX VERSION / TYPE",
@@ -122,9 +128,7 @@ def write_obs(path: Path, rows, start: dt.datetime) -> None:
         f"{'':60}END OF HEADER",
     ]
     body = []
-    for k in sorted({r[0] for r in rows}):
-        epoch_rows = [r for r in rows if r[0] == k]
-        t = start + dt.timedelta(seconds=k)
+    for t, epoch_rows in _epochs(rows, start):
         body.append(f"> {t:%Y %m %d %H %M}{t.second + t.microsecond / 1e6:11.7f}  0{len(epoch_rows):3d}")
         body += [f"{sv}{pr:14.3f}  {cn0:14.3f}  " for _, sv, pr, cn0 in epoch_rows]
     path.write_text("\n".join(head + body) + "\n")
@@ -139,9 +143,7 @@ def write_obs2(path: Path, rows, start: dt.datetime) -> None:
         f"{'':60}END OF HEADER",
     ]
     body = []
-    for k in sorted({r[0] for r in rows}):
-        epoch_rows = [r for r in rows if r[0] == k]
-        t = start + dt.timedelta(seconds=k)
+    for t, epoch_rows in _epochs(rows, start):
         svs = "".join(sv for _, sv, _, _ in epoch_rows)
         first, rest = svs[: 12 * 3], svs[12 * 3 :]
         body.append(f" {t:%y} {t.month:2d} {t.day:2d} {t.hour:2d} {t.minute:2d}{t.second + t.microsecond / 1e6:11.7f}  0{len(epoch_rows):3d}{first}")

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tollcli.integrity.trajectory_filter import FilterPass, MotionNoise, motion_states, run_pass
+from tollcli.integrity.trajectory_filter import MOTION_STATES, FilterPass, MotionNoise, run_pass
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 from tollcli.integrity.trajectory_noise import (
     RHO_CUT,
@@ -71,7 +71,7 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
     if positioning not in ("smoothed", "filtered"):
         raise ValueError(f"positioning {positioning!r}: smoothed or filtered")
     odometry = inp.has_odometry
-    m = motion_states(odometry)
+    m = MOTION_STATES
     sigma = np.where(inp.mask & np.isfinite(inp.sigma_m) & (inp.sigma_m > 0), inp.sigma_m, FALLBACK_SIGMA_M)
     sigma2 = sigma**2
     start_f, start_b = _starts(inp, odometry, m)
@@ -141,7 +141,7 @@ def _combined(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndar
     correlations to zero): only the other pass's value of it counts."""
     if backward is None:
         return forward.post_x, forward.post_p
-    m = forward.motion_states
+    m = MOTION_STATES
     xf, pf = forward.post_x, _unknown_clocks(forward.post_p, forward.started, m)
     xb, pb = backward.prior_x, _unknown_clocks(backward.prior_p, backward.started, m)
     if forward.odometry:  # headings compared on the same turn
@@ -255,13 +255,12 @@ def with_trajectory(epochs, meas, positioning: str):
     """
     from dataclasses import replace
 
-    from tollcli.integrity.trajectory_inputs import has_pseudoranges, trajectory_inputs
+    from tollcli.integrity.trajectory_inputs import epochs_have_odometry, has_pseudoranges, trajectory_inputs
 
     if positioning == "snapshot" or not has_pseudoranges(meas):
         return epochs, meas, "snapshot"
     if positioning == "auto":
-        speed = epochs["odometer_speed_mps"].to_numpy(float) if "odometer_speed_mps" in epochs else np.zeros(0)
-        if not (speed.size > 1 and np.isfinite(speed[1:]).mean() >= 0.5):  # TrajectoryInputs.has_odometry
+        if not epochs_have_odometry(epochs):
             return epochs, meas, "snapshot"
         positioning = "smoothed"
     fixes = np.isfinite(epochs["lat_deg"].to_numpy(float)).sum()

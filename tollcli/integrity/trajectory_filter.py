@@ -66,14 +66,9 @@ class FilterPass:
     odometry: bool
     started: np.ndarray  # (E, C) the clock groups the pass had started by each epoch (a clock it has not tells nothing)
 
-    @property
-    def motion_states(self) -> int:
-        return 6
 
-
-def motion_states(odometry: bool) -> int:
-    """States before the clocks: e, n, u, ψ, gyro bias, drift (odometry) or e, n, u, v_e, v_n, drift."""
-    return 6
+#: states before the clocks: e, n, u, ψ, gyro bias, drift (odometry) or e, n, u, v_e, v_n, drift (without)
+MOTION_STATES = 6
 
 
 def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start_x: np.ndarray, start_p: np.ndarray,
@@ -86,7 +81,7 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
     inflated for time correlation does not hide a fault from the robust loss."""
     robust = sigma2_m2 if robust_sigma2_m2 is None else robust_sigma2_m2
     n_epochs, n_slots = inp.mask.shape
-    m = motion_states(odometry)
+    m = MOTION_STATES
     n_states = m + inp.n_clocks
     prior_x = np.full((n_epochs, n_states), np.nan)
     prior_p = np.full((n_epochs, n_states, n_states), np.nan)

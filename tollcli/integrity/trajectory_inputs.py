@@ -47,7 +47,7 @@ class TrajectoryInputs:
     @property
     def has_odometry(self) -> bool:
         """Odometry over at least half of the log's intervals."""
-        return bool(np.isfinite(self.speed_mps[1:]).mean() >= 0.5) if self.t_s.size > 1 else False
+        return has_odometry(self.speed_mps)
 
     def enu2geodetic(self, enu_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Latitude, longitude (deg) and height (m) of east-north-up points (E, 3) of this frame."""
@@ -55,6 +55,16 @@ class TrajectoryInputs:
 
         ecef = self.origin_ecef_m + enu_m @ self.ecef2enu
         return ecef2geodetic(ecef[:, 0], ecef[:, 1], ecef[:, 2])
+
+
+def has_odometry(speed_mps: np.ndarray) -> bool:
+    """Odometry over at least half of a log's intervals (``speed_mps``: per epoch, the interval ending there)."""
+    return bool(speed_mps.size > 1 and np.isfinite(speed_mps[1:]).mean() >= 0.5)
+
+
+def epochs_have_odometry(epochs: pd.DataFrame) -> bool:
+    """:func:`has_odometry` of an epoch table's ``odometer_speed_mps`` (none: no)."""
+    return "odometer_speed_mps" in epochs and has_odometry(epochs["odometer_speed_mps"].to_numpy(float))
 
 
 def has_pseudoranges(meas: Measurements) -> bool:

@@ -192,9 +192,9 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
         with run.named_errors():  # one charge for every input kind: its chunks of epochs and measurements, streamed
             stats = ReadStats() if kind in NAVIGATION_KINDS else None
-            used: list[str] = []  # the positioning a pseudorange log's chunks were placed by
+            placed: dict[str, str] = {}  # how a pseudorange log's epochs were placed: positioning, and a note why not
             chunks = (_navigation_chunks(run, kind, settings, nominal, stats) if kind in NAVIGATION_KINDS
-                      else _pseudorange_chunks(run, kind, nav, settings, nominal, used, charger))  # fmt: skip
+                      else _pseudorange_chunks(run, kind, nav, settings, nominal, placed, charger))  # fmt: skip
             params = _charge_chunks(chunks, settings, geo_objects, params, epoch_raim, charger, epoch_table, osnma, auth_counts,
                                     failure_fixes)  # fmt: skip
             if stats is not None:
@@ -225,8 +225,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         del parameters["vehicle_attrs"]  # recorded only for a tariff of per-km tables
     if not settings.require_authenticated:
         del parameters["require_authenticated"]  # recorded only when required: invoices made before it stay as they were
-    positioning_used = used[0] if used else "snapshot"
-    refused = used[1] if len(used) > 1 else None  # why no trajectory placed the log's epochs
+    positioning_used = placed.get("positioning", "snapshot")
+    refused = placed.get("note")  # why no trajectory placed the log's epochs
     if kind in NAVIGATION_KINDS or (positioning_used == "snapshot" and settings.positioning in ("auto", "snapshot") and not refused):
         del parameters["positioning"]  # a receiver's positions, or snapshot ones as before: recorded as they were
     else:
@@ -298,18 +298,18 @@ def _navigation_chunks(run: LogRun, kind: str, settings: ChargeSettings, nominal
 
 
 def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | None, settings: ChargeSettings,
-                        nominal: NominalModel, used: list[str], charger: TailCharger) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
+                        nominal: NominalModel, placed: dict[str, str], charger: TailCharger) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
     """A pseudorange log's (RINEX, GnssLogger, GSDC, u-blox RAWX, libRSF) epochs and measurements, in chunks of
     :data:`CHUNK_EPOCHS` epochs. The positions are solved for the whole log at once (its reader and solver read it
     whole, from the run's replay) — each epoch alone (snapshot WLS), then placed by the trajectory estimator
-    (``settings.positioning``, :func:`~tollcli.integrity.trajectory.with_trajectory`; ``used`` receives the positioning
-    it used, and ``charger`` counts positions as independent evidence only the trajectory's correlation time apart);
+    (``settings.positioning``, :func:`~tollcli.integrity.trajectory.with_trajectory`; ``placed`` receives the positioning
+    it used and the note why a trajectory was refused, and ``charger`` counts positions as independent evidence only the trajectory's correlation time apart);
     from there on the chunks take the same path as a navigation log's."""
     epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
     epochs, meas, positioning = with_trajectory(epochs, meas, settings.positioning)
-    used.append(positioning)
+    placed["positioning"] = positioning
     if "positioning_note" in epochs.attrs:
-        used.append(epochs.attrs["positioning_note"])
+        placed["note"] = epochs.attrs["positioning_note"]
     if "trajectory_correlation_s" in epochs.attrs:
         charger.independent_after(epochs.attrs["trajectory_correlation_s"])
     for start in range(0, len(epochs), CHUNK_EPOCHS):
