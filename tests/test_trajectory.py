@@ -50,10 +50,11 @@ def test_berlin_smoothed_by_default_is_available_and_never_misleading(tmp_path):
 
 
 def test_berlin_filtered_forward_only(tmp_path):
-    """Forward only (what an on-board unit could do): over half valid at HAL 50 m (65 %; the issue asks 80 %), none
-    misleading."""
+    """Forward only (what an on-board unit could do, each position from the measurements up to its epoch): ≥ 80 % valid
+    at HAL 50 m, none misleading or hazardous; its error larger than the smoothed one's (it cannot use the future)."""
     summary, audit = _audited(tmp_path, shared(*BERLIN), "--positioning", "filtered")
-    assert summary["positioning_used"] == "filtered" and summary["statuses"].get("valid", 0) >= 0.50 * 1372
+    assert summary["positioning_used"] == "filtered" and summary["statuses"].get("valid", 0) >= 0.80 * 1372
+    assert audit["horizontal_error_m"]["median"] > 8.0
     assert audit["regions"]["misleading"] == 0 and audit["regions"]["hazardous"] == 0
 
 
