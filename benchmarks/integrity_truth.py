@@ -80,7 +80,7 @@ def drives() -> list[Drive]:
     if os.path.exists(os.path.join(g22, "device_gnss.csv")):
         out.append(Drive("GSDC 2022 (standing)", os.path.join(g22, "device_gnss.csv"), "device-gnss",
                          os.path.join(g22, "ground_truth.csv")))  # fmt: skip
-    out += city_drives()
+    out += city_drives() + city_drives(SENSOR_FAULT_SIMULATIONS)
     for name in ("rural-clean", "urban-clean", "rural-fault", "urban-fault"):
         d = os.path.join(ROOT, "samples", "sim", name)
         out.append(Drive(f"simulated {name} (pseudoranges, one clock)", os.path.join(d, "drive-derived.csv"), "gsdc-derived",
@@ -97,12 +97,18 @@ CITY_SIMULATIONS = (("city-clean", ("--seed", "11")),
                                     "--jam-at", "1200", "--jam-duration", "60", "--jam-db", "40")))  # fmt: skip
 
 
-def city_drives() -> list[Drive]:
+#: the same with the vehicle's sensors wrong for a minute, twice: the odometer reading 10 % too much, the gyro's bias
+#: 0.02 rad/s (1.1 °/s) off — not used to choose settings (``trajectory_settings.py``), only to show what they give
+SENSOR_FAULT_SIMULATIONS = (("city-odometer", ("--seed", "13", "--sensor-fault-at", "600,1400", "--odometer-step", "0.1")),
+                            ("city-gyro", ("--seed", "14", "--sensor-fault-at", "600,1400", "--gyro-step", "0.02")))  # fmt: skip
+
+
+def city_drives(simulations=CITY_SIMULATIONS) -> list[Drive]:
     """The simulated city drives, written once into ``benchmarks/integrity_truth/sim/`` (not kept in git)."""
     import subprocess
 
     out = []
-    for name, extra in CITY_SIMULATIONS:
+    for name, extra in simulations:
         folder = os.path.join(OUT, "sim", name)
         if not os.path.exists(os.path.join(folder, "truth-librsf.txt")):
             subprocess.run([sys.executable, "-m", "tollcli", "simulate", "--nlos", "--odometry", "--duration", "2000", "--rate", "5",

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from conftest import run_cli, shared
 
-from tollcli.gnss.odometry import interval_odometry
+from tollcli.gnss.odometry import implausible_odometry, interval_odometry
 from tollcli.integrity.trajectory import sigma_major_m
 from tollcli.integrity.trajectory_noise import correlation_inflation, sigma_by_cn0
 
@@ -189,3 +189,19 @@ def test_a_simulated_city_drive_with_a_satellite_fault(tmp_path):
     assert set_aside[during].mean() > 0.9 and set_aside[~during].mean() < 0.2  # the robust loss caught the fault
     alarms = t[epochs["raim_status"] == "fault_detected"]
     assert alarms.between(300 - 250, 360 + 250).all()  # an alarm, if any, near the fault
+
+
+def test_odometry_the_fixes_contradict_is_found():
+    """Known answer: a car driving 10 m/s east for 200 s (fixes 20 m scattered), its odometer reading 0 from 80 s to
+    140 s: the intervals around the stuck minute are marked, the rest not; a correct odometer marks nothing, nor does
+    one reading 10 % too much (a straight line shorter than the road is no contradiction)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 200.0, 0.5)
+    fixes = np.stack([10.0 * t, np.zeros(t.size)], axis=1) + rng.normal(0, 20, (t.size, 2))
+    forward = np.full(t.size, 5.0)
+    forward[0] = np.nan
+    assert not implausible_odometry(t, fixes, forward).any()
+    assert not implausible_odometry(t, fixes, 1.1 * forward).any()
+    stuck = np.where((t > 80) & (t <= 140), 0.0, forward)
+    bad = implausible_odometry(t, fixes, stuck)
+    assert bad[(t > 85) & (t <= 135)].all() and not bad[(t < 30) | (t > 190)].any()

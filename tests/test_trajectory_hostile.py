@@ -5,7 +5,8 @@ Each case found a failure once: a short log (a reflection lasting the whole log 
 epochs), a clock group that appears late (a clock one pass had not started pulled the other: 457 hazardous), a hole
 in the pseudoranges with the odometry going on (the turn over a minute taken as a straight line: 44 misleading),
 pseudoranges 10 000 km off (outliers hid the residuals' correlation: 483 misleading), C/N0 not reported (one σ for
-strong and weak signals alike: 29 misleading).
+strong and weak signals alike: 29 misleading), an odometer stuck at 0 once a pass could lose the vehicle and be widened
+back (6 hazardous epochs: the odometry the fixes contradict is now not used).
 """
 
 from __future__ import annotations
@@ -50,6 +51,8 @@ def test_an_odd_log_never_misleads(tmp_path, case):
         summary = json.loads(proc.stdout)
         if case == "short":  # 8 s: no noise can be measured from it; the snapshot positions, and why
             assert summary["positioning_used"] == "snapshot" and "less than the 120 s" in summary["positioning_note"]
+        if case == "odometer_stuck":  # a speed of 0 while the fixes move: the odometry is not used, and the user told
+            assert "contradicts the fixes" in summary["positioning_note"], summary
         proc = run_cli("audit", "--epochs", str(table), "--truth", str(shared(*TRUTH)), "-o", str(report), "-q")
         assert proc.returncode == 0, proc.stderr.decode()
         regions = json.loads(report.read_text())["integrity"]["regions"]

@@ -101,6 +101,10 @@ def simulate(
     stop_duration: Annotated[float, typer.Option("--stop-duration", help="How long each stop lasts, s.", min=0.0)] = 180.0,
     nlos: Annotated[bool, typer.Option("--nlos", help="City reflections: a satellite the buildings block is received by reflection part of the time, weaker and late (an excess path of ~30–70 m correlated over 30 s); C/N0 rises with elevation.")] = False,
     odometry: Annotated[bool, typer.Option("--odometry", help="The vehicle's odometry (wheel speed with a 1 % scale error, yaw rate with a 0.002 rad/s bias), written with the pseudoranges as libRSF text (drive-librsf.txt, truth-librsf.txt).")] = False,
+    sensor_fault_at: Annotated[Optional[str], typer.Option("--sensor-fault-at", help="Comma-separated times the odometry goes wrong, s from the start (with --odometry: --odometer-step, --gyro-step).")] = None,
+    sensor_fault_duration: Annotated[float, typer.Option("--sensor-fault-duration", help="How long each odometry fault lasts, s.", min=0.0)] = 60.0,
+    odometer_step: Annotated[float, typer.Option("--odometer-step", help="The odometer's scale error added during a sensor fault (0.1: it reads 10 % more).")] = 0.0,
+    gyro_step: Annotated[float, typer.Option("--gyro-step", help="The gyro's bias added during a sensor fault, rad/s.")] = 0.0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every random draw: the same seed gives the same files.")] = 0,
     json_summary: opt.JsonSummary = False,
     quiet: opt.Quiet = False,
@@ -127,6 +131,10 @@ def simulate(
         raise UsageError(f"--fault-sv {fault_sv!r}: like G05 or E11")
     if (path_from is None) != (path_to is None) or (path_from and (via or not route)):
         raise UsageError("--from and --to go together, with an OpenStreetMap --route and without --via")
+    if sensor_fault_at and not odometry:
+        raise UsageError("--sensor-fault-at injects faults into the odometry: give --odometry too")
+    if not (-0.9 <= odometer_step <= 10.0 and abs(gyro_step) <= 1.0):
+        raise UsageError(f"--odometer-step {odometer_step:g} / --gyro-step {gyro_step:g}: a scale step in -0.9…10, a bias step within ±1 rad/s")
     stops = [(at, stop_duration) for at in _floats(stop_at, "--stop-at")] if stop_at else []
     if any(at < 0 for at, _ in stops):
         raise UsageError(f"--stop-at {stop_at!r}: times from the start, s ≥ 0")
@@ -143,7 +151,9 @@ def simulate(
                        start_utc=start_utc.replace(tzinfo=dt.UTC), jam_at_s=_floats(jam_at, "--jam-at") if jam_at else [],
                        jam_duration_s=jam_duration, jam_db=jam_db, track_min_dbhz=track_min, nav_path=nav,
                        lateral_bias_m=lateral_bias, lateral_bias_at_s=_floats(lateral_bias_at, "--lateral-bias-at") if lateral_bias_at else [],
-                       lateral_bias_duration_s=lateral_bias_duration, nlos=nlos, odometry=odometry)  # fmt: skip
+                       lateral_bias_duration_s=lateral_bias_duration, nlos=nlos, odometry=odometry,
+                       sensor_fault_at_s=_floats(sensor_fault_at, "--sensor-fault-at") if sensor_fault_at else [],
+                       sensor_fault_duration_s=sensor_fault_duration, odo_scale_step=odometer_step, gyro_bias_step_radps=gyro_step)  # fmt: skip
     command = _command(ctx)
     with progress("simulating", quiet) as advance:
         manifest = write_drive(trajectory, config, output, geo=geo, command=command, progress=advance)

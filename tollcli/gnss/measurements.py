@@ -54,6 +54,7 @@ class Measurements:
     trajectory_test_stat: np.ndarray | None = None
     trajectory_dof: np.ndarray | None = None
     trajectory_set_aside: np.ndarray | None = None
+    trajectory_lost: np.ndarray | None = None  # epochs near where a pass of the estimator lost the vehicle
 
     def take(self, rows: np.ndarray) -> Measurements:
         """The given epochs (rows may repeat: one per epoch and geo-object)."""

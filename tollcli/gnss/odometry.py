@@ -71,3 +71,46 @@ def interval_displacement(odometry_t_s: np.ndarray, speed_mps: np.ndarray, yaw_r
     left = np.concatenate([[np.nan], c0 * ds - s0 * dc])
     forward[bad], left[bad] = np.nan, np.nan
     return forward, left
+
+
+#: the window over which the odometer's distance is compared with how far the fixes moved (s) …
+PLAUSIBLE_WINDOW_S = 60.0
+#: … and how much further the fixes may have moved than the odometer says (m): the block medians of city fixes are a
+#: few tens of metres off, a car never covers a straight line longer than the road it drove
+PLAUSIBLE_MARGIN_M = 100.0
+
+
+def implausible_odometry(t_s: np.ndarray, fix_en_m: np.ndarray, forward_m: np.ndarray,
+                         window_s: float = PLAUSIBLE_WINDOW_S, margin_m: float = PLAUSIBLE_MARGIN_M) -> np.ndarray:  # fmt: skip
+    """The intervals (E,) whose odometry the fixes contradict: over a window of ``window_s`` the fixes moved further
+    in a straight line than the odometer says the vehicle drove, by more than ``margin_m`` (a stuck or disconnected
+    odometer reads 0 while the car drives; a straight line is never longer than the road).
+
+    ``t_s`` epoch times (s, sorted), ``fix_en_m`` (E, 2) the snapshot fixes east-north (NaN where none), ``forward_m``
+    (E,) the odometer's distance over the interval ending at each epoch. Where the fixes were is the median of the
+    fixes of the window's first and last quarter (a single fix can be far off); every interval of a window that fails
+    is marked."""
+    import pandas as pd
+
+    n = t_s.size
+    bad = np.zeros(n, bool)
+    if n < 3:
+        return bad
+    travelled = np.concatenate([[0.0], np.cumsum(np.abs(np.nan_to_num(forward_m[1:], nan=0.0)))])
+    quarter = window_s / 4
+    index = pd.to_datetime(t_s, unit="s")
+    median = pd.DataFrame(fix_en_m, index=index).rolling(pd.Timedelta(seconds=quarter), min_periods=1).median().to_numpy()
+    # the window ending at each epoch k: its last quarter's median is median[k], its first quarter's median[j]
+    lo = np.searchsorted(t_s, t_s - window_s)  # the window's first epoch
+    j = np.searchsorted(t_s, t_s[lo] + quarter, side="right") - 1
+    full = t_s - t_s[lo] >= 0.9 * window_s
+    moved = np.hypot(*(median - median[j]).T)
+    driven = travelled - travelled[lo]
+    with np.errstate(invalid="ignore"):
+        fails = np.flatnonzero(full & (moved > driven + margin_m))
+    if fails.size:  # mark the intervals lo+1 … k of each failing window (a difference array, no loop)
+        mark = np.zeros(n + 1, np.int64)
+        np.add.at(mark, lo[fails] + 1, 1)
+        np.add.at(mark, fails + 1, -1)
+        bad = np.cumsum(mark[:n]) > 0
+    return bad

@@ -5,7 +5,10 @@
   measurements, but with correlated errors: reflections last) are combined by **covariance intersection**, which is
   consistent whatever their correlation: P⁻¹ = ω P_f⁻¹ + (1 − ω) P_b⁻¹, ω minimising the horizontal variance;
 * ``filtered`` (what an on-board unit could do): the forward pass alone — each position from the measurements up to
-  its epoch.
+  its epoch. Its bound is checked against the whole trip, as only a log processor can: HPL = max(K σ_forward,
+  |x_forward − x_smoothed| + HPL_smoothed) (wherever the smoothed bound holds, the forward position is within this),
+  and its fault test is the smoothed one's. The forward pass's own bound does not hold when the odometry goes wrong
+  (on simulated drives with a 3 % odometer scale step or a 0.02 rad/s gyro bias step: 70–110 misleading epochs).
 
 The noise is the log's own (:mod:`tollcli.integrity.trajectory_noise`): the error model's σ scaled so the median
 normalised innovation is χ²₁'s, then :data:`NOISE_ROUNDS` times σ per C/N0 bin from the residuals at the smoothed
@@ -63,6 +66,7 @@ class Trajectory:
     n_set_aside: np.ndarray
     test_stat: np.ndarray  # the fault test's statistic (χ²_dof when fault-free): see :func:`fault_test`
     dof: np.ndarray
+    lost: np.ndarray  # epochs within LOST_WINDOW_S of where a pass lost the vehicle: a fault, whatever the test says
     sigma_by_cn0_m: np.ndarray  # the noise table of the last round (per C/N0 bin, or per elevation bin: noise_bins)
     inflation: float  # the correlation factor of the last round
     correlation_s: float  # how long the residuals stay correlated (ρ above RHO_CUT): the evidence's independence time
@@ -96,20 +100,24 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
         white2 = np.where(inp.mask, table[bins] ** 2, FALLBACK_SIGMA_M**2)
         sigma2 = white2 * max(factor, 1.0)
         forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise, white2)
-        if positioning == "smoothed" or round_ < NOISE_ROUNDS - 1:
-            backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise, white2)
-    if positioning == "filtered":
-        backward = None
+        backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise, white2)
     x, p = _combined(forward, backward)
+    major = sigma_major_m(p[:, :2, :2])
+    hpl = K_FUSED * major
+    weight = np.minimum(forward.weight, backward.weight)
+    if positioning == "filtered":  # the forward positions, bounded through the smoothed ones
+        hpl = np.maximum(K_FUSED * sigma_major_m(forward.post_p[:, :2, :2]),
+                         np.hypot(*(forward.post_x[:, :2] - x[:, :2]).T) + hpl)  # fmt: skip
+        x, p, weight = forward.post_x, forward.post_p, forward.weight
+        major = sigma_major_m(p[:, :2, :2])
     cov = p[:, :2, :2]
-    major = sigma_major_m(cov)
-    weight = forward.weight if backward is None else np.minimum(forward.weight, backward.weight)
     n_kept = (inp.mask & (weight >= 0.5)).sum(axis=1)
     test_stat, dof = fault_test(forward, backward)
+    lost = near(inp.t_s, forward.relocked | backward.relocked, LOST_WINDOW_S)
     below = np.flatnonzero(rho < RHO_CUT)
     lags = int(below[0]) if below.size else rho.size
     step_s = float(np.median(np.diff(inp.t_s))) if inp.t_s.size > 1 else 1.0
-    return Trajectory(x[:, :3], cov, major, K_FUSED * major, n_kept, inp.mask.sum(axis=1) - n_kept, test_stat, dof, table, factor,
+    return Trajectory(x[:, :3], cov, major, hpl, n_kept, inp.mask.sum(axis=1) - n_kept, test_stat, dof, lost, table, factor,
                       lags * step_s, positioning, odometry)  # fmt: skip
 
 
@@ -122,7 +130,7 @@ def fault_test(forward: FilterPass, backward: FilterPass | None) -> tuple[np.nda
     confidence when both are fault-free. A fault that one pass took in and the other did not (a satellite's bias, an
     odometry step) shows as a disagreement.
 
-    Forward only: the normalised innovations of the measurements the robust loss kept, t = Σ z², χ²_n.
+    Without a backward pass: the normalised innovations of the measurements the robust loss kept, t = Σ z², χ²_n.
     """
     if backward is None:
         kept = forward.weight >= 0.5
@@ -131,7 +139,30 @@ def fault_test(forward: FilterPass, backward: FilterPass | None) -> tuple[np.nda
     d = forward.post_x[:, :2] - backward.prior_x[:, :2]
     spread = sigma_major_m(forward.post_p[:, :2, :2]) + sigma_major_m(backward.prior_p[:, :2, :2])
     t = (d**2).sum(axis=1) / spread**2
-    return t, np.full(t.size, 2)
+    if not forward.odometry:
+        return t, np.full(t.size, 2)
+    # the headings too: a gyro bias the passes did not model turns them opposite ways (one integrates it forward, the
+    # other backward)
+    d_psi = (forward.post_x[:, 3] - backward.prior_x[:, 3] + np.pi) % (2 * np.pi) - np.pi
+    spread_psi = np.sqrt(forward.post_p[:, 3, 3]) + np.sqrt(backward.prior_p[:, 3, 3])
+    return t + (d_psi / spread_psi) ** 2, np.full(t.size, 3)
+
+
+#: how long before and after an epoch where a pass lost the vehicle (:func:`tollcli.integrity.trajectory_filter._widened`)
+#: its positions are suspect (s): a pass drifts out for a while before it loses the vehicle (≈ 20 s on the simulated
+#: drives with a 0.05 rad/s gyro fault), and the other pass may be inside the same fault
+LOST_WINDOW_S = 30.0
+
+
+def near(t_s: np.ndarray, events: np.ndarray, window_s: float) -> np.ndarray:
+    """Epochs within ``window_s`` (s) of an epoch where ``events`` (E,) is true; times ``t_s`` (E,) sorted."""
+    at = t_s[events]
+    if at.size == 0:
+        return np.zeros(t_s.size, bool)
+    i = np.searchsorted(at, t_s)
+    before = np.abs(t_s - at[np.clip(i - 1, 0, at.size - 1)])
+    after = np.abs(at[np.clip(i, 0, at.size - 1)] - t_s)
+    return np.minimum(before, after) <= window_s
 
 
 def sigma_major_m(cov_en_m2: np.ndarray) -> np.ndarray:
@@ -200,8 +231,9 @@ def _starts(inp: TrajectoryInputs, odometry: bool, m: int):
         x0 = np.zeros(n_states)
         p = p0.copy()
         if odometry:
-            psi, start = _fitted_start(inp, window)
+            psi, start, misfit = _fitted_start(inp, window)
             x0[3], x0[:2] = psi, start
+            p[0, 0] = p[1, 1] = max(p0[0, 0], misfit**2)  # an odometry that does not fit the fixes: a start as uncertain
             p[3, 3] = 0.3**2
             p[4, 4] = GYRO_BIAS0_RADPS**2
         else:
@@ -212,9 +244,10 @@ def _starts(inp: TrajectoryInputs, odometry: bool, m: int):
     return starts[0], starts[1]
 
 
-def _fitted_start(inp: TrajectoryInputs, window: np.ndarray) -> tuple[float, np.ndarray]:
+def _fitted_start(inp: TrajectoryInputs, window: np.ndarray) -> tuple[float, np.ndarray, float]:
     """Heading (rad) and east-north position at ``window[0]``: the odometry's dead-reckoned shape over ``window``
-    (epochs in the pass's order) rotated and shifted to fit the snapshot fixes best (Cauchy cost, 2° steps)."""
+    (epochs in the pass's order) rotated and shifted to fit the snapshot fixes best (Cauchy cost, 2° steps); and the
+    fit's median distance from the fixes (m: a stuck or wrong odometer fits them badly)."""
     lo, hi = int(window.min()), int(window.max())
     span = np.arange(lo, hi + 1)
     t = inp.t_s[span]
@@ -234,7 +267,7 @@ def _fitted_start(inp: TrajectoryInputs, window: np.ndarray) -> tuple[float, np.
     best = int(np.argmin(np.log1p((r / 15.0) ** 2).sum(axis=1)))
     first = at[0]  # window[0]: the pass's first epoch (the span's last for a backward pass)
     heading = float(psi0[best, 0] + turn[first])
-    return heading, np.array([off_e[best] + de[best, first], off_n[best] + dn[best, first]])
+    return heading, np.array([off_e[best] + de[best, first], off_n[best] + dn[best, first]]), float(np.median(r[best]))
 
 
 #: the fewest snapshot fixes a log needs for a trajectory (fewer: its snapshot positions stay)
@@ -287,8 +320,14 @@ def with_trajectory(epochs, meas, positioning: str):
                            positioning=np.full(n, positioning, dtype=object))  # fmt: skip
     placed.attrs.update(epochs.attrs)
     placed.attrs["trajectory_correlation_s"] = round(traj.correlation_s, 1)
+    given = np.isfinite(epochs["odometer_forward_m"].to_numpy(float)) if "odometer_forward_m" in epochs else np.zeros(n, bool)
+    contradicted = int((given & ~np.isfinite(inp.forward_m)).sum())
+    if contradicted:
+        placed.attrs["positioning_note"] = (f"the odometry of {contradicted} of {int(given.sum())} intervals contradicts the fixes "
+                                            "(they moved further than it says the vehicle drove): not used there")  # fmt: skip
     meas = replace(meas, trajectory_source=np.full(n, positioning, dtype=object), trajectory_hpl_m=traj.hpl_m,
-                   trajectory_test_stat=traj.test_stat, trajectory_dof=traj.dof, trajectory_set_aside=traj.n_set_aside)  # fmt: skip
+                   trajectory_test_stat=traj.test_stat, trajectory_dof=traj.dof, trajectory_set_aside=traj.n_set_aside,
+                   trajectory_lost=traj.lost)  # fmt: skip
     return placed, meas, positioning
 
 

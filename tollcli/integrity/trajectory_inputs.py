@@ -17,6 +17,7 @@ import pandas as pd
 
 from tollcli.geodesy import enu_rotation, geodetic2ecef
 from tollcli.gnss.measurements import Measurements
+from tollcli.gnss.odometry import implausible_odometry
 
 
 @dataclass
@@ -86,6 +87,9 @@ def trajectory_inputs(epochs: pd.DataFrame, meas: Measurements) -> TrajectoryInp
     yaw = epochs["yaw_rate_radps"].to_numpy(float) if "yaw_rate_radps" in epochs else np.full(t.size, np.nan)
     forward = epochs["odometer_forward_m"].to_numpy(float) if "odometer_forward_m" in epochs else speed * np.diff(t, prepend=np.nan)
     left = epochs["odometer_left_m"].to_numpy(float) if "odometer_left_m" in epochs else np.where(np.isfinite(forward), 0.0, np.nan)
+    if np.isfinite(forward).any():  # odometry the fixes contradict is no odometry (the estimator then wanders there)
+        bad = implausible_odometry(t, fix_enu[:, :2], forward)
+        speed, yaw, forward, left = (np.where(bad, np.nan, a) for a in (speed, yaw, forward, left))
     cn0 = meas.cn0_dbhz if meas.cn0_dbhz is not None else np.full(meas.mask.shape, np.nan)
     los = meas.sat_ecef_m - origin
     with np.errstate(invalid="ignore", divide="ignore"):

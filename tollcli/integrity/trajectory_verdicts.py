@@ -3,7 +3,8 @@
 The same columns as :func:`tollcli.integrity.run.run_raim`'s, from :mod:`tollcli.integrity.trajectory`'s bound and
 fault test: ``fault_detected`` where the test statistic exceeds χ²_dof's (1 − P_FA) quantile (evidence that a pass
 took in a fault: the two passes disagree beyond any correlation of their errors, or the kept innovations are too
-large), else ``unavailable`` where HPL > HAL, else ``valid``; ``insufficient`` where the estimator gave no bound.
+large), or where a pass of the estimator lost the vehicle (most of an epoch's measurements rejected: its motion
+model was wrong there), else ``unavailable`` where HPL > HAL, else ``valid``; ``insufficient`` where the estimator gave no bound.
 The position vouched for is the trajectory's own (no shift). ``integrity_source`` and ``raim_mode`` name the
 positioning; ``excluded_sv`` counts the measurements the robust loss set aside (``set_aside:N``).
 """
@@ -30,6 +31,8 @@ def trajectory_raim(meas: Measurements, params: RaimParams, hal_m=None) -> pd.Da
     status[hpl > hal] = UNAVAILABLE
     with np.errstate(invalid="ignore"):
         status[t > threshold] = FAULT
+    if meas.trajectory_lost is not None:
+        status[np.asarray(meas.trajectory_lost, bool)] = FAULT
     status[~np.isfinite(hpl)] = INSUFFICIENT
     aside = np.asarray(meas.trajectory_set_aside, np.int64)
     nan = np.full(n, np.nan)

@@ -73,6 +73,12 @@ class SimConfig:
     odo_speed_sigma_mps: float = 0.05
     gyro_bias_radps: float = 0.002
     gyro_sigma_radps: float = 0.002
+    # sensor faults (the odometry's own): from these times, for ``sensor_fault_duration_s``, the odometer's scale is
+    # off by a further ``odo_scale_step`` (a slipping wheel, a wrong tyre) and the gyro by a further ``gyro_bias_step_radps``
+    sensor_fault_at_s: list[float] = field(default_factory=list)
+    sensor_fault_duration_s: float = 60.0
+    odo_scale_step: float = 0.0
+    gyro_bias_step_radps: float = 0.0
 
 
 @dataclass
@@ -152,9 +158,20 @@ def simulate(traj: Trajectory, config: SimConfig) -> Iterator[SimChunk]:
         chunk = _receiver_output(measured, Satellites(names, svid, group), traj, start, config, rng)
         if yaw_radps is not None:  # the odometer and the gyro: what the vehicle's own sensors say
             o = rng["odometry"]
-            chunk.epochs["odo_speed_mps"] = traj.speed_mps[sl] * (1.0 + config.odo_scale) + config.odo_speed_sigma_mps * o.standard_normal(n)
-            chunk.epochs["odo_yaw_rate_radps"] = yaw_radps[sl] + config.gyro_bias_radps + config.gyro_sigma_radps * o.standard_normal(n)
+            broken = sensor_fault(config, t)
+            scale = 1.0 + config.odo_scale + np.where(broken, config.odo_scale_step, 0.0)
+            gyro_bias = config.gyro_bias_radps + np.where(broken, config.gyro_bias_step_radps, 0.0)
+            chunk.epochs["odo_speed_mps"] = traj.speed_mps[sl] * scale + config.odo_speed_sigma_mps * o.standard_normal(n)
+            chunk.epochs["odo_yaw_rate_radps"] = yaw_radps[sl] + gyro_bias + config.gyro_sigma_radps * o.standard_normal(n)
         yield chunk
+
+
+def sensor_fault(config: SimConfig, t_s: np.ndarray) -> np.ndarray:
+    """Whether the odometry is faulty (``sensor_fault_at_s``, for ``sensor_fault_duration_s``) at times ``t_s`` (s)."""
+    broken = np.zeros(t_s.size, bool)
+    for at in config.sensor_fault_at_s:  # a few episodes
+        broken |= (t_s >= at) & (t_s < at + config.sensor_fault_duration_s)
+    return broken
 
 
 def _yaw_rate_radps(traj: Trajectory) -> np.ndarray:
