@@ -6,6 +6,19 @@ import numpy as np
 import pandas as pd
 
 
+#: the years a receiver's date may fall in: GPS time starts in 1980; beyond 2200 a date is a damaged field (and pandas'
+#: nanosecond timestamps end in 2262)
+PLAUSIBLE_YEARS = (1980, 2200)
+
+
+def plausible_date(year, month, day, hour=0, minute=0, second=0):
+    """Whether date and time fields (scalars or arrays) can be a receiver's: the year in :data:`PLAUSIBLE_YEARS`, the
+    month, day, hour, minute and second (a leap second: 60) in range."""
+    year, month, day, hour, minute, second = (np.asarray(a, dtype=np.int64) for a in (year, month, day, hour, minute, second))
+    return ((year >= PLAUSIBLE_YEARS[0]) & (year <= PLAUSIBLE_YEARS[1]) & (month >= 1) & (month <= 12) & (day >= 1) & (day <= 31)
+            & (hour >= 0) & (hour <= 23) & (minute >= 0) & (minute <= 59) & (second >= 0) & (second <= 60))  # fmt: skip
+
+
 def epoch_seconds(epochs: pd.DataFrame) -> np.ndarray:
     """Seconds since 1970 from ``time_utc`` where dated, else the time of day unwrapped over midnights."""
     if "time_utc" in epochs and epochs["time_utc"].notna().all() and len(epochs):

@@ -26,7 +26,10 @@ def pseudorange_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_m
         from tollcli.gnss.gsdc_positions import gsdc_epochs
         from tollcli.readers.gsdc import read_gsdc_derived
 
-        return gsdc_epochs(read_gsdc_derived(log), sigma_model, sigma_m, nominal)
+        derived = read_gsdc_derived(log, strict)
+        epochs, meas = gsdc_epochs(derived, sigma_model, sigma_m, nominal)
+        epochs.attrs["skipped_lines"] = derived.attrs["skipped_lines"]
+        return epochs, meas
     if kind == "rinex":
         from tollcli.gnss.rinex_positions import rinex_epochs
 
@@ -65,12 +68,15 @@ def _raw_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: s
 
         if ephemerides is None:
             raise UsageError(f"{log}: a GnssLogger file carries no satellite orbits: give --nav NAVFILE (RINEX 2 or 3)")
-        m = with_broadcast_satellites(raw_pseudoranges(read_gnsslogger(log, strict).raw), ephemerides)
+        read = read_gnsslogger(log, strict)
+        skipped = read.n_malformed + read.raw.attrs.get("skipped_lines", 0)
+        m = with_broadcast_satellites(raw_pseudoranges(read.raw), ephemerides)
     elif kind == "device-gnss":
         from tollcli.gnss.android_raw import raw_pseudoranges
         from tollcli.readers.gnsslogger import read_device_gnss
 
-        device = read_device_gnss(log)
+        device = read_device_gnss(log, strict)
+        skipped = device.attrs["skipped_lines"]
         m = raw_pseudoranges(device)
         m = with_device_gnss_satellites(m, device) if ephemerides is None else with_broadcast_satellites(m, ephemerides)
     else:
@@ -89,6 +95,8 @@ def _raw_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: s
         epochs, meas = raw_epochs(m, sigma_model, sigma_m, nominal, iono_coeffs=iono)
     except DataError as exc:
         raise DataError(f"{log}: {exc}") from None
+    if kind != "ubx":
+        epochs.attrs["skipped_lines"] = int(skipped)
     if kind == "ubx":
         from tollcli.gnss.ubx_measurements import with_receiver_solution
 

@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError, UsageError
+from tollcli.readers.csv_numbers import checked_numbers
 
 #: the ``Raw`` fields a pseudorange needs (Android GnssClock + GnssMeasurement names)
 RAW_REQUIRED = ("TimeNanos", "FullBiasNanos", "BiasNanos", "TimeOffsetNanos", "ReceivedSvTimeNanos", "State",
@@ -32,6 +33,8 @@ DEVICE_GNSS_SATELLITE = ("SvPositionXEcefMeters", "SvPositionYEcefMeters", "SvPo
 
 #: nanosecond counts since 1980 need all 64 bits (a float64 column would round them to ~100 ns)
 EXACT_DTYPES = {"FullBiasNanos": "Int64", "TimeNanos": "Int64", "ReceivedSvTimeNanos": "Int64", "CodeType": "string"}
+#: the ``Raw`` fields that must be integers in every row (a missing one makes the row malformed)
+RAW_INTEGERS = ("State", "Svid", "ConstellationType")
 
 
 @dataclass
@@ -72,39 +75,49 @@ def read_gnsslogger(path: str, strict: bool = False) -> RawRead:
     if not good:
         raise DataError(f"{path}: no usable Raw records (GnssLogger was not recording raw measurements)")
     try:
-        raw = pd.read_csv(io.StringIO("\n".join(good)), header=None, names=header, dtype=EXACT_DTYPES,
-                          low_memory=False)  # fmt: skip
+        raw = pd.read_csv(io.StringIO("\n".join(good)), header=None, names=header, dtype=str, low_memory=False)
     except (ValueError, pd.errors.ParserError) as exc:
-        raise DataError(f"{path}: unreadable Raw records ({exc})") from None
-    raw = _numeric(raw, path)
-    raw["line"] = numbers[~bad] + 1
-    return RawRead(raw, int(bad.sum()), first_bad)
+        raise DataError(f"{path}: unreadable Raw records ({' '.join(str(exc).split())})") from None
+    lines_of = numbers[~bad] + 1
+    exact = _exact_columns(raw)
+    raw = checked_numbers(raw, path, tuple(c for c in RAW_REQUIRED if c not in (*RAW_INTEGERS, *exact)), RAW_INTEGERS, strict,
+                          exact=exact)  # fmt: skip
+    raw["line"] = lines_of[raw["line"].to_numpy() - 2]  # checked_numbers counted rows from 2: the file's own lines
+    n_bad = int(bad.sum()) + raw.attrs["skipped_lines"]
+    raw.attrs["skipped_lines"] = 0  # counted in n_malformed
+    if raw.empty:
+        raise DataError(f"{path}: no usable Raw records")
+    return RawRead(_exact(raw), n_bad, first_bad if first_bad is not None else None)
 
 
-def read_device_gnss(path: str) -> pd.DataFrame:
-    """A GSDC 2022/2023 ``device_gnss.csv`` (``Raw`` fields + Google's satellite columns), checked."""
+def read_device_gnss(path: str, strict: bool = False) -> pd.DataFrame:
+    """A GSDC 2022/2023 ``device_gnss.csv`` (``Raw`` fields + Google's satellite columns), checked: a row whose
+    number fields are not numbers is skipped and counted (``attrs['skipped_lines']``), or with ``strict`` an error."""
     try:
-        table = pd.read_csv(path, dtype={**EXACT_DTYPES, "SignalType": "string"}, low_memory=False)
+        table = pd.read_csv(path, dtype=str, low_memory=False)
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
     except (OSError, pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
-        raise DataError(f"{path}: not a readable CSV ({exc})") from None
+        raise DataError(f"{path}: not a readable CSV ({' '.join(str(exc).split())})") from None
     missing = [c for c in RAW_REQUIRED if c not in table.columns]
     if missing:
         raise DataError(f"{path}: not a GSDC device_gnss file, missing columns {', '.join(missing)}")
-    table = _numeric(table, path)
-    table["line"] = np.arange(len(table)) + 2
-    return table
+    exact = _exact_columns(table)
+    floats = tuple(c for c in (*RAW_REQUIRED, *DEVICE_GNSS_SATELLITE) if c in table.columns and c not in (*RAW_INTEGERS, *exact))
+    table = checked_numbers(table, path, floats, RAW_INTEGERS, strict, exact=exact)
+    if table.empty:
+        raise DataError(f"{path}: no usable rows (the first bad one at line {table.attrs['first_skipped_line']})")
+    return _exact(table)
 
 
-def _numeric(raw: pd.DataFrame, path: str) -> pd.DataFrame:
-    """The fields a pseudorange needs as numbers (an empty field: NaN; text where a number belongs: an error)."""
-    for name in RAW_REQUIRED:
-        if name in EXACT_DTYPES:
-            continue
-        col = pd.to_numeric(raw[name], errors="coerce")
-        bad = col.isna() & raw[name].notna()
-        if bad.any():
-            raise DataError(f"{path}: Raw field {name} is not a number ({raw[name][bad].iloc[0]!r})")
-        raw[name] = col
+def _exact_columns(raw: pd.DataFrame) -> tuple[str, ...]:
+    """The nanosecond counts the table has (read digit for digit as ``Int64``)."""
+    return tuple(c for c, dtype in EXACT_DTYPES.items() if dtype == "Int64" and c in raw.columns)
+
+
+def _exact(raw: pd.DataFrame) -> pd.DataFrame:
+    """The text columns as strings (the nanosecond counts are already exact integers)."""
+    for name, dtype in EXACT_DTYPES.items():
+        if name in raw.columns and dtype == "string":
+            raw[name] = raw[name].astype(dtype)
     return raw

@@ -51,25 +51,40 @@ _QUALITY = {2: 2, 3: 4, 4: 5, 5: 6}
 
 
 def _float(report: dict, *names: str) -> float:
+    """The first of ``names`` that is a number, as a float (NaN: none is, or it is too large for one)."""
     for name in names:
         value = report.get(name)
         if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
+            try:
+                return float(value)
+            except OverflowError:  # an integer of hundreds of digits
+                return math.nan
     return math.nan
+
+
+def _small_int(value) -> int | None:
+    """``value`` if it is an integer an id or a count can be (|value| < 2³¹), else None."""
+    return value if isinstance(value, int) and not isinstance(value, bool) and -(2**31) < value < 2**31 else None
+
+
+#: the times a gpsd report may carry (ms since 1970): 1980 to 2200 — beyond, a damaged field
+_TIME_RANGE_MS = (315_964_800_000, 7_258_118_400_000)
 
 
 def _time_ms(text) -> int | None:
     if not isinstance(text, str) or len(text) < 19:
         return None
     try:
-        return int(np.datetime64(text.rstrip("Z"), "ms").astype(np.int64))
-    except ValueError:
+        ms = int(np.datetime64(text.rstrip("Z"), "ms").astype(np.int64))
+    except (ValueError, OverflowError):
         return None
+    return ms if _TIME_RANGE_MS[0] <= ms < _TIME_RANGE_MS[1] else None
 
 
 def _tpv_fields(r: dict) -> dict:
-    mode = r.get("mode") if isinstance(r.get("mode"), int) else 0
-    status = r.get("status") if isinstance(r.get("status"), int) else 1
+    mode = _small_int(r.get("mode")) or 0
+    status = _small_int(r.get("status"))
+    status = 1 if status is None else status
     valid = mode >= 2 and status not in (5, 8)  # dead reckoning only, simulated: no GNSS fix; 7: a surveyed position
     quality = _QUALITY.get(status, 1) if mode >= 2 else 6 if status == 5 else 0
     fields = {"fix_mode": mode if mode in (1, 2, 3) else -1, "fix_valid": valid, "fix_quality": quality,
@@ -90,11 +105,11 @@ def _sky_satellites(r: dict) -> list[tuple]:
     for s in r.get("satellites") or ():
         if not isinstance(s, dict):
             continue
-        gnss, svid = s.get("gnssid"), s.get("svid")
-        if isinstance(gnss, int) and isinstance(svid, int):
+        gnss, svid, prn = _small_int(s.get("gnssid")), _small_int(s.get("svid")), _small_int(s.get("PRN"))
+        if gnss is not None and svid is not None:
             name = GNSS_NAME.get(gnss, "unknown")
-        elif isinstance(s.get("PRN"), int):
-            name, svid = by_number(s["PRN"])
+        elif prn is not None:
+            name, svid = by_number(prn)
         else:
             continue
         el, az, ss = _float(s, "el"), _float(s, "az"), _float(s, "ss")
@@ -102,7 +117,7 @@ def _sky_satellites(r: dict) -> list[tuple]:
         residual = _float(s, "prRes") if used else math.nan
         known = math.isfinite(el) and -90 <= el <= 90 and math.isfinite(az)
         out.append((name, int(svid), el if known else math.nan, az % 360.0 if known else math.nan,
-                    ss if ss > 0 else math.nan, used, residual, int(s["PRN"]) if isinstance(s.get("PRN"), int) else -1))  # fmt: skip
+                    ss if ss > 0 else math.nan, used, residual, prn if prn is not None else -1))  # fmt: skip
     return out
 
 

@@ -10,19 +10,29 @@ from __future__ import annotations
 import pandas as pd
 
 from tollcli.errors import DataError
+from tollcli.readers.csv_numbers import checked_numbers
 
 ANDROID_CONSTELLATION = {1: "GPS", 2: "SBAS", 3: "GLONASS", 4: "QZSS", 5: "BeiDou", 6: "Galileo", 7: "NavIC"}
 REQUIRED = ("millisSinceGpsEpoch", "constellationType", "svid", "signalType", "xSatPosM", "ySatPosM", "zSatPosM",
             "satClkBiasM", "rawPrM", "rawPrUncM", "isrbM", "ionoDelayM", "tropoDelayM")  # fmt: skip
 
 
-def read_gsdc_derived(path) -> pd.DataFrame:
-    """The derived CSV with the columns the WLS needs, checked."""
+#: the integer columns (the rest of :data:`REQUIRED` but ``signalType`` are floats)
+INTEGERS = ("millisSinceGpsEpoch", "constellationType", "svid")
+
+
+def read_gsdc_derived(path, strict: bool = False) -> pd.DataFrame:
+    """The derived CSV with the columns the WLS needs, checked: a row whose number fields are not numbers is skipped
+    and counted (``attrs['skipped_lines']``), or with ``strict`` an error naming its line."""
     try:
-        table = pd.read_csv(path)
-    except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: not a readable CSV ({exc})") from None
+        table = pd.read_csv(path, dtype=str)
+    except (OSError, pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
+        raise DataError(f"{path}: not a readable CSV ({' '.join(str(exc).split())})") from None
     missing = [c for c in REQUIRED if c not in table.columns]
     if missing:
         raise DataError(f"{path}: not a GSDC derived file, missing columns {', '.join(missing)}")
+    floats = tuple(c for c in REQUIRED if c not in INTEGERS and c != "signalType")
+    table = checked_numbers(table, path, floats, INTEGERS, strict)
+    if table.empty:
+        raise DataError(f"{path}: no usable rows (the first bad one at line {table.attrs['first_skipped_line']})")
     return table

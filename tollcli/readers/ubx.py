@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError, UsageError
+from tollcli.times import plausible_date
 
 UBX_SYNC = b"\xb5\x62"
 #: UBX gnssId → constellation name
@@ -105,4 +106,10 @@ def read_ubx(path: str, strict: bool = False) -> UbxRead:
     sf = pd.DataFrame(sfrbx, columns=["gnssId", "svId", "sigId", "words", "message"])
     pvt_table = pd.DataFrame(pvt, columns=["year", "month", "day", "hour", "minute", "second", "nano", "fix_type", "lat_deg",
                                            "lon_deg", "height_m", "speed_mps", "h_acc_m", "speed_acc_mps", "n_sv", "message"])  # fmt: skip
+    dated = plausible_date(*(pvt_table[c].to_numpy(np.int64) for c in ("year", "month", "day", "hour", "minute", "second")))
+    if not dated.all():  # a damaged date (year 60000) is no date: the row is dropped, and counted
+        if strict:
+            raise DataError(f"{path}: UBX message {int(pvt_table['message'][~dated].iloc[0]) + 1}: NAV-PVT with an impossible date")
+        errors += ["NAV-PVT with an impossible date"] * int((~dated).sum())
+        pvt_table = pvt_table[dated].reset_index(drop=True)
     return UbxRead(raw_table, sf, pvt_table, n, len(errors))

@@ -42,6 +42,7 @@ from tollcli.io.sources import open_binary, source_name
 from tollcli.readers.gps_time import LEAP_SECONDS
 from tollcli.readers.nav_tables import TableBuilder
 from tollcli.readers.ubx_frames import SYNC, iter_frames
+from tollcli.times import plausible_date
 from tollcli.readers.nmea.line_reader import ReadStats
 from tollcli.readers.nmea.reader import CHUNK_EPOCHS, NmeaTables
 
@@ -100,7 +101,7 @@ def _quality(fix_type: int, gnss_ok: bool, diff: bool, carrier: int) -> tuple[in
 
 def _utc_ms(year: int, month: int, day: int, hour: int, minute: int, sec: int, nano: int, valid: int) -> int | None:
     """UTC ms since 1970 of a NAV-PVT / HNR-PVT date and time, None unless its ``valid`` flags say date and time."""
-    if valid & 0x03 != 0x03:
+    if valid & 0x03 != 0x03 or not plausible_date(year, month, day, hour, minute, sec):
         return None
     try:
         base = int(np.datetime64(f"{year:04d}-{month:02d}-{day:02d}", "ms").astype(np.int64))
