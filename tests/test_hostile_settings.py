@@ -52,3 +52,32 @@ def test_a_byte_order_mark_opens_a_tariff(tmp_path):
         assert done.returncode == 0, done.stderr.decode()
         totals.append(json.loads(out.read_text())["total"])
     assert totals[0] == totals[1] != "0.00"
+
+
+@pytest.mark.parametrize("fee,says", [('"0.95"', "without quotes"), ("1e-320", "below the currency's minor unit"),
+                                      ("0.004", "below the currency's minor unit")])  # fmt: skip
+def test_a_fee_that_is_text_or_below_a_cent_is_refused(tmp_path, fee, says):
+    """A fee written as text was taken as the number it spells; a fee of 1e-320 EUR charged 0.00 without a word."""
+    tariff = tmp_path / "tariff.toml"
+    tariff.write_text(TARIFF.read_text().replace("car = 0.95", f"car = {fee}", 1))
+    out = tmp_path / "i.json"
+    done = run_cli("process", LOG, "--geo", GEO, "--tariff", str(tariff), "-q", "-o", str(out))
+    err = done.stderr.decode()
+    assert done.returncode == 1 and says in err and "motorway" in err and not out.exists(), err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_a_free_passage_stays_possible(tmp_path):
+    """0 is a fee (a free road class): the check is for amounts the rounding would turn into 0, not for 0 itself."""
+    tariff = tmp_path / "tariff.toml"
+    tariff.write_text(TARIFF.read_text().replace("car = 0.95", "car = 0", 1))
+    out = tmp_path / "i.json"
+    done = run_cli("process", LOG, "--geo", GEO, "--tariff", str(tariff), "-q", "-o", str(out))
+    assert done.returncode == 0, done.stderr.decode()
+
+
+@pytest.mark.parametrize("option", [("--p-sat", "1e-320"), ("--p-const", "0"), ("--p-md", "0.9"), ("--p-fa", "1")])
+def test_a_probability_outside_its_range_is_refused(tmp_path, option):
+    """``--p-sat 1e-320`` was taken as given (1 − p is 1 in floating point)."""
+    done = run_cli("integrity", LOG, "-q", "-o", str(tmp_path / "i.csv"), *option)
+    assert done.returncode == 2 and option[0] in done.stderr.decode() and not (tmp_path / "i.csv").exists()

@@ -40,8 +40,13 @@ def where(path: str, text: str, key: str, after: int = 0) -> str:
 
 
 def money(value, where_: str, limit: Decimal = MAX_FEE) -> Decimal:
-    """A fee or rate as read from TOML (int, Decimal or numeric string) → Decimal ≥ 0, or a DataError naming ``where_``."""
-    if isinstance(value, bool) or not isinstance(value, (int, Decimal, str)):
+    """A fee or rate as read from TOML (an int or a Decimal: TOML numbers are read as Decimal) → Decimal ≥ 0, or a
+    DataError naming ``where_``. Text is refused, even text that reads as a number: ``"0.95"`` quoted is a typo's
+    way of hiding a number (``"0,95"``, ``"O.95"``) and a TOML tariff writes numbers as numbers."""
+    if isinstance(value, str):
+        raise DataError(f"{where_}: a fee must be a number, not text: write {value} without quotes" if _numeric_text(value)
+                        else f"{where_}: a fee must be a number, got {value!r}")  # fmt: skip
+    if isinstance(value, bool) or not isinstance(value, (int, Decimal)):
         raise DataError(f"{where_}: a fee must be a number, got {value!r}")
     try:
         amount = Decimal(value)
@@ -74,3 +79,19 @@ def exact_fee(amount: Decimal, factor: Decimal, minor_unit: int) -> Decimal:
     with localcontext() as ctx:
         ctx.prec, ctx.Emax, ctx.Emin = 1000, MAX_EMAX, MIN_EMIN
         return product.quantize(quantum, rounding=ROUND_HALF_UP)
+
+
+def _numeric_text(text: str) -> bool:
+    try:
+        return Decimal(text).is_finite()
+    except InvalidOperation:
+        return False
+
+
+def at_least_minor_unit(amount: Decimal, minor_unit: int, where_: str) -> Decimal:
+    """A flat fee of 0 or of at least the currency's minor unit (a DataError naming ``where_`` otherwise): a fee below it
+    is charged as 0.00 by the one rounding — a file that says 1e-320 EUR meant something else."""
+    if 0 < amount < Decimal(1).scaleb(-minor_unit):
+        raise DataError(f"{where_}: a fee of {amount} is below the currency's minor unit ({Decimal(1).scaleb(-minor_unit)}): "
+                        f"it would be charged as 0; give 0 or a fee of at least the minor unit")  # fmt: skip
+    return amount

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 from decimal import ROUND_HALF_UP, Decimal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
-from tollcli.charging.money import exact, exact_fee, line_of
+from tollcli.charging.money import at_least_minor_unit, exact, exact_fee, line_of
 from tollcli.charging.money import money as _money
 from tollcli.charging.money import where as _where
 from tollcli.charging.rate_tables import (
@@ -189,7 +189,7 @@ def _minutes(text, where: str) -> int:
     return t.hour * 60 + t.minute
 
 
-def _fee_tables(section, name: str, path: str) -> dict[str, dict[str, Decimal]]:
+def _fee_tables(section, name: str, path: str, minor_unit: int) -> dict[str, dict[str, Decimal]]:
     if section is None:
         return {}
     if not isinstance(section, dict):
@@ -198,7 +198,8 @@ def _fee_tables(section, name: str, path: str) -> dict[str, dict[str, Decimal]]:
     for key, fees in section.items():
         if not isinstance(fees, dict) or not fees:
             raise DataError(f"{path}: [{name}.{key}] must map vehicle classes to fees")
-        out[str(key)] = {str(vc): _money(v, f"{path}: [{name}.{key}] {vc}") for vc, v in fees.items()}
+        out[str(key)] = {str(vc): at_least_minor_unit(_money(v, f"{path}: [{name}.{key}] {vc}"), minor_unit, f"{path}: [{name}.{key}] {vc}")
+                         for vc, v in fees.items()}  # fmt: skip
     return out
 
 
@@ -289,8 +290,8 @@ def load_tariff(path: str) -> Tariff:
         ZoneInfo(str(timezone))
     except (ZoneInfoNotFoundError, ValueError):
         raise DataError(f"{path}: unknown timezone {timezone!r}") from None
-    road_class = _fee_tables(doc.get("road_class"), "road_class", path)
-    geoobject = _fee_tables(doc.get("geoobject"), "geoobject", path)
+    road_class = _fee_tables(doc.get("road_class"), "road_class", path, minor)
+    geoobject = _fee_tables(doc.get("geoobject"), "geoobject", path, minor)
     bands = _bands(doc.get("band"), path, text)
     if "table" in doc:
         if road_class or geoobject:

@@ -112,14 +112,18 @@ DateOpt = Annotated[
     typer.Option("--date", formats=["%Y-%m-%d"], help="UTC date of the first epoch, for logs without RMC/ZDA dates (YYYY-MM-DD)."),
 ]
 
+#: the smallest probability an option takes: below it 1 − p is 1 in floating point and χ² quantiles lose their meaning
+#: (``--p-sat 1e-320`` was taken as given)
+PROBABILITY_FLOOR = 1e-15
+
 RaimMode = Annotated[Literal[RAIM_MODES], typer.Option("--raim", help="RAIM: ss (solution separation over every satellite and constellation left out: several faults at once, HPL from the fault modes; the default), etc (paper 001's toll RAIM: HPL = HAL, P_FA per epoch, one fault) or classic (paper 001's civil-aviation RAIM: fixed P_FA, HPL ≤ HAL, one fault).")]
 Positioning = Annotated[Literal[POSITIONINGS], typer.Option("--positioning", help="Pseudorange logs: where each position comes from. smoothed: a robust filter with the log's odometry (or a GNSS-only motion model), run forward and backward over the whole trip and combined (covariance intersection), HPL from its covariance with the noise the log's own residuals show, a fault where the two runs disagree; filtered: the forward filter's positions (what an on-board unit could do), bounded through the smoothed ones; snapshot: each epoch alone (weighted least squares), judged by the RAIM; auto (the default): smoothed where the log has odometry, else snapshot. Recorded in the invoice (positioning, positioning_used).")]
 Environment = Annotated[Literal[ENVIRONMENTS], typer.Option("--environment", help="Error model's environment: auto (urban where the residuals of the last 30 s exceed the nominal model 1.5-fold: C/N0-weighted urban σ there), open (the nominal model throughout) or urban (the urban σ throughout).")]
-PSat = Annotated[float, typer.Option("--p-sat", help="--raim ss: prior probability of a satellite fault.")]
-PConst = Annotated[float, typer.Option("--p-const", help="--raim ss: prior probability of a constellation-wide fault.")]
+PSat = Annotated[float, typer.Option("--p-sat", help="--raim ss: prior probability of a satellite fault (1e-15–0.5).", min=PROBABILITY_FLOOR, max=0.5)]
+PConst = Annotated[float, typer.Option("--p-const", help="--raim ss: prior probability of a constellation-wide fault (1e-15–0.5).", min=PROBABILITY_FLOOR, max=0.5)]
 Hal = Annotated[float, typer.Option("--hal", help="Horizontal alert limit, m (0–10 000).", min=0.0, max=10_000.0)]
-PMd = Annotated[float, typer.Option("--p-md", help="Probability of missed detection.")]
-PFa = Annotated[float, typer.Option("--p-fa", help="Probability of false alarm: classic RAIM's design value; under ETC an alarm at a higher per-epoch P_FA reads probable_false_alarm.")]
+PMd = Annotated[float, typer.Option("--p-md", help="Probability of missed detection (1e-15–0.5).", min=PROBABILITY_FLOOR, max=0.5)]
+PFa = Annotated[float, typer.Option("--p-fa", help="Probability of false alarm (1e-15–0.5): classic RAIM's design value; under ETC an alarm at a higher per-epoch P_FA reads probable_false_alarm.", min=PROBABILITY_FLOOR, max=0.5)]
 IntegritySources = Annotated[
     Literal[INTEGRITY_LEVELS],
     typer.Option("--integrity-sources", help="Which integrity sources may validate a position: residual (GRS residuals, "
