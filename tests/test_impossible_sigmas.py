@@ -54,3 +54,41 @@ def test_an_impossible_gbs_sigma_is_no_verdict():
 
     epochs = pd.DataFrame({"gbs_err_lat_m": [1.0, -1.0, 0.0, np.inf], "gbs_err_lon_m": [2.0, 2.0, 2.0, 2.0]})
     assert np.array_equal(receiver_outputs(epochs).gbs_sigma_major_m, [2.0, np.nan, np.nan, np.nan], equal_nan=True)
+
+
+@pytest.mark.parametrize("sigma", ["0.0000", "-5.0000", "nan", "1e300"])
+def test_an_impossible_rtklib_sigma_is_never_valid(tmp_path, sigma):
+    """RTKLIB's sdn/sde (the 1σ north and east errors of a .pos file) zero, negative, NaN or absurd: no epoch valid on
+    them (the real file's sdn/sde make every epoch valid)."""
+    from conftest import shared
+
+    lines = []
+    for line in shared("rtklibexplorer", "gnss_1730_sf.pos").read_text().splitlines():
+        if line.strip() and not line.startswith("%"):
+            fields = line.split()
+            fields[7] = fields[8] = sigma
+            line = "  ".join(fields)
+        lines.append(line)
+    path = tmp_path / "bad.pos"
+    path.write_text("\n".join(lines) + "\n")
+    done = run_cli("integrity", str(path), "-o", str(tmp_path / "e.csv"), "--json", "-q")
+    assert done.returncode == 0, done.stderr.decode()
+    assert json.loads(done.stdout)["statuses"].get("valid", 0) == 0
+
+
+@pytest.mark.parametrize("residual", ["99999999.9", "-99999999.9"])
+def test_an_absurd_grs_residual_is_never_valid(tmp_path, residual):
+    """A GRS residual of ±10⁸ m (checksum good) on one satellite of every epoch of a simulated drive whose residuals
+    make all 230 epochs valid: the residual test fails there, no epoch is valid on it."""
+
+    def edit(fields: list[str]) -> None:
+        fields[3] = residual
+
+    lines = [edit_fields(line, edit) if sentence_type(line) == "GRS" else line
+             for line in (SAMPLES / "sim" / "rural-clean" / "drive.nmea").read_text().splitlines()]  # fmt: skip
+    path = tmp_path / "grs.nmea"
+    path.write_text("\n".join(lines) + "\n")
+    done = run_cli("integrity", str(path), "-o", str(tmp_path / "e.csv"), "--json", "--integrity-sources", "residual", "-q")
+    assert done.returncode == 0, done.stderr.decode()
+    statuses = json.loads(done.stdout)["statuses"]
+    assert statuses.get("valid", 0) == 0 and sum(statuses.values()) > 0, statuses
