@@ -11,7 +11,8 @@ Exit codes (also in ``tollcli --help`` and the man pages):
   permissions); nothing half-written is left in place of an output
 * 5 — internal error: a defect of tollcli (the message names it; please report it;
   ``TOLLCLI_DEBUG=1`` shows the traceback)
-* 6 — some failed: ``batch`` wrote every log's outputs it could, but some logs failed (``failed/`` says why)
+* 6 — some failed: ``batch`` wrote every log's outputs it could, but some logs failed (``failed/`` says why); when
+  the system refused a log's files (disk full), ``batch`` exits 4
 """
 
 EXIT_OK = 0
@@ -45,6 +46,12 @@ class PartialError(TollError):
     """The job finished and wrote its outputs, but more input was skipped than allowed (--max-bad)."""
 
     exit_code = EXIT_PARTIAL
+
+
+class SystemFailureError(TollError):
+    """The system refused a file (disk full, permissions): what could be written was, nothing is half-written."""
+
+    exit_code = EXIT_SYSTEM
 
 
 class SomeFailedError(TollError):

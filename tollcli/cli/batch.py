@@ -12,7 +12,7 @@ from tollcli.cli import options as opt
 from tollcli.cli.charge_options import ChargeOptions, charge_options
 from tollcli.cli.console import note, progress
 from tollcli.cli.settings_file import Config
-from tollcli.errors import DataError, PartialError, SomeFailedError, UsageError
+from tollcli.errors import DataError, PartialError, SomeFailedError, SystemFailureError, UsageError
 from tollcli.job.batch import run_batch
 from tollcli.job.log_files import expand_inputs
 
@@ -37,7 +37,7 @@ def batch(
 
     Resumable: a log whose invoice records its current SHA-256 is skipped (--force
     redoes it). A bad log is reported in failed/ and the summary and never stops
-    the others (exit 6 when some failed, 1 when all did). Outputs do not depend on
+    the others (exit 6 when some failed, 1 when all did, 4 when the system refused their files). Outputs do not depend on
     the worker count or the scheduler. A vehicle's consecutive logs (the next
     starting within 120 s of the last) are one drive: a passage cut by the file
     boundary is charged once, where it began; the next invoice lists its part at
@@ -73,6 +73,9 @@ def batch(
         first = next(o["error"] for o in summary["outcomes"] if o["status"] == "failed")
         message = (f"{summary['failed']} of {summary['logs']} logs failed (see {os.path.join(output, 'failed')}); "
                    f"first: {first}")  # fmt: skip
+        if any(o.get("system_error") for o in summary["outcomes"]):  # the system's failure (disk full): exit 4
+            first = next(o["error"] for o in summary["outcomes"] if o.get("system_error"))
+            raise SystemFailureError(f"{summary['failed']} of {summary['logs']} logs failed, the system refusing a file; first: {first}")
         raise (DataError if summary["failed"] == summary["logs"] else SomeFailedError)(message)
     over = [o for o in summary["outcomes"] if charge.max_bad is not None and o.get("skipped_lines", 0) > charge.max_bad]
     if over:

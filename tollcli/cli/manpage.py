@@ -22,7 +22,7 @@ EXIT_STATUS = (
     ("3", "partial: outputs were written but more lines were skipped than --max-bad allows"),
     ("4", "system error: a file could not be written or read (read-only folder, disk full, permissions)"),
     ("5", "internal error: a defect of tollcli, named in one line (please report it; TOLLCLI_DEBUG=1 shows the traceback)"),
-    ("6", "some failed: batch wrote the outputs of every log it could, but some logs failed (failed/ says why)"),
+    ("6", "some failed: batch wrote the outputs of every log it could, but some logs failed (failed/ says why; 4 when the system refused their files)"),
 )  # fmt: skip
 FILES = (
     ("geoobjects/*.geojson", "geo-objects: constant-HAL buffer polygons with id, hal_m, road_class (tollcli geoobjects build)"),

@@ -169,14 +169,32 @@ def run_one(job: Job) -> dict:
         return _process(job, settings, folder, name, inv_path, outcome)
     except (DataError, UsageError) as exc:
         return _failed(job, name, outcome, str(exc))
+    except OSError as exc:  # the system refused a file (disk full, permissions): that log's failure, of the system's class
+        return _failed(job, name, outcome, f"{job.log}: {system_message(exc)}", system=True)
     except Exception as exc:  # noqa: BLE001 - one log's failure, whatever it is, never stops the others
         return _failed(job, name, outcome, f"{job.log}: internal error ({type(exc).__name__}: {exc}); please report it")
 
 
-def _failed(job: Job, name: str, outcome: dict, message: str) -> dict:
-    os.makedirs(os.path.join(job.outdir, "failed"), exist_ok=True)
-    write_text_atomic(os.path.join(job.outdir, "failed", name + ".txt"), message + "\n")
-    return {**outcome, "status": "failed", "error": message}
+def system_message(exc: OSError) -> str:
+    """What the system refused, in one line: ``cannot write PATH (No space left on device)``."""
+    what = f"cannot write {exc.filename}" if exc.filename else "a file could not be written or read"
+    return f"{what} ({exc.strerror or exc})"
+
+
+def _failed(job: Job, name: str, outcome: dict, message: str, system: bool = False) -> dict:
+    """The log's failed outcome, its reason also in ``failed/NAME.txt`` when that can be written (a full disk, a
+    ``failed`` folder that is a dangling link: the outcome says so instead). ``system_error``: the failure is the
+    system's (exit 4), not the log's."""
+    out = {**outcome, "status": "failed", "error": message}
+    try:
+        os.makedirs(os.path.join(job.outdir, "failed"), exist_ok=True)
+        write_text_atomic(os.path.join(job.outdir, "failed", name + ".txt"), message + "\n")
+    except OSError as exc:
+        out["error"] = f"{message} (its note in failed/ could not be written: {exc.strerror or exc})"
+        system = True
+    if system:
+        out["system_error"] = True
+    return out
 
 
 def _process(job: Job, settings: ChargeSettings, folder: str, name: str, inv_path: str, outcome: dict) -> dict:
@@ -319,6 +337,10 @@ def _run_in_worker(job: Job) -> dict:
     _IN_JOB = True
     try:
         return run_one(job)
+    except Exception as exc:  # noqa: BLE001 - run_one never raises for a log: a defect; the log fails, the pool lives
+        return {"log": job.log, "vehicle": job.vehicle, "invoice": "", "status": "failed", "system_error": isinstance(exc, OSError),
+                "error": f"{job.log}: " + (system_message(exc) if isinstance(exc, OSError) else
+                                           f"internal error ({type(exc).__name__}: {exc}); please report it")}  # fmt: skip
     except BaseException:  # noqa: BLE001 - SIGTERM or an interrupt: what was written has been discarded on the way out
         os._exit(143)
     finally:
