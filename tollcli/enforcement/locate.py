@@ -45,7 +45,20 @@ def vehicle_from_path(path: str) -> str:
     return name
 
 
-_HEADER_VEHICLE = re.compile(rb"^#\s*vehicle(?:[ _-]?id)?\s*[:=]\s*(\S+)", re.IGNORECASE | re.MULTILINE)
+#: ``# vehicle: ID`` (or ``vehicle id``, ``vehicle_id``, ``=``): the id is the whole rest of that line, trimmed
+_HEADER_VEHICLE = re.compile(rb"^#[ \t]*vehicle(?:[ _-]?id)?[ \t]*[:=]([^\r\n]*)", re.IGNORECASE | re.MULTILINE)
+#: the longest vehicle id (characters): a plate, a VIN (17), a fleet's own numbering fit many times over
+VEHICLE_ID_MAX_CHARS = 64
+
+
+def vehicle_id_problem(vehicle: str) -> str | None:
+    """Why ``vehicle`` cannot be a vehicle id (None: it can): control characters (a tab, a line end, NUL) or more than
+    :data:`VEHICLE_ID_MAX_CHARS` characters (its invoice folder's name, percent-encoded, must fit a file system)."""
+    if any(ord(c) < 0x20 or 0x7F <= ord(c) < 0xA0 for c in vehicle):
+        return f"vehicle id {vehicle!r} has control characters"
+    if len(vehicle) > VEHICLE_ID_MAX_CHARS:
+        return f"vehicle id {vehicle[:20]!r}… has {len(vehicle)} characters, more than {VEHICLE_ID_MAX_CHARS}"
+    return None
 
 
 def vehicle_from_log(path: str) -> str | None:
@@ -63,9 +76,13 @@ def vehicle_from_log(path: str) -> str | None:
 
 
 def vehicle_in_head(head: bytes) -> str | None:
-    """The vehicle id of a ``# vehicle: ID`` comment line in a log's first bytes, if any."""
+    """The vehicle id of a ``# vehicle: ID`` comment line in a log's first bytes, if any: the whole rest of the line,
+    blanks inside kept (``FLEET 1`` and ``FLEET 2`` are two vehicles), around it trimmed; an empty one is none."""
     match = _HEADER_VEHICLE.search(head)
-    return match.group(1).decode("utf-8", "replace") if match else None
+    if not match:
+        return None
+    vehicle = match.group(1).decode("utf-8", "replace").strip(" \t")
+    return vehicle or None
 
 
 def separate_simultaneous(vehicles: list[str], named_by_file: list[bool], logs: list[str],

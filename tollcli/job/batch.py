@@ -49,7 +49,7 @@ import pandas as pd
 from tollcli import __version__
 from tollcli.charging.invoice import file_sha256, invoice_json
 from tollcli.charging.recognition import PASSAGE_GAP_S
-from tollcli.enforcement.locate import vehicle_from_log, vehicle_from_path
+from tollcli.enforcement.locate import VEHICLE_ID_MAX_CHARS, vehicle_from_log, vehicle_from_path, vehicle_id_problem
 from tollcli.errors import DataError, UsageError
 from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
 from tollcli.job.epoch_schema import conform_epochs, epoch_schema
@@ -94,10 +94,17 @@ def _owner(outdir: str, vehicle: str, name: str) -> str | None:
         return None
 
 
+def _vehicle_error(log: str, vehicle: str) -> str:
+    problem = vehicle_id_problem(vehicle)
+    return f"{log}: {problem} (give each vehicle a printable id of at most {VEHICLE_ID_MAX_CHARS} characters)" if problem else ""
+
+
 def plan_outputs(logs: list[str], settings: ChargeSettings, outdir: str) -> list[tuple[str, str, str]]:
-    """(vehicle id, vehicle folder, output name) of every log: no two logs share an output."""
+    """(vehicle id, vehicle folder, output name) of every log: no two logs share an output. A vehicle id that cannot be
+    one (:func:`~tollcli.enforcement.locate.vehicle_id_problem`) gets a placeholder folder: that log fails."""
     vehicles = [settings.vehicle or vehicle_from_log(log) or vehicle_from_path(log) for log in logs]
-    places = [(path_component(v), path_component(log_name(log))) for v, log in zip(vehicles, logs)]
+    places = [(path_component(v if vehicle_id_problem(v) is None else f"invalid-vehicle-{hashlib.sha256(v.encode('utf-8', 'surrogateescape')).hexdigest()[:8]}"),
+               path_component(log_name(log))) for v, log in zip(vehicles, logs)]  # fmt: skip
     groups: dict[tuple[str, str], list[int]] = {}
     for i, place in enumerate(places):
         groups.setdefault(place, []).append(i)
@@ -380,7 +387,7 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
         shared.append(("osnma_merkle_sha256", file_sha256(osnma_merkle)))
     keys = tuple(osnma_public_keys) if osnma_public_keys is not None else None
     jobs = [Job(log, geo, tariff, settings, outdir, force, roads, vehicle, name, tuple(shared), nav,
-                osnma_merkle=osnma_merkle, osnma_public_keys=keys)
+                osnma_merkle=osnma_merkle, osnma_public_keys=keys, error=_vehicle_error(log, vehicle))
             for log, (vehicle, _, name) in zip(logs, plan_outputs(logs, settings, outdir))]  # fmt: skip
     if vehicles is not None:
         jobs = _fleet_jobs(jobs, vehicles, fleet)

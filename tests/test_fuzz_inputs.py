@@ -1,0 +1,139 @@
+"""A seeded mutation fuzzer over a real file of every input kind (part of issue 54): bit flips, truncation, a record
+duplicated or two swapped, a number replaced by NaN, infinity, 10⁴⁰⁰ or 400 digits, NUL runs, a 300 kB field; UBX
+frames with their checksums recomputed (a flipped payload byte, an edited length). Each case goes through ``info``
+and ``integrity``: a documented exit (never 4 or 5), an error in one line, no output left behind by an error.
+
+``FUZZ_EXAMPLES`` sets the budget (cases in all; CI runs a small fixed set); ``benchmarks/fuzz_nightly.py`` runs
+thousands. A case is its kind and number: ``pytest tests/test_fuzz_inputs.py -k 'ubx-17'`` replays it.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+
+import numpy as np
+import pytest
+from conftest import SHARED_DATA as SHARED
+from conftest import run_main
+
+EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "60"))
+#: the seed files: kind → (path under ../shared/data, bytes kept from its start (0: all), extra options)
+SEEDS = {
+    "ubx": ("rtklibexplorer/gnss_1730.ubx", 500_000, ()),
+    "ubx-nav": ("gpsd/ublox-neo-m8l.log", 0, ()),
+    "gpsd-json": ("gpsd/ac12.log.chk", 0, ()),
+    "gsdc-derived": ("gsdc2021/Pixel4_derived.csv", 0, ()),
+    "device-gnss": ("gsdc2022/device_gnss.csv", 0, ()),
+    "gnsslogger": ("android/pixel6_gnsslogger.txt", 0, ("--nav", str(SHARED / "rinex" / "brdc1190.21n"))),
+    "rinex": ("android/pixel6.23o", 0, ("--nav", str(SHARED / "rinex" / "brdc1190.21n"))),
+    "rtklib-pos": ("rtklibexplorer/gnss_1730_sf.pos", 0, ()),
+    "librsf": ("smartloc/Berlin_Potsdamer_Platz_Input.txt", 400_000, ()),
+    "nmea": ("gpsd/ublox-neo-m8n.log", 0, ()),
+}
+#: what a number token may become
+ODD_NUMBERS = (b"NaN", b"nan", b"inf", b"-inf", b"1e400", b"-1e400", b"9" * 400, b"-0", b"", b"0", b"-1", b"1e-320", b"\x00")
+DOCUMENTED = {0, 1, 2, 3}
+_NUMBER = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
+
+
+def _seed(kind: str) -> bytes:
+    path, keep, _ = SEEDS[kind]
+    data = (SHARED / path).read_bytes()
+    return data[:keep] if keep else data
+
+
+def _ubx_frames(data: bytes) -> list[tuple[int, int]]:
+    """(start, length with header and checksum) of the UBX frames of ``data``."""
+    frames, i = [], 0
+    while (i := data.find(b"\xb5\x62", i)) >= 0 and i + 8 <= len(data):
+        n = data[i + 4] | data[i + 5] << 8
+        if i + 8 + n <= len(data):
+            frames.append((i, 8 + n))
+            i += 8 + n
+        else:
+            i += 2
+    return frames
+
+
+def _ubx_checksum(frame: bytearray) -> None:
+    a = b = 0
+    for x in frame[2:-2]:
+        a = (a + x) & 255
+        b = (b + a) & 255
+    frame[-2], frame[-1] = a, b
+
+
+def _mutate_ubx(data: bytes, rng: np.random.Generator) -> bytes:
+    frames = _ubx_frames(data)
+    start, size = frames[int(rng.integers(len(frames)))]
+    frame = bytearray(data[start : start + size])
+    how = int(rng.integers(5))
+    if how == 0 and size > 8:  # a payload byte flipped, the checksum made good
+        frame[6 + int(rng.integers(size - 8))] ^= 1 << int(rng.integers(8))
+        _ubx_checksum(frame)
+    elif how == 1:  # the length edited (the checksum made good over what is there)
+        n = int(rng.choice([0, 1, 0xFFFF, size - 9, size + 7]))
+        frame[4:6] = (max(n, 0) & 0xFFFF).to_bytes(2, "little")
+        _ubx_checksum(frame)
+    elif how == 2:  # the frame twice
+        frame = frame + frame
+    elif how == 3:  # NUL run
+        frame = frame[: size // 2] + bytes(int(rng.integers(1, 5000))) + frame[size // 2 :]
+    else:  # the log cut inside the frame
+        return data[: start + int(rng.integers(size))]
+    return data[:start] + bytes(frame) + data[start + size :]
+
+
+def _mutate_text(data: bytes, rng: np.random.Generator) -> bytes:
+    lines = data.split(b"\n")
+    k = int(rng.integers(len(lines)))
+    how = int(rng.integers(8))
+    if how == 0:  # a bit flipped anywhere
+        b = bytearray(data)
+        b[int(rng.integers(len(b)))] ^= 1 << int(rng.integers(8))
+        return bytes(b)
+    if how == 1:  # cut
+        return data[: int(rng.integers(len(data)))]
+    if how == 2:  # a line twice
+        lines.insert(k, lines[k])
+    elif how == 3:  # two lines swapped
+        j = int(rng.integers(len(lines)))
+        lines[k], lines[j] = lines[j], lines[k]
+    elif how in (4, 5, 6):  # numbers replaced by odd ones (several in one line)
+        numbers = list(_NUMBER.finditer(lines[k]))
+        for m in sorted((numbers[int(i)] for i in rng.integers(len(numbers), size=min(3, len(numbers)))) if numbers else (),
+                        key=lambda m: -m.start()):  # fmt: skip
+            lines[k] = lines[k][: m.start()] + ODD_NUMBERS[int(rng.integers(len(ODD_NUMBERS)))] + lines[k][m.end() :]
+    else:  # a NUL run or a 300 kB field
+        filler = bytes(int(rng.integers(1, 5000))) if rng.integers(2) else b"7" * 300_000
+        cut = int(rng.integers(len(lines[k]) + 1))
+        lines[k] = lines[k][:cut] + filler + lines[k][cut:]
+    return b"\n".join(lines)
+
+
+def _cases() -> list[tuple[str, int]]:
+    kinds = [k for k in SEEDS if (SHARED / SEEDS[k][0]).exists()]
+    per_kind = max(EXAMPLES // max(len(SEEDS), 1), 2)
+    return [(kind, i) for kind in kinds for i in range(per_kind)]
+
+
+@pytest.mark.parametrize("kind,case", _cases(), ids=[f"{k}-{i}" for k, i in _cases()])
+def test_a_mutated_real_file_gets_a_documented_exit(tmp_path, kind, case):
+    rng = np.random.default_rng([case, sum(kind.encode())])
+    data = _seed(kind)
+    for _ in range(int(rng.integers(1, 4))):  # one to three mutations
+        data = (_mutate_ubx if kind.startswith("ubx") else _mutate_text)(data, rng)
+    name = os.path.basename(SEEDS[kind][0])
+    log = tmp_path / name
+    log.write_bytes(data)
+    out = tmp_path / "e.csv"
+    fmt = ("--input-format", kind) if kind in ("librsf", "rinex", "gnsslogger", "device-gnss", "gsdc-derived", "gpsd-json") else ()
+    for args, output in ((("info", str(log)), None), (("integrity", str(log), *fmt, *SEEDS[kind][2], "-q", "-o", str(out)), out)):
+        code, err = run_main(*args)
+        assert code in DOCUMENTED and "Traceback" not in err and "internal error" not in err, f"{kind}-{case} {args[0]}: exit {code}: {err}"
+        if code in (1, 2):
+            assert err.strip().splitlines()[-1].startswith("tollcli: error"), err
+            assert len(err.strip().splitlines()) == 1, err
+            if output is not None:
+                assert not output.exists(), f"{kind}-{case}: exit {code} left {output}"
