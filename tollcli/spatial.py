@@ -198,3 +198,36 @@ def project(geoms, crs: str, inverse: bool = False):
     for start in range(0, len(geoms), PROJECT_CHUNK):
         out[start : start + PROJECT_CHUNK] = shapely.transform(geoms[start : start + PROJECT_CHUNK], moved)
     return out
+
+
+#: the largest HAL a geo-object may have (m): as ``--hal`` (an Infinity or 1e300 made every position "within HAL", and
+#: an invoice with ``Infinity`` in it is not JSON)
+HAL_MAX_M = 10_000.0
+
+
+def hal_of(value) -> float:
+    """A geo-object's ``hal_m`` property as metres, NaN unless it is a JSON number (not text, not a boolean), finite,
+    positive and at most :data:`HAL_MAX_M`."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return float("nan")
+    try:
+        hal = float(value)
+    except OverflowError:  # an integer of hundreds of digits
+        return float("nan")
+    return hal if 0.0 < hal <= HAL_MAX_M else float("nan")
+
+
+def unclosed_ring(feature) -> bool:
+    """Whether a ring of the feature's GeoJSON Polygon or MultiPolygon does not end where it starts (shapely closes it
+    silently; the file meant something else)."""
+    geom = feature.get("geometry") if isinstance(feature, dict) else None
+    if not isinstance(geom, dict):
+        return False
+    coords = geom.get("coordinates")
+    polygons = [coords] if geom.get("type") == "Polygon" else coords if geom.get("type") == "MultiPolygon" else []
+    for polygon in polygons if isinstance(polygons, list) else ():
+        for ring in polygon if isinstance(polygon, list) else ():
+            if isinstance(ring, list) and len(ring) >= 2 and ring[0] != ring[-1]:
+                return True
+    return False
+

@@ -60,8 +60,10 @@ def read_settings(path: str) -> dict:
     if path.lower().endswith(".json"):
         try:
             doc = json.loads(raw)
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise UsageError(f"--config {path}: not JSON ({exc})") from None
+        except (UnicodeDecodeError, ValueError) as exc:  # (ValueError: not JSON, or an integer of over 4 300 digits)
+            raise UsageError(f"--config {path}: not JSON ({' '.join(str(exc).split())[:200]})") from None
+        except RecursionError:
+            raise UsageError(f"--config {path}: not JSON (nested too deeply)") from None
         params = doc.get("parameters") if isinstance(doc, dict) else None
         if not isinstance(params, dict):
             raise UsageError(f"--config {path}: a JSON settings file is an invoice, with its parameters")

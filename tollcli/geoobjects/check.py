@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from tollcli.spatial import feature_geometries, feature_geometry, metric_crs, project
+from tollcli.spatial import HAL_MAX_M, feature_geometries, feature_geometry, hal_of, metric_crs, project, unclosed_ring
 
 
 @dataclass
@@ -53,6 +53,9 @@ def _crs_problem(crs, seen: dict) -> str:
 OVERLAP_BLOCK = 8192
 #: the smallest HAL ``check`` (and ``process``) accept unless told otherwise, m
 HAL_MIN_CHECK_M = 5.0
+#: the widest a geo-object may be (degrees of longitude or latitude, ≈ 650 km): its metric frame is centred on it,
+#: and a polygon from 2°E to 153°E was never matched (nor said so)
+MAX_EXTENT_DEG = 6.0
 
 
 def check_geoobjects(path: str, hal_min_m: float = HAL_MIN_CHECK_M) -> list[Finding]:
@@ -98,6 +101,12 @@ def check_features(features: list, hal_min_m: float = HAL_MIN_CHECK_M) -> list[F
         bounds = all_bounds[i]
         if (np.abs(bounds[[0, 2]]) > 180).any() or (np.abs(bounds[[1, 3]]) > 90).any():
             findings.append(Finding(fid, "coordinates are not WGS-84 longitude/latitude (wrong CRS?)"))
+        elif max(bounds[2] - bounds[0], bounds[3] - bounds[1]) > MAX_EXTENT_DEG:
+            findings.append(Finding(fid, f"spans {bounds[2] - bounds[0]:.1f}° of longitude and {bounds[3] - bounds[1]:.1f}° of latitude: "
+                                         f"no metric frame holds it faithfully (a geo-object is a stretch of road or a zone, "
+                                         f"at most {MAX_EXTENT_DEG:g}° across)"))  # fmt: skip
+        if unclosed_ring(feature):
+            findings.append(Finding(fid, "a ring is not closed (GeoJSON: its last point repeats its first)"))
             polys.append(None)
             continue
         if not valid[i]:
@@ -109,13 +118,13 @@ def check_features(features: list, hal_min_m: float = HAL_MIN_CHECK_M) -> list[F
         if crs_problem:
             findings.append(Finding(fid, crs_problem))
         hal = props.get("hal_m")
-        try:
-            hal_value = float(hal)
-        except (TypeError, ValueError):
-            findings.append(Finding(fid, f"hal_m missing or not a number ({hal!r})"))
-        else:
-            if not hal_value >= hal_min_m:
-                findings.append(Finding(fid, f"hal_m {hal_value:g} m below the minimum {hal_min_m:g} m"))
+        hal_value = hal_of(hal)
+        if isinstance(hal, bool) or not isinstance(hal, (int, float)):
+            findings.append(Finding(fid, f"hal_m missing or not a number ({str(hal)[:40]!r})"))
+        elif not np.isfinite(hal_value):
+            findings.append(Finding(fid, f"hal_m {str(hal)[:40]} is not a HAL: give metres in (0, {HAL_MAX_M:g}]"))
+        elif not hal_value >= hal_min_m:
+            findings.append(Finding(fid, f"hal_m {hal_value:g} m below the minimum {hal_min_m:g} m"))
         polys.append(geom if valid[i] else None)
     usable = [(fid, p) for fid, p in zip(ids, polys) if p is not None]
     if len(usable) > 1:

@@ -13,10 +13,12 @@ import shapely
 from tollcli.geoobjects.geojson_stream import gc_paused
 from tollcli.geoobjects.index import build_grid
 from tollcli.errors import DataError
-from tollcli.spatial import feature_geometries, feature_geometry, project
+from tollcli.spatial import HAL_MAX_M, feature_geometries, feature_geometry, hal_of, project
 
-#: 6: a folder of memory-mapped arrays with a grid index (5 and before: one .npz read whole)
-STORE_FORMAT = 6
+#: 6: a folder of memory-mapped arrays with a grid index (5 and before: one .npz read whole); 7: the same arrays, made
+#: only from files that pass the stricter check (a HAL that is a number in (0, 10 000] m, rings closed, at most 6°
+#: across): a store an older version made of a file now refused is not used
+STORE_FORMAT = 7
 #: polygons projected and written as WKB per block
 CHUNK = 8192
 #: the properties the store and ``geoobjects check`` read (the others — the build's report — are not kept)
@@ -56,7 +58,7 @@ def compile_features(features: list, path: str, checked: bool = False, columns: 
         if fid in (None, ""):
             raise DataError(f"{path}: feature #{i} has no id")
     polys = feature_geometries(features, "Polygon")
-    hals = np.array([_float(p.get("hal_m")) for p in props])
+    hals = np.array([hal_of(p.get("hal_m")) for p in props])
     usable = ~shapely.is_missing(polys)
     usable[usable] = np.isin(shapely.get_type_id(polys[usable]), (3, 6))  # Polygon, MultiPolygon
     usable[usable] &= ~shapely.is_empty(polys[usable]) & shapely.is_valid(polys[usable])
@@ -64,7 +66,7 @@ def compile_features(features: list, path: str, checked: bool = False, columns: 
     if not usable.all():
         i = int(np.flatnonzero(~usable)[0])
         _, why = feature_geometry(features[i])
-        raise DataError(f"{path}: feature {ids[i]}: needs a valid non-empty polygon and hal_m > 0 ({why or 'run tollcli geoobjects check'})")
+        raise DataError(f"{path}: feature {ids[i]}: needs a valid non-empty polygon and a hal_m in (0, {HAL_MAX_M:g}] m ({why or 'run tollcli geoobjects check'})")
     ids = [str(fid) for fid in ids]
     if len(set(ids)) != len(ids):
         raise DataError(f"{path}: duplicate geo-object ids")

@@ -17,7 +17,7 @@ import json
 import re
 
 from tollcli.errors import DataError, UsageError
-from tollcli.spatial import feature_geometries, features_of
+from tollcli.spatial import feature_geometries, features_of, unclosed_ring
 
 READ_BYTES = 8 << 20
 BLOCK = 2000  # features made into geometries at a time
@@ -83,6 +83,8 @@ class _Text:
                 raise DataError(f"{path}: not a GeoJSON file ({exc.msg} at character {self.offset + exc.pos})") from None
             except RecursionError:
                 raise DataError(f"{path}: not a GeoJSON file (nested too deeply)") from None
+            except ValueError as exc:  # an integer of over 4 300 digits
+                raise DataError(f"{path}: not a GeoJSON file ({str(exc).split(';')[0]})") from None
             if end == len(self.buf) and not self.eof and self.more():  # a number may go on in the next block
                 continue
             self.pos = end
@@ -159,7 +161,7 @@ def _slim(block: list, keep: frozenset[str] | None, geometry: bool = True) -> li
     geoms = feature_geometries(block, "Polygon")
     out = []
     for feature, geom in zip(block, geoms):
-        if geom is None or not isinstance(feature, dict):
+        if geom is None or not isinstance(feature, dict) or unclosed_ring(feature):  # (shapely would close the ring: check says why)
             out.append(feature)
         else:
             props = feature.get("properties")

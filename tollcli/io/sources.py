@@ -134,8 +134,8 @@ def read_json(path: str, what: str):
             return json.load(fh)
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise DataError(f"{path}: not {what} ({exc})") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:  # (ValueError: not JSON, or an integer of over 4 300 digits)
+        raise DataError(f"{path}: not {what} ({' '.join(str(exc).split())[:200]})") from None
     except RecursionError:
         raise DataError(f"{path}: not {what} (nested too deeply)") from None
 
