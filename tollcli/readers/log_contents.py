@@ -13,6 +13,7 @@ from collections import Counter
 import numpy as np
 
 from tollcli.io.sources import iter_byte_blocks, open_binary, source_name
+from tollcli.readers.ubx_frames import MAX_PAYLOAD
 
 _NMEA = re.compile(rb"[$!]([A-Z][A-Z0-9]{1,5}),")
 _GPSD = re.compile(rb'"class"\s*:\s*"([A-Z]+)"')
@@ -75,9 +76,12 @@ def _count_ubx(data: bytes, counts: Counter) -> bytes:
         if i + 6 > len(data):
             return data[i:]
         cls, msg_id, length = struct.unpack_from("<BBH", data, i + 2)
+        if length > MAX_PAYLOAD:  # no frame (as the reader frames them): a sync pair inside other data, one byte on
+            i = data.find(_UBX_SYNC, i + 2)
+            continue
         end = i + 8 + length
         if end > len(data):
-            return data[i:] if length < 65536 else b""
+            return data[i:]
         body = np.frombuffer(data, np.uint8, end - 2 - (i + 2), i + 2).astype(np.int64)
         a, b = int(body.sum()) & 0xFF, int(np.cumsum(body).sum()) & 0xFF  # the 8-bit Fletcher checksum
         if data[end - 2] == a and data[end - 1] == b:

@@ -22,7 +22,7 @@ from tollcli.readers.nmea.line_reader import ReadStats
 
 SYNC = b"\xb5\x62"
 #: the longest payload taken for a frame (a longer length field is a sync pair inside other data)
-_MAX_PAYLOAD = 8192
+MAX_PAYLOAD = 8192
 
 
 def checksum(data: bytes) -> bytes:
@@ -80,6 +80,7 @@ def iter_frame_blocks(stream: BinaryIO, name: str, stats: ReadStats, strict: boo
     while not eof:
         block = stream.read(block_bytes)
         eof = not block
+        stats.bytes_read += len(block)
         buf += block
         at, keep = 0, None
         while keep is None or at < keep:
@@ -127,7 +128,7 @@ def _walk(buf: bytes, at: int, eof: bool) -> tuple[list[tuple[int, int]], int, i
         if n < start + 6:
             return spans, n, (n if eof else start)
         length = buf[start + 4] | (buf[start + 5] << 8)
-        if length > _MAX_PAYLOAD:  # no frame: a sync pair inside other data
+        if length > MAX_PAYLOAD:  # no frame: a sync pair inside other data
             at = start + 2
             continue
         end = start + 8 + length

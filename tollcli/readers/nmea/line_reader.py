@@ -24,6 +24,7 @@ class ReadStats:
     source: str = ""
     protocol: str = "NMEA sentences"  # what ``sentences`` counts (UBX messages, gpsd JSON reports)
     lines: int = 0  # lines (UBX: frames)
+    bytes_read: int = 0  # bytes a binary reader read (UBX: a file of bytes with no frame in them is not empty)
     sentences: int = 0  # checksum-verified NMEA sentences (UBX frames, JSON reports)
     decoded: int = 0  # of which decoded into epochs
     unused: int = 0  # valid sentences of types the reader does not use (proprietary, AIS, ...)

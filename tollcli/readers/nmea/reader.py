@@ -171,6 +171,8 @@ def check_partial(stats: ReadStats, max_bad: int | None) -> None:
 def check_usable(stats: ReadStats) -> None:
     """Raise DataError when a log gave nothing a toll processor can use."""
     if stats.lines == 0:
+        if stats.bytes_read:
+            raise DataError(f"{stats.source}: no {stats.protocol} in {stats.bytes_read} bytes (no whole frame with a good checksum)")
         raise DataError(f"{stats.source}: empty file")
     if stats.sentences == 0:
         hint = f"; first problem at {stats.first_problem}" if stats.first_problem else ""
