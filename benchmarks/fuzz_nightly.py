@@ -1,9 +1,14 @@
-"""Run the fuzz suite (tests/test_fuzz.py) long and at random, for nightly use.
+"""Run the fuzz suites long and at random, for nightly use.
 
     python benchmarks/fuzz_nightly.py --examples 5000
 
-Each fuzzer gets ``--examples`` random cases (CI runs a small fixed set); the
-report lists cases tried per fuzzer and every failure with its minimal example.
+* ``tests/test_fuzz.py``: each hypothesis fuzzer (NMEA logs, geo-object files, tariffs) gets ``--examples`` cases;
+* ``tests/test_fuzz_inputs.py``: ``--examples`` seeded mutations in all of a real file of every input kind (UBX RAWX
+  and NAV, gpsd JSON, GSDC derived and device_gnss CSV, GnssLogger, RINEX, RTKLIB .pos, libRSF, NMEA), each through
+  ``info`` and ``integrity``.
+
+CI runs a small fixed set of both. The report lists the cases tried and every failure (a hypothesis failure with its
+minimal example; a mutation by its kind and number, which replays it: ``pytest tests/test_fuzz_inputs.py -k ubx-17``).
 """
 
 from __future__ import annotations
@@ -32,7 +37,15 @@ def main() -> None:
     print(proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else "(no output)")
     if proc.returncode != 0:
         print(proc.stdout[-8000:])
-    sys.exit(proc.returncode)
+    start = time.perf_counter()
+    inputs = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-rf", "tests/test_fuzz_inputs.py"],
+                            cwd=ROOT, env=env, capture_output=True, text=True)  # fmt: skip
+    failed = [line for line in inputs.stdout.splitlines() if line.startswith("FAILED")]
+    print(f"\nmutations of real files: {args.examples} cases over every input kind, each through info and integrity, "
+          f"{time.perf_counter() - start:.0f} s")
+    print(inputs.stdout.strip().splitlines()[-1] if inputs.stdout.strip() else "(no output)")
+    print("\n".join(failed))
+    sys.exit(proc.returncode or inputs.returncode)
 
 
 if __name__ == "__main__":

@@ -112,10 +112,16 @@ def _mutate_text(data: bytes, rng: np.random.Generator) -> bytes:
     return b"\n".join(lines)
 
 
+#: cases a long run found failing once (every run replays them): a damaged receiver clock left a record without a
+#: time (KeyError 'tod_s'; a merge on a null time), a date in the year 0 (strftime), a satellite number of 14 000 000
+FOUND = (("device-gnss", 134), ("gnsslogger", 25), ("gnsslogger", 49), ("rtklib-pos", 32), ("rtklib-pos", 141), ("librsf", 146))
+
+
 def _cases() -> list[tuple[str, int]]:
     kinds = [k for k in SEEDS if (SHARED / SEEDS[k][0]).exists()]
     per_kind = max(EXAMPLES // max(len(SEEDS), 1), 2)
-    return [(kind, i) for kind in kinds for i in range(per_kind)]
+    cases = [(kind, i) for kind in kinds for i in range(per_kind)]
+    return cases + [c for c in FOUND if c not in cases and c[0] in kinds]
 
 
 @pytest.mark.parametrize("kind,case", _cases(), ids=[f"{k}-{i}" for k, i in _cases()])

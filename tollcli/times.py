@@ -23,6 +23,12 @@ def epoch_seconds(epochs: pd.DataFrame) -> np.ndarray:
     """Seconds since 1970 from ``time_utc`` where dated, else the time of day unwrapped over midnights."""
     if "time_utc" in epochs and epochs["time_utc"].notna().all() and len(epochs):
         return epochs["time_utc"].dt.tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64) / 1000.0
+    if "tod_s" not in epochs:  # a table dated per epoch, some epochs not (a damaged time field): NaN there
+        out = np.full(len(epochs), np.nan)
+        if "time_utc" in epochs:
+            dated = epochs["time_utc"].notna().to_numpy()
+            out[dated] = epochs["time_utc"][dated].dt.tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64) / 1000.0
+        return out
     tod = epochs["tod_s"].to_numpy(float)
     wraps = np.concatenate([[0], np.cumsum(np.diff(tod) < -43_200.0)]) if tod.size else np.zeros(0)
     return tod + 86_400.0 * wraps

@@ -43,8 +43,9 @@ DEFAULT_PRR_SIGMA_MPS = 0.2
 
 
 def with_broadcast_satellites(m: pd.DataFrame, ephemerides: pd.DataFrame) -> pd.DataFrame:
-    """``m`` with the satellite columns from broadcast ephemerides (NaN where none is known)."""
-    m = m.copy()
+    """``m`` with the satellite columns from broadcast ephemerides (NaN where none is known); records without a
+    receiver time (clock fields missing or damaged) are left out: they belong to no epoch."""
+    m = m[np.isfinite(m["t_rx_gps_s"].to_numpy(float))].reset_index(drop=True)
     use = m["pr_valid"].to_numpy(bool) & np.isin(m["constellation"].to_numpy(object), ["GPS", "Galileo"])
     states = satellite_states(ephemerides, m["sv"].to_numpy(str), m["t_rx_gps_s"].to_numpy(float),
                               np.where(use, m["pr_m"].to_numpy(float), 2.2e7))  # fmt: skip
@@ -78,6 +79,9 @@ def with_device_gnss_satellites(m: pd.DataFrame, device: pd.DataFrame) -> pd.Dat
 def raw_epochs(m: pd.DataFrame, sigma_model: str = "nominal", sigma_m: float = 5.0, nominal: NominalModel | None = None,
                iono_coeffs=None) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
     """WLS position and Doppler velocity per epoch (an epoch table) and the RAIM measurements there."""
+    timed = np.isfinite(m["t_rx_gps_s"].to_numpy(float))
+    if not timed.all():  # a record whose clock fields are missing or damaged has no time: it belongs to no epoch
+        m = m[timed].reset_index(drop=True)
     keys = m["epoch_key"].to_numpy()
     epoch_keys, first = np.unique(keys, return_index=True)
     n_epochs = epoch_keys.size

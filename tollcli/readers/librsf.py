@@ -38,6 +38,10 @@ class LibrsfLog:
     malformed: int  # lines of a known kind that were skipped
 
 
+#: satellite numbers and system codes are below this (smartLoc: GPS 1–32, Galileo 301–336; systems 1 and 3)
+SATELLITE_ID_LIMIT = 1000
+
+
 def read_librsf(path: str, strict: bool = False) -> LibrsfLog:
     """The three kinds of measurement of a libRSF file as tables (rows in file order)."""
     try:
@@ -54,6 +58,10 @@ def read_librsf(path: str, strict: bool = False) -> LibrsfLog:
         rows = np.flatnonzero(kind == name)
         values = raw.iloc[rows, 1 : 1 + len(columns)].apply(pd.to_numeric, errors="coerce").to_numpy(float)
         bad = ~np.isfinite(values).all(axis=1)
+        if name == "pseudorange3":  # a satellite number (GPS 1…, Galileo 301…) and a system code are small integers
+            ids = values[:, [columns.index("sat"), columns.index("sys")]]
+            with np.errstate(invalid="ignore"):
+                bad |= ~((ids >= 0) & (ids < SATELLITE_ID_LIMIT) & (np.floor(ids) == ids)).all(axis=1)
         if bad.any() and strict:
             raise DataError(f"{path}:{int(rows[np.argmax(bad)]) + 1}: a {name} line whose fields are not {len(columns)} numbers")
         malformed += int(bad.sum())
