@@ -83,3 +83,18 @@ def test_a_json_integer_of_5000_digits_is_a_one_line_error(tmp_path):
         done = run_cli(*args)
         err = done.stderr.decode()
         assert done.returncode in (1, 2) and "4300 digits" in err and len(err.strip().splitlines()) == 1, (args[0], err)
+
+
+def test_a_road_file_on_mars_is_a_one_line_error(tmp_path):
+    """A Shapefile whose .prj is a CRS of Mars: ``ProjError … not belong to the same celestial body`` (exit 5)."""
+    import geopandas as gpd
+
+    roads = gpd.read_file(REPO / "geoobjects" / "example-roads.geojson")
+    shp = tmp_path / "roads.shp"
+    roads.to_file(shp)
+    shp.with_suffix(".prj").write_text('GEOGCS["Mars 2000",DATUM["D_Mars_2000",SPHEROID["Mars_2000_IAU_IAG",3396190.0,169.894447]],'
+                                       'PRIMEM["Greenwich",0],UNIT["Decimal_Degree",0.0174532925199433]]')  # fmt: skip
+    done = run_cli("geoobjects", "build", str(shp), "-o", str(tmp_path / "geo.geojson"), "-q")
+    err = done.stderr.decode()
+    assert done.returncode == 1 and "cannot be turned into WGS-84" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "geo.geojson").exists()

@@ -43,8 +43,12 @@ def read_road_features(path: str) -> list[dict]:
         raise DataError(f"{path}: not a readable vector file ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
     if frame.crs is None:
         raise DataError(f"{path}: declares no coordinate reference system (a Shapefile needs its .prj)")
-    reproject = not frame.crs.equals("EPSG:4326") and not frame.crs.equals("OGC:CRS84")
-    geometry = frame.geometry.to_crs("EPSG:4326") if reproject else frame.geometry
+    try:
+        reproject = not frame.crs.equals("EPSG:4326") and not frame.crs.equals("OGC:CRS84")
+        geometry = frame.geometry.to_crs("EPSG:4326") if reproject else frame.geometry
+    except Exception as exc:  # PROJ's errors (a CRS on Mars, a projection without its conversion): the file's CRS is unusable
+        first = " ".join(str(exc).split())[:200]
+        raise DataError(f"{path}: its coordinate reference system cannot be turned into WGS-84 ({type(exc).__name__}: {first})") from None
     geoms = np.asarray(geometry.array, dtype=object)
     if reproject:
         geoms = shapely.transform(geoms, _round_degrees)
