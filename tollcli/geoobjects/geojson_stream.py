@@ -38,6 +38,11 @@ def gc_paused():
             gc.enable()
 
 
+#: the longest one feature's text may be (characters, ≈ 2 million vertices): decoded, its coordinates take ~12 times
+#: that (a ring of 10 million vertices, 230 MB of text, took 2.7 GB)
+MAX_FEATURE_CHARS = 64_000_000
+
+
 class _Text:
     """The file's text, decoded block by block; ``buf[pos:]`` is what is not consumed yet."""
 
@@ -72,12 +77,17 @@ class _Text:
         self.pos += 1
 
     def value(self, decoder: json.JSONDecoder, path: str):
-        """The next JSON value (reading more of the file while it is cut short)."""
+        """The next JSON value (reading more of the file while it is cut short; one longer than
+        :data:`MAX_FEATURE_CHARS` is refused: its decoded coordinates would take ~12 times its text)."""
         self.skip_space()
         while True:
             try:
                 value, end = decoder.raw_decode(self.buf, self.pos)
             except json.JSONDecodeError as exc:
+                if len(self.buf) - self.pos > MAX_FEATURE_CHARS:
+                    raise DataError(f"{path}: a feature at character {self.offset + self.pos} is longer than "
+                                    f"{MAX_FEATURE_CHARS // 1_000_000} MB of text (millions of vertices): simplify it "
+                                    f"or cut it into sections") from None  # fmt: skip
                 if self.more():
                     continue
                 raise DataError(f"{path}: not a GeoJSON file ({exc.msg} at character {self.offset + exc.pos})") from None
