@@ -64,6 +64,10 @@ class _Text:
         self.buf += self.decoder.decode(data, final=self.eof)
         return True
 
+    def _too_long(self, path: str) -> DataError:
+        return DataError(f"{path}: a feature at character {self.offset + self.pos} is longer than {MAX_FEATURE_CHARS:,} "
+                         f"characters of text (millions of vertices): simplify it or cut it into sections")
+
     def skip_space(self) -> str:
         """The next character that is not white space ('' at the end)."""
         while True:
@@ -85,9 +89,7 @@ class _Text:
                 value, end = decoder.raw_decode(self.buf, self.pos)
             except json.JSONDecodeError as exc:
                 if len(self.buf) - self.pos > MAX_FEATURE_CHARS:
-                    raise DataError(f"{path}: a feature at character {self.offset + self.pos} is longer than "
-                                    f"{MAX_FEATURE_CHARS // 1_000_000} MB of text (millions of vertices): simplify it "
-                                    f"or cut it into sections") from None  # fmt: skip
+                    raise self._too_long(path) from None
                 if self.more():
                     continue
                 raise DataError(f"{path}: not a GeoJSON file ({exc.msg} at character {self.offset + exc.pos})") from None
@@ -97,6 +99,8 @@ class _Text:
                 raise DataError(f"{path}: not a GeoJSON file ({str(exc).split(';')[0]})") from None
             if end == len(self.buf) and not self.eof and self.more():  # a number may go on in the next block
                 continue
+            if end - self.pos > MAX_FEATURE_CHARS:
+                raise self._too_long(path)
             self.pos = end
             return value
 
