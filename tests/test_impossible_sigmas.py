@@ -92,3 +92,28 @@ def test_an_absurd_grs_residual_is_never_valid(tmp_path, residual):
     assert done.returncode == 0, done.stderr.decode()
     statuses = json.loads(done.stdout)["statuses"]
     assert statuses.get("valid", 0) == 0 and sum(statuses.values()) > 0, statuses
+
+
+@pytest.mark.parametrize("h_acc_m,pl_m,valid", [(1.5, None, True), (0.0, None, False), (0.0, 0.0, False), (1.5, 4e6, False)])
+def test_a_u_blox_accuracy_or_protection_level_that_is_no_sigma(tmp_path, h_acc_m, pl_m, valid):
+    """NAV-PVT's hAcc and NAV-PL's horizontal protection level are the receiver's σ: 0 is no σ (no verdict), 4 000 km
+    no bound within any HAL; 1.5 m makes every epoch valid (the control)."""
+    import struct
+
+    from test_ubx_nav import _nav_pvt
+
+    from tollcli.readers.ubx_frames import frame
+
+    data = b""
+    for k in range(20):
+        itow = 1000 * (43_200 + k)
+        data += _nav_pvt(itow, 42.7 + k * 1e-4, 2.9, 9, h_acc_m=h_acc_m, second=k)
+        if pl_m is not None:
+            pl_mm = round(pl_m * 1000)
+            data += frame(0x01, 0x62, struct.pack("<BBbBBBBBIIIII", 1, 1, -7, 1, 1, 0, 0, 0, 0, itow, pl_mm, pl_mm, pl_mm) + bytes(12))
+    path = tmp_path / "nav.ubx"
+    path.write_bytes(data)
+    done = run_cli("integrity", str(path), "-o", str(tmp_path / "e.csv"), "--json", "-q")
+    assert done.returncode == 0, done.stderr.decode()
+    statuses = json.loads(done.stdout)["statuses"]
+    assert (statuses.get("valid", 0) == 20) if valid else statuses.get("valid", 0) == 0, statuses
