@@ -14,8 +14,11 @@ import re
 
 import numpy as np
 import pytest
+from conftest import REPO, run_main
 from conftest import SHARED_DATA as SHARED
-from conftest import run_main
+
+GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
+TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
 
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "60"))
 #: the seed files: kind → (path under ../shared/data, bytes kept from its start (0: all), extra options)
@@ -37,7 +40,29 @@ DOCUMENTED = {0, 1, 2, 3}
 _NUMBER = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 
 
+#: inputs the tool writes and reads back (an invoice for ``verify``/``info``/``--config``, a TOML settings file): made
+#: once from the straight-drive sample, then mutated like the receivers' files
+WRITTEN = ("invoice", "settings")
+_WRITTEN_SEEDS: dict[str, bytes] = {}
+
+
+def _written_seed(kind: str) -> bytes:
+    if kind not in _WRITTEN_SEEDS:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            out = os.path.join(tmp, "i.json")
+            code, err = run_main("process", str(REPO / "samples" / "straight-drive.nmea"), "--geo", GEO, "--tariff", TARIFF, "-o", out, "-q")
+            assert code == 0, err
+            _WRITTEN_SEEDS["invoice"] = open(out, "rb").read()
+        _WRITTEN_SEEDS["settings"] = (b'date = 2024-05-06\nhal = 40.0\ntc = 5.0\nn_th = 3\nraim = "ss"\npolicy = "raim"\n'
+                                      b'vehicle = "TRK 042"\nvehicle_class = "truck"\nsigma = 5.0\np_md = 5e-5\n')  # fmt: skip
+    return _WRITTEN_SEEDS[kind]
+
+
 def _seed(kind: str) -> bytes:
+    if kind in WRITTEN:
+        return _written_seed(kind)
     path, keep, _ = SEEDS[kind]
     data = (SHARED / path).read_bytes()
     return data[:keep] if keep else data
@@ -118,8 +143,8 @@ FOUND = (("device-gnss", 134), ("gnsslogger", 25), ("gnsslogger", 49), ("rtklib-
 
 
 def _cases() -> list[tuple[str, int]]:
-    kinds = [k for k in SEEDS if (SHARED / SEEDS[k][0]).exists()]
-    per_kind = max(EXAMPLES // max(len(SEEDS), 1), 2)
+    kinds = [k for k in SEEDS if (SHARED / SEEDS[k][0]).exists()] + list(WRITTEN)
+    per_kind = max(EXAMPLES // (len(SEEDS) + len(WRITTEN)), 2)
     cases = [(kind, i) for kind in kinds for i in range(per_kind)]
     return cases + [c for c in FOUND if c not in cases and c[0] in kinds]
 
@@ -130,12 +155,15 @@ def test_a_mutated_real_file_gets_a_documented_exit(tmp_path, kind, case):
     data = _seed(kind)
     for _ in range(int(rng.integers(1, 4))):  # one to three mutations
         data = (_mutate_ubx if kind.startswith("ubx") else _mutate_text)(data, rng)
-    name = os.path.basename(SEEDS[kind][0])
-    log = tmp_path / name
-    log.write_bytes(data)
-    out = tmp_path / "e.csv"
-    fmt = ("--input-format", kind) if kind in ("librsf", "rinex", "gnsslogger", "device-gnss", "gsdc-derived", "gpsd-json") else ()
-    for args, output in ((("info", str(log)), None), (("integrity", str(log), *fmt, *SEEDS[kind][2], "-q", "-o", str(out)), out)):
+    if kind in WRITTEN:
+        runs = _written_runs(tmp_path, kind, data)
+    else:
+        log = tmp_path / os.path.basename(SEEDS[kind][0])
+        log.write_bytes(data)
+        out = tmp_path / "e.csv"
+        fmt = ("--input-format", kind) if kind in ("librsf", "rinex", "gnsslogger", "device-gnss", "gsdc-derived", "gpsd-json") else ()
+        runs = ((("info", str(log)), None), (("integrity", str(log), *fmt, *SEEDS[kind][2], "-q", "-o", str(out)), out))
+    for args, output in runs:
         code, err = run_main(*args)
         assert code in DOCUMENTED and "Traceback" not in err and "internal error" not in err, f"{kind}-{case} {args[0]}: exit {code}: {err}"
         if code in (1, 2):
@@ -143,3 +171,15 @@ def test_a_mutated_real_file_gets_a_documented_exit(tmp_path, kind, case):
             assert len(err.strip().splitlines()) == 1, err
             if output is not None:
                 assert not output.exists(), f"{kind}-{case}: exit {code} left {output}"
+
+
+def _written_runs(tmp_path, kind: str, data: bytes):
+    """The commands that read a mutated invoice (``info``, ``verify``, ``--config``) or settings file (``--config``)."""
+    path = tmp_path / ("invoice.json" if kind == "invoice" else "settings.toml")
+    path.write_bytes(data)
+    out = tmp_path / "c.json"
+    drive = str(REPO / "samples" / "straight-drive.nmea")
+    process = (("process", drive, "--config", str(path), "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(out)), out)
+    if kind == "settings":
+        return (process,)
+    return (("info", str(path)), None), (("verify", str(path)), None), process

@@ -22,6 +22,7 @@ import json
 import tomllib
 from typing import Annotated, Optional
 
+import click
 import typer
 
 from tollcli.errors import UsageError
@@ -70,8 +71,10 @@ def read_settings(path: str) -> dict:
         return {PARAMETER_OPTION.get(k, k): _option_value(v) for k, v in params.items() if k not in DERIVED and v is not None}
     try:
         doc = tomllib.loads(raw.decode("utf-8-sig"))
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise UsageError(f"--config {path}: not TOML ({exc})") from None
+    except (UnicodeDecodeError, ValueError) as exc:  # (tomllib.TOMLDecodeError, or an integer of over 4 300 digits)
+        raise UsageError(f"--config {path}: not TOML ({' '.join(str(exc).split())[:200]})") from None
+    except RecursionError:
+        raise UsageError(f"--config {path}: not TOML (nested too deeply)") from None
     return doc
 
 
@@ -102,6 +105,14 @@ def settings_for(command: str, doc: dict, path: str, options: set[str]) -> dict:
     return out
 
 
+def _takes_a_date(param) -> bool:
+    """Whether an option's value is a date or time (typer's bare type, or click's DateTime)."""
+    bare = getattr(param, "bare_type", None)
+    if callable(bare):
+        return "date" in str(bare()) or "time" in str(bare())
+    return isinstance(getattr(param, "type", None), click.DateTime)
+
+
 def _load(ctx: typer.Context, param: typer.CallbackParam, value: str | None) -> str | None:
     if not value:
         return value
@@ -109,6 +120,9 @@ def _load(ctx: typer.Context, param: typer.CallbackParam, value: str | None) -> 
     defaults = settings_for(ctx.info_name or "", read_settings(value), value, options)
     repeatable = {p.name for p in ctx.command.params if p.param_type_name == "option" and getattr(p, "multiple", False)}
     defaults = {k: [v] if k in repeatable and isinstance(v, str) else v for k, v in defaults.items()}  # nav = "f" as ["f"]
+    for p in ctx.command.params:  # a date or time option takes text (a TOML date became text above); a number is none
+        if p.name in defaults and _takes_a_date(p) and not isinstance(defaults[p.name], str):
+            raise UsageError(f"--config {value}: {p.name} = {str(defaults[p.name])[:40]!r} is not a date (write it as 2026-03-02)")
     ctx.default_map = {**(ctx.default_map or {}), **defaults}
     return value
 
