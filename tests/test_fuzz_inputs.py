@@ -19,6 +19,7 @@ from conftest import SHARED_DATA as SHARED
 
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
 TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
+RURAL = REPO / "samples" / "sim" / "rural-clean"
 
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "60"))
 #: the seed files: kind → (path under ../shared/data, bytes kept from its start (0: all), extra options)
@@ -36,13 +37,13 @@ SEEDS = {
 }
 #: what a number token may become
 ODD_NUMBERS = (b"NaN", b"nan", b"inf", b"-inf", b"1e400", b"-1e400", b"9" * 400, b"-0", b"", b"0", b"-1", b"1e-320", b"\x00")
-DOCUMENTED = {0, 1, 2, 3}
+DOCUMENTED = {0, 1, 2, 3, 6}  # (6: a batch some of whose logs failed)
 _NUMBER = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 
 
 #: inputs the tool writes and reads back (an invoice for ``verify``/``info``/``--config``, a TOML settings file): made
 #: once from the straight-drive sample, then mutated like the receivers' files
-WRITTEN = ("invoice", "settings")
+WRITTEN = ("invoice", "settings", "truth", "fleet")
 _WRITTEN_SEEDS: dict[str, bytes] = {}
 
 
@@ -51,12 +52,15 @@ def _written_seed(kind: str) -> bytes:
         import tempfile
 
         with tempfile.TemporaryDirectory() as tmp:
-            out = os.path.join(tmp, "i.json")
-            code, err = run_main("process", str(REPO / "samples" / "straight-drive.nmea"), "--geo", GEO, "--tariff", TARIFF, "-o", out, "-q")
-            assert code == 0, err
-            _WRITTEN_SEEDS["invoice"] = open(out, "rb").read()
+            for name, drive in (("invoice", REPO / "samples" / "straight-drive.nmea"), ("rural invoice", RURAL / "drive.nmea")):
+                out = os.path.join(tmp, "i.json")
+                code, err = run_main("process", str(drive), "--geo", GEO, "--tariff", TARIFF, "-o", out, "-q")
+                assert code == 0, err
+                _WRITTEN_SEEDS[name] = open(out, "rb").read()
         _WRITTEN_SEEDS["settings"] = (b'date = 2024-05-06\nhal = 40.0\ntc = 5.0\nn_th = 3\nraim = "ss"\npolicy = "raim"\n'
                                       b'vehicle = "TRK 042"\nvehicle_class = "truck"\nsigma = 5.0\np_md = 5e-5\n')  # fmt: skip
+        _WRITTEN_SEEDS["truth"] = (RURAL / "truth.csv").read_bytes()  # the rural drive's truth, audited with its invoice
+        _WRITTEN_SEEDS["fleet"] = b"vehicle,vehicle_class\nstraight-drive,truck\nTRK-042,car\n"
     return _WRITTEN_SEEDS[kind]
 
 
@@ -174,11 +178,20 @@ def test_a_mutated_real_file_gets_a_documented_exit(tmp_path, kind, case):
 
 
 def _written_runs(tmp_path, kind: str, data: bytes):
-    """The commands that read a mutated invoice (``info``, ``verify``, ``--config``) or settings file (``--config``)."""
-    path = tmp_path / ("invoice.json" if kind == "invoice" else "settings.toml")
+    """The commands that read a mutated invoice (``info``, ``verify``, ``--config``), settings file (``--config``),
+    truth trajectory (``audit --truth``) or fleet file (``batch --fleet``)."""
+    path = tmp_path / {"invoice": "invoice.json", "settings": "settings.toml", "truth": "truth.csv", "fleet": "fleet.csv"}[kind]
     path.write_bytes(data)
     out = tmp_path / "c.json"
     drive = str(REPO / "samples" / "straight-drive.nmea")
+    if kind == "truth":
+        invoice = tmp_path / "invoice.json"
+        _written_seed("invoice")
+        invoice.write_bytes(_WRITTEN_SEEDS["rural invoice"])
+        return ((("audit", str(invoice), "--truth", str(path), "--geo", GEO, "-q", "-o", str(out)), out),)
+    if kind == "fleet":
+        return ((("batch", drive, "--fleet", str(path), "--geo", GEO, "--tariff", TARIFF, "--workers", "1", "-q",
+                  "-o", str(tmp_path / "out")), None),)  # fmt: skip
     process = (("process", drive, "--config", str(path), "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(out)), out)
     if kind == "settings":
         return (process,)
