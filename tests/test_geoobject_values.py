@@ -1,6 +1,6 @@
 """Odd but legal-looking geo-object files and JSON inputs (part of issue 55): a HAL of ``Infinity`` or 1e300 made every
 position "within HAL" and wrote ``Infinity`` into the invoice (not JSON); ``"40"`` (text), a negative or a boolean HAL
-passed; a polygon 151° wide was never matched and never reported; an unclosed ring was closed silently; a JSON integer
+passed, and so did lengths (what a per-km tariff prices) of ``Infinity``, text or below 0; a polygon 151° wide was never matched and never reported; an unclosed ring was closed silently; a JSON integer
 of 5 000 digits ended in an internal error. Each is now refused in one line naming the file and the geo-object."""
 
 from __future__ import annotations
@@ -50,6 +50,10 @@ CASES = {
     "151 degrees wide": (_add("WIDE", _box(2.0, 40.0, 153.0, 45.0)), "no metric frame holds it"),
     "the world": (_add("WORLD", _box(-180.0, -90.0, 180.0, 90.0)), "no metric frame holds it"),
     "unclosed ring": (_unclose, "not closed"),
+    "length Infinity": (lambda doc: doc["features"][0]["properties"].__setitem__("section_length_m", float("inf")), "not a length"),
+    "length as text": (lambda doc: doc["features"][0]["properties"].__setitem__("length_m", "1200"), "not a length"),
+    "negative tunnel": (lambda doc: doc["features"][0]["properties"].__setitem__("tunnel_m", -5), "not a length"),
+    "road class a number": (lambda doc: doc["features"][0]["properties"].__setitem__("road_class", 7), "not a name"),
 }
 
 

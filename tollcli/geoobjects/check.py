@@ -56,6 +56,19 @@ HAL_MIN_CHECK_M = 5.0
 #: the widest a geo-object may be (degrees of longitude or latitude, ≈ 650 km): its metric frame is centred on it,
 #: and a polygon from 2°E to 153°E was never matched (nor said so)
 MAX_EXTENT_DEG = 6.0
+#: the length properties a charge may be priced by (per km) and their largest value (m): a section is never 1 000 km
+LENGTH_PROPERTIES = ("section_length_m", "length_m", "tunnel_m", "gap_m")
+MAX_LENGTH_M = 1_000_000.0
+
+
+def _a_length(value) -> bool:
+    """Whether a length property is a JSON number (not text, not a boolean), finite, in [0, MAX_LENGTH_M]."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return 0.0 <= float(value) <= MAX_LENGTH_M
+    except OverflowError:
+        return False
 
 
 def check_geoobjects(path: str, hal_min_m: float = HAL_MIN_CHECK_M) -> list[Finding]:
@@ -117,6 +130,11 @@ def check_features(features: list, hal_min_m: float = HAL_MIN_CHECK_M) -> list[F
         crs_problem = _crs_problem(props.get("crs_metric"), crs_seen)
         if crs_problem:
             findings.append(Finding(fid, crs_problem))
+        for name in LENGTH_PROPERTIES:
+            if name in props and props[name] is not None and not _a_length(props[name]):
+                findings.append(Finding(fid, f"{name} {str(props[name])[:40]!r} is not a length: give metres, a number in [0, {MAX_LENGTH_M:g}]"))
+        if "road_class" in props and not isinstance(props["road_class"], str):
+            findings.append(Finding(fid, f"road_class {str(props['road_class'])[:40]!r} is not a name (text)"))
         hal = props.get("hal_m")
         hal_value = hal_of(hal)
         if isinstance(hal, bool) or not isinstance(hal, (int, float)):
