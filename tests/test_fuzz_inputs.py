@@ -9,6 +9,7 @@ thousands. A case is its kind and number: ``pytest tests/test_fuzz_inputs.py -k 
 
 from __future__ import annotations
 
+import json
 import os
 import re
 
@@ -34,7 +35,11 @@ SEEDS = {
     "rtklib-pos": ("rtklibexplorer/gnss_1730_sf.pos", 0, ()),
     "librsf": ("smartloc/Berlin_Potsdamer_Platz_Input.txt", 400_000, ()),
     "nmea": ("gpsd/ublox-neo-m8n.log", 0, ()),
+    "osnma-vector": ("osnma/icd_configuration_1/16_AUG_2023_GST_05_00_01.csv", 300_000,
+                     ("--merkle", str(SHARED / "osnma" / "icd_configuration_1" / "OSNMA_MerkleTree.xml"))),
 }
+#: kinds read by ``osnma`` (a test vector; the u-blox log with a mutated public key), not by info and integrity
+OSNMA_KINDS = ("osnma-vector", "osnma-key")
 #: what a number token may become
 ODD_NUMBERS = (b"NaN", b"nan", b"inf", b"-inf", b"1e400", b"-1e400", b"9" * 400, b"-0", b"", b"0", b"-1", b"1e-320", b"\x00")
 DOCUMENTED = {0, 1, 2, 3, 6}  # (6: a batch some of whose logs failed)
@@ -43,7 +48,7 @@ _NUMBER = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 
 #: inputs the tool writes and reads back (an invoice for ``verify``/``info``/``--config``, a TOML settings file): made
 #: once from the straight-drive sample, then mutated like the receivers' files
-WRITTEN = ("invoice", "settings", "truth", "fleet")
+WRITTEN = ("invoice", "settings", "truth", "fleet", "roadside", "osnma-key")
 _WRITTEN_SEEDS: dict[str, bytes] = {}
 
 
@@ -61,6 +66,10 @@ def _written_seed(kind: str) -> bytes:
                                       b'vehicle = "TRK 042"\nvehicle_class = "truck"\nsigma = 5.0\np_md = 5e-5\n')  # fmt: skip
         _WRITTEN_SEEDS["truth"] = (RURAL / "truth.csv").read_bytes()  # the rural drive's truth, audited with its invoice
         _WRITTEN_SEEDS["fleet"] = b"vehicle,vehicle_class\nstraight-drive,truck\nTRK-042,car\n"
+        _WRITTEN_SEEDS["roadside"] = (b"tag_id,gantry_id,time_utc\nTAG-1,G1,2024-05-06T08:00:30Z\nTAG-1,G2,2024-05-06T08:01:40Z\n"
+                                      b"TAG-1,G1,2024-05-06T09:30:00Z\nTAG-9,G2,2024-05-06T08:02:00Z\n")  # fmt: skip
+        key = SHARED / "osnma" / "ublox" / "OSNMA_PublicKey_1.xml"
+        _WRITTEN_SEEDS["osnma-key"] = key.read_bytes() if key.exists() else b"<xml/>"
     return _WRITTEN_SEEDS[kind]
 
 
@@ -161,6 +170,11 @@ def test_a_mutated_real_file_gets_a_documented_exit(tmp_path, kind, case):
         data = (_mutate_ubx if kind.startswith("ubx") else _mutate_text)(data, rng)
     if kind in WRITTEN:
         runs = _written_runs(tmp_path, kind, data)
+    elif kind in OSNMA_KINDS:
+        log = tmp_path / os.path.basename(SEEDS[kind][0])  # (a test vector's name gives its start time)
+        log.write_bytes(data)
+        out = tmp_path / "o.csv"
+        runs = ((("osnma", str(log), *SEEDS[kind][2], "-q", "-o", str(out)), out),)
     else:
         log = tmp_path / os.path.basename(SEEDS[kind][0])
         log.write_bytes(data)
@@ -180,7 +194,8 @@ def test_a_mutated_real_file_gets_a_documented_exit(tmp_path, kind, case):
 def _written_runs(tmp_path, kind: str, data: bytes):
     """The commands that read a mutated invoice (``info``, ``verify``, ``--config``), settings file (``--config``),
     truth trajectory (``audit --truth``) or fleet file (``batch --fleet``)."""
-    path = tmp_path / {"invoice": "invoice.json", "settings": "settings.toml", "truth": "truth.csv", "fleet": "fleet.csv"}[kind]
+    path = tmp_path / {"invoice": "invoice.json", "settings": "settings.toml", "truth": "truth.csv", "fleet": "fleet.csv",
+                       "roadside": "reads.csv", "osnma-key": "OSNMA_PublicKey_1.xml"}[kind]  # fmt: skip
     path.write_bytes(data)
     out = tmp_path / "c.json"
     drive = str(REPO / "samples" / "straight-drive.nmea")
@@ -189,6 +204,16 @@ def _written_runs(tmp_path, kind: str, data: bytes):
         _written_seed("invoice")
         invoice.write_bytes(_WRITTEN_SEEDS["rural invoice"])
         return ((("audit", str(invoice), "--truth", str(path), "--geo", GEO, "-q", "-o", str(out)), out),)
+    if kind == "roadside":
+        gantries = tmp_path / "gantries.geojson"
+        gantries.write_text(json.dumps({"type": "FeatureCollection", "features": [
+            {"type": "Feature", "properties": {"id": "G1"}, "geometry": {"type": "Point", "coordinates": [2.8955, 42.6990]}},
+            {"type": "Feature", "properties": {"id": "G2"}, "geometry": {"type": "Point", "coordinates": [2.8960, 42.7100]}}]}))  # fmt: skip
+        return ((("enforce", drive, "--reads", str(path), "--gantries", str(gantries), "--tag", "TAG-1", "-q", "-o", str(out)), out),)
+    if kind == "osnma-key":
+        ublox = SHARED / "osnma" / "ublox"
+        return ((("osnma", str(ublox / "current_config.ubx"), "--merkle", str(ublox / "OSNMA_MerkleTree.xml"), "--public-key", str(path),
+                  "-q", "-o", str(tmp_path / "o.csv")), tmp_path / "o.csv"),)  # fmt: skip
     if kind == "fleet":
         return ((("batch", drive, "--fleet", str(path), "--geo", GEO, "--tariff", TARIFF, "--workers", "1", "-q",
                   "-o", str(tmp_path / "out")), None),)  # fmt: skip

@@ -50,7 +50,7 @@ from tollcli import __version__
 from tollcli.charging.invoice import file_sha256, invoice_json
 from tollcli.charging.recognition import PASSAGE_GAP_S
 from tollcli.enforcement.locate import VEHICLE_ID_MAX_CHARS, vehicle_from_log, vehicle_from_path, vehicle_id_problem
-from tollcli.errors import DataError, UsageError
+from tollcli.errors import DataError, SystemFailureError, UsageError
 from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
 from tollcli.job.epoch_schema import conform_epochs, epoch_schema
 from tollcli.job.fleet import read_fleet
@@ -422,5 +422,10 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
         pool.shutdown()
     outcomes = join_passages(outcomes, {job.log: job for job in jobs})
     summary = summarise(outcomes)
-    write_text_atomic(os.path.join(outdir, "summary.json"), json.dumps(summary, indent=1, sort_keys=True) + "\n")
+    where = os.path.join(outdir, "summary.json")
+    try:
+        write_text_atomic(where, json.dumps(summary, indent=1, sort_keys=True) + "\n")
+    except OSError as exc:  # a full disk at the very end: say what is missing and what is there
+        raise SystemFailureError(f"{where}: the batch summary could not be written ({exc.strerror or exc}); {summary['done']} of "
+                                 f"{summary['logs']} logs done, each of their invoices complete") from None  # fmt: skip
     return summary

@@ -154,17 +154,25 @@ def summarize(log: str, r: OsnmaResult, epochs: pd.DataFrame, keys, dropped: int
         "kroots_authenticated": c["kroots_authenticated"],
         "tesla_keys_verified": int(r.keys["verified"].sum()) if len(r.keys) else 0,
         "tags_authenticated": c["tags_authenticated"],
-        "tags_authenticated_by_adkd": {str(k): int(v) for k, v in tags.groupby("adkd").size().items()},
+        "tags_authenticated_by_adkd": _counts(tags, "adkd"),
         "data_authenticated": c["data_authenticated"],
-        "data_authenticated_by_adkd": {str(k): int(v) for k, v in r.data.groupby("adkd").size().items()},
+        "data_authenticated_by_adkd": _counts(r.data, "adkd"),
         "first_authenticated_data_gst": _gst_text(first),
         # as OSNMAlib counts it: the fourth satellite with authenticated ephemeris, at the end of its page
         "first_authenticated_fix_gst": _gst_text(None if fix is None else fix + 2),
         "failures": c["failures"],
-        "failures_by_kind": {str(k): int(v) for k, v in r.failures.groupby("kind").size().items()},
-        "first_failures": r.failures.head(5).assign(gst=lambda f: [_gst_text(t) for t in f["gst_s"]]).drop(columns="gst_s").to_dict("records"),
+        "failures_by_kind": _counts(r.failures, "kind"),
+        "first_failures": (r.failures.head(5).assign(gst=lambda f: [_gst_text(t) for t in f["gst_s"]]).drop(columns="gst_s").to_dict("records")
+                           if len(r.failures) and "gst_s" in r.failures else []),  # fmt: skip
         "epochs": n,
         "epochs_with_4_authenticated_used": enough,
         "mean_used_authenticated": round(float(epochs["n_used_authenticated"].mean()), 3) if n else None,
         "mean_galileo_used": round(float(epochs["n_galileo_used"].mean()), 3) if n else None,
     }  # fmt: skip
+
+
+def _counts(table, column: str) -> dict[str, int]:
+    """Rows per value of ``column`` ({} for a table without rows, which may have no columns either)."""
+    if table is None or len(table) == 0 or column not in table:
+        return {}
+    return {str(k): int(v) for k, v in table.groupby(column).size().items()}
