@@ -104,14 +104,15 @@ def test_the_minor_unit_must_be_the_currency_s(tmp_path):
 
 
 def test_fees_keep_every_digit_until_the_one_rounding(tmp_path):
-    """28-digit arithmetic would round 0.004999…9 (33 digits) up to 0.005 and then to 0.01: it must be 0.00."""
-    t = _tariff(tmp_path, 'currency = "EUR"\n[road_class.motorway]\ncar = 0.00499999999999999999999999999999\n'
-                          'van = 0.00333333333333333333333333333333\n'
+    """28-digit arithmetic would round 1.004999…9 (33 digits) up to 1.005 and then to 1.01: it must be 1.00. (Fees of
+    at least a cent: a flat fee below the minor unit is refused.)"""
+    t = _tariff(tmp_path, 'currency = "EUR"\n[road_class.motorway]\ncar = 1.00499999999999999999999999999999\n'
+                          'van = 1.00333333333333333333333333333333\n'
                           '[[band]]\nname = "b"\nstart = "00:00"\nend = "12:00"\nfactor = 1.5\n')  # fmt: skip
     night, noon = dt.datetime(2026, 3, 2, 1, tzinfo=UTC), dt.datetime(2026, 3, 2, 13, tzinfo=UTC)
-    assert t.fee("x", "motorway", "car", noon)[0] == Decimal("0.00")
-    assert t.fee("x", "motorway", "van", night)[0] == Decimal("0.00")  # × 1.5 = 0.004999…95
-    assert t.fee("x", "motorway", "car", night)[0] == Decimal("0.01")  # × 1.5 = 0.0074999…
+    assert t.fee("x", "motorway", "car", noon)[0] == Decimal("1.00")
+    assert t.fee("x", "motorway", "van", night)[0] == Decimal("1.50")  # × 1.5 = 1.504999…995
+    assert t.fee("x", "motorway", "car", night)[0] == Decimal("1.51")  # × 1.5 = 1.5074999…
 
 
 def test_a_huge_fee_is_a_one_line_error(tmp_path):

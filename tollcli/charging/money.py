@@ -45,7 +45,7 @@ def money(value, where_: str, limit: Decimal = MAX_FEE) -> Decimal:
     way of hiding a number (``"0,95"``, ``"O.95"``) and a TOML tariff writes numbers as numbers."""
     if isinstance(value, str):
         raise DataError(f"{where_}: a fee must be a number, not text: write {value} without quotes" if _numeric_text(value)
-                        else f"{where_}: a fee must be a number, got {value!r}")  # fmt: skip
+                        else f"{where_}: not a number: {value!r}")  # fmt: skip
     if isinstance(value, bool) or not isinstance(value, (int, Decimal)):
         raise DataError(f"{where_}: a fee must be a number, got {value!r}")
     try:

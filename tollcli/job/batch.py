@@ -34,7 +34,6 @@ distributed cluster; each log's outputs depend only on that log and the shared s
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import json
 import os
 import signal
@@ -42,19 +41,18 @@ import threading
 import time
 from dataclasses import asdict, dataclass, replace
 from decimal import Decimal
-from urllib.parse import quote
 
 import pandas as pd
 
 from tollcli import __version__
 from tollcli.charging.invoice import file_sha256, invoice_json
 from tollcli.charging.recognition import PASSAGE_GAP_S
-from tollcli.enforcement.locate import VEHICLE_ID_MAX_CHARS, vehicle_from_log, vehicle_from_path, vehicle_id_problem
 from tollcli.errors import DataError, SystemFailureError, UsageError
 from tollcli.io.writers import TableWriter, output_folder, write_text_atomic
 from tollcli.job.epoch_schema import conform_epochs, epoch_schema
 from tollcli.job.fleet import read_fleet
-from tollcli.job.log_files import is_pseudorange_log, log_name
+from tollcli.job.batch_outputs import path_component, plan_outputs, vehicle_error
+from tollcli.job.log_files import is_pseudorange_log
 from tollcli.job.pipeline import ChargeSettings, charge_log
 
 
@@ -74,58 +72,6 @@ class Job:
     error: str = ""  # why the log cannot be charged before it is read (a vehicle the fleet file does not list)
     osnma_merkle: str | None = None  # the OSNMA Merkle tree for every log (None: each u-blox log's own, beside it)
     osnma_public_keys: tuple[str, ...] | None = None
-
-
-def path_component(text: str) -> str:
-    """``text`` as one safe file or folder name: percent-encoded, never ``.``/``..`` or hidden, never a path."""
-    quoted = quote(text, safe="-_~@+=,")
-    if quoted.startswith("."):
-        quoted = "%2E" + quoted[1:]
-    return quoted or "%00"
-
-
-def _owner(outdir: str, vehicle: str, name: str) -> str | None:
-    """The log (absolute path) whose invoice is at that place in OUTDIR, if any."""
-    try:
-        with open(os.path.join(outdir, "invoices", vehicle, name + ".json"), encoding="utf-8") as fh:
-            log = json.load(fh).get("inputs", {}).get("log")
-        return os.path.abspath(log) if isinstance(log, str) else None
-    except (OSError, ValueError, AttributeError):
-        return None
-
-
-def _vehicle_error(log: str, vehicle: str) -> str:
-    problem = vehicle_id_problem(vehicle)
-    return f"{log}: {problem} (give each vehicle a printable id of at most {VEHICLE_ID_MAX_CHARS} characters)" if problem else ""
-
-
-def plan_outputs(logs: list[str], settings: ChargeSettings, outdir: str) -> list[tuple[str, str, str]]:
-    """(vehicle id, vehicle folder, output name) of every log: no two logs share an output. A vehicle id that cannot be
-    one (:func:`~tollcli.enforcement.locate.vehicle_id_problem`) gets a placeholder folder: that log fails."""
-    vehicles = [settings.vehicle or vehicle_from_log(log) or vehicle_from_path(log) for log in logs]
-    places = [(path_component(v if vehicle_id_problem(v) is None else f"invalid-vehicle-{hashlib.sha256(v.encode('utf-8', 'surrogateescape')).hexdigest()[:8]}"),
-               path_component(log_name(log))) for v, log in zip(vehicles, logs)]  # fmt: skip
-    groups: dict[tuple[str, str], list[int]] = {}
-    for i, place in enumerate(places):
-        groups.setdefault(place, []).append(i)
-    names = [name for _, name in places]
-    for (folder, name), members in groups.items():
-        # the log whose invoice is already there keeps the name; a free name goes to the first log by path
-        owner = _owner(outdir, folder, name)
-        keeper = next((i for i in members if os.path.abspath(logs[i]) == owner), None)
-        if keeper is None and owner is None:
-            keeper = min(members, key=lambda i: os.path.abspath(logs[i]))
-        for i in members:
-            if i != keeper:
-                folder_hash = hashlib.sha256(os.path.dirname(os.path.abspath(logs[i])).encode("utf-8", "surrogateescape"))
-                names[i] = f"{name}~{folder_hash.hexdigest()[:8]}"
-    out = [(v, folder, n) for v, (folder, _), n in zip(vehicles, places, names)]
-    seen: dict[tuple[str, str], str] = {}
-    for log, (_, folder, n) in zip(logs, out):
-        if (folder, n) in seen:  # the same folder twice among the inputs under two spellings
-            raise UsageError(f"{log} and {seen[folder, n]} would write the same outputs ({folder}/{n}); give each log once")
-        seen[folder, n] = log
-    return out
 
 
 def _current(done: dict, job: Job, settings: ChargeSettings, log_sha) -> bool:
@@ -387,7 +333,7 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
         shared.append(("osnma_merkle_sha256", file_sha256(osnma_merkle)))
     keys = tuple(osnma_public_keys) if osnma_public_keys is not None else None
     jobs = [Job(log, geo, tariff, settings, outdir, force, roads, vehicle, name, tuple(shared), nav,
-                osnma_merkle=osnma_merkle, osnma_public_keys=keys, error=_vehicle_error(log, vehicle))
+                osnma_merkle=osnma_merkle, osnma_public_keys=keys, error=vehicle_error(log, vehicle))
             for log, (vehicle, _, name) in zip(logs, plan_outputs(logs, settings, outdir))]  # fmt: skip
     if vehicles is not None:
         jobs = _fleet_jobs(jobs, vehicles, fleet)
