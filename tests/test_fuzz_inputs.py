@@ -152,7 +152,8 @@ def _mutate_text(data: bytes, rng: np.random.Generator) -> bytes:
 
 #: cases a long run found failing once (every run replays them): a damaged receiver clock left a record without a
 #: time (KeyError 'tod_s'; a merge on a null time), a date in the year 0 (strftime), a satellite number of 14 000 000
-FOUND = (("device-gnss", 134), ("gnsslogger", 25), ("gnsslogger", 49), ("rtklib-pos", 32), ("rtklib-pos", 141), ("librsf", 146))
+FOUND = (("device-gnss", 134), ("gnsslogger", 25), ("gnsslogger", 49), ("rtklib-pos", 32), ("rtklib-pos", 141), ("librsf", 146),
+         ("osnma-vector", 139), ("osnma-key", 41))  # (and an OSNMA vector that authenticated nothing, a key file not UTF-8)
 
 
 def _cases() -> list[tuple[str, int]]:

@@ -59,6 +59,10 @@ def _xml_text(path: str | os.PathLike) -> str:
             return "".join(line.strip() for line in stream)
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
+    except UnicodeDecodeError as exc:  # a damaged file: GSC files are UTF-8 XML
+        raise UsageError(f"{path}: not a UTF-8 XML file (byte {exc.start})") from None
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read ({exc.strerror or exc})") from None
 
 
 def read_merkle_tree(path: str | os.PathLike) -> MerkleTree:

@@ -52,10 +52,12 @@ def satellite_status(result: OsnmaResult, satellites: pd.DataFrame) -> pd.DataFr
     gal = (out["constellation"].to_numpy(object) == "Galileo") if n else np.zeros(0, bool)
     rows = pd.DataFrame({"_i": np.flatnonzero(gal), "svid": out["svid"].to_numpy(np.int64)[gal], "t": out["gst_s"].to_numpy(float)[gal]})
     iods = result.iods.assign(t=result.iods["gst_s"].astype(float) + KNOWN_AFTER_S).sort_values("t", kind="stable")
+    iods = iods.astype({"svid": np.int64})  # (a log that authenticated nothing has empty, untyped tables)
     rows = pd.merge_asof(rows.sort_values("t"), iods[["svid", "t", "iod", "data_key"]], on="t", by="svid", direction="backward")
     known = {}
     for adkd in (0, 12):
         first = _first_auth(result, adkd)
+        first = first.astype({"svid": np.int64, "data_key": rows["data_key"].dtype}) if first.empty else first
         rows = rows.merge(first.rename(columns={"known_s": f"k{adkd}"}), on=["svid", "data_key"], how="left")
         known[adkd] = rows[f"k{adkd}"].to_numpy(float) <= rows["t"].to_numpy(float)
     for adkd in (0, 12):
