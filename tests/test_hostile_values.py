@@ -150,7 +150,10 @@ def test_gpsd_json_with_absurd_integers(tmp_path):
                  ("integrity", str(path), "-o", str(tmp_path / "i.csv"), "--json", "-q")):  # fmt: skip
         run = run_cli(*args)
         assert run.returncode == 0, (args[0], run.stderr.decode())
-    assert json.loads(run.stdout)["epochs"] >= 5
+    summary = json.loads(run.stdout)
+    assert summary["epochs"] >= 5 and summary["skipped_lines"] == 4  # each damaged report skipped and counted
+    strict = run_cli("integrity", str(path), "-o", str(tmp_path / "s.csv"), "--strict", "-q")
+    assert strict.returncode == 1 and f"{path}:" in strict.stderr.decode() and "too large" in strict.stderr.decode()
 
 
 def test_a_file_of_false_ubx_headers_is_read_in_one_pass(tmp_path):

@@ -124,6 +124,8 @@ def integrity(
                 _tally(table, counts)
                 writer.write(table)
             writer.commit()
+    if kind in NAVIGATION_KINDS:
+        counts["skipped", "lines"] += stats.skipped  # the malformed lines the reader passed over
     statuses = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "status"}
     sources = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "source"}
     ignored = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "note" and k[1]}

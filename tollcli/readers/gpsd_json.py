@@ -81,6 +81,28 @@ def _time_ms(text) -> int | None:
     return ms if _TIME_RANGE_MS[0] <= ms < _TIME_RANGE_MS[1] else None
 
 
+def _damaged(report) -> str:
+    """Why a report cannot be a receiver's ('' when it can): an integer too large for 64 bits anywhere in it, or a
+    time outside 1980–2200."""
+    stack = [report]
+    while stack:
+        value = stack.pop()
+        if isinstance(value, dict):
+            stack.extend(value.values())
+        elif isinstance(value, list):
+            stack.extend(value)
+        elif isinstance(value, int) and not isinstance(value, bool) and not -(2**63) <= value < 2**63:
+            return "a number too large for any field"
+    text = report.get("time") if isinstance(report, dict) else None
+    if isinstance(text, str) and len(text) >= 19 and _time_ms(text) is None:
+        try:
+            np.datetime64(text.rstrip("Z"), "ms")
+        except (ValueError, OverflowError):
+            return ""  # not a time at all: the report is used without one, as before
+        return f"a time outside 1980–2200 ({text[:30]})"
+    return ""
+
+
 def _tpv_fields(r: dict) -> dict:
     mode = _small_int(r.get("mode")) or 0
     status = _small_int(r.get("status"))
@@ -151,6 +173,10 @@ def iter_gpsd_json_tables(source: str | os.PathLike | BinaryIO, *, strict: bool 
                 kind = report["class"]
             except (ValueError, KeyError, TypeError, RecursionError) as exc:
                 skip_malformed(stats, line_no, f"not a gpsd JSON report ({type(exc).__name__})", strict)
+                continue
+            damage = _damaged(report)
+            if damage:  # a field no receiver writes: the report is malformed, skipped and counted (--strict: an error)
+                skip_malformed(stats, line_no, damage, strict)
                 continue
             stats.sentences += 1
             state.add(kind, report, line_no)
