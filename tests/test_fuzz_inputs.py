@@ -1,7 +1,8 @@
 """A seeded mutation fuzzer over a real file of every input kind (part of issue 54): bit flips, truncation, a record
 duplicated or two swapped, a number replaced by NaN, infinity, 10⁴⁰⁰ or 400 digits, NUL runs, a 300 kB field; UBX
 frames with their checksums recomputed (a flipped payload byte, an edited length). Each case goes through ``info``
-and ``integrity``: a documented exit (never 4 or 5), an error in one line, no output left behind by an error.
+and ``integrity`` (or the commands that read it): a documented exit (never 4 or 5), an error in one line, no output
+left behind by an error. Road files (GeoJSON, GeoPackage, FlatGeobuf, Shapefile) go through ``geoobjects build``.
 
 ``FUZZ_EXAMPLES`` sets the budget (cases in all; CI runs a small fixed set); ``benchmarks/fuzz_nightly.py`` runs
 thousands. A case is its kind and number: ``pytest tests/test_fuzz_inputs.py -k 'ubx-17'`` replays it.
@@ -49,6 +50,33 @@ _NUMBER = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 #: inputs the tool writes and reads back (an invoice for ``verify``/``info``/``--config``, a TOML settings file): made
 #: once from the straight-drive sample, then mutated like the receivers' files
 WRITTEN = ("invoice", "settings", "truth", "fleet", "roadside", "osnma-key")
+#: road files through ``geoobjects build`` (issue 55): the example roads as GeoJSON, GeoPackage, FlatGeobuf and a
+#: Shapefile whose .shp, .dbf or .prj is the mutated part
+ROADS = ("roads-geojson", "roads-gpkg", "roads-fgb", "roads-shp", "roads-dbf", "roads-prj")
+_ROAD_FILES: dict[str, bytes] = {}
+
+
+def _road_files() -> dict[str, bytes]:
+    """The example roads written once in every road-file format (file name → bytes)."""
+    if not _ROAD_FILES:
+        import tempfile
+
+        import geopandas as gpd
+
+        roads = gpd.read_file(REPO / "geoobjects" / "example-roads.geojson")
+        with tempfile.TemporaryDirectory() as tmp:
+            roads.to_file(os.path.join(tmp, "roads.gpkg"), driver="GPKG")
+            roads.to_file(os.path.join(tmp, "roads.fgb"), driver="FlatGeobuf")
+            roads.to_file(os.path.join(tmp, "roads.shp"))
+            for name in os.listdir(tmp):
+                _ROAD_FILES[name] = open(os.path.join(tmp, name), "rb").read()
+        _ROAD_FILES["roads.geojson"] = (REPO / "geoobjects" / "example-roads.geojson").read_bytes()
+    return _ROAD_FILES
+
+
+def _road_target(kind: str) -> str:
+    return {"roads-geojson": "roads.geojson", "roads-gpkg": "roads.gpkg", "roads-fgb": "roads.fgb", "roads-shp": "roads.shp",
+            "roads-dbf": "roads.dbf", "roads-prj": "roads.prj"}[kind]  # fmt: skip
 _WRITTEN_SEEDS: dict[str, bytes] = {}
 
 
@@ -76,6 +104,8 @@ def _written_seed(kind: str) -> bytes:
 def _seed(kind: str) -> bytes:
     if kind in WRITTEN:
         return _written_seed(kind)
+    if kind in ROADS:
+        return _road_files()[_road_target(kind)]
     path, keep, _ = SEEDS[kind]
     data = (SHARED / path).read_bytes()
     return data[:keep] if keep else data
@@ -153,12 +183,13 @@ def _mutate_text(data: bytes, rng: np.random.Generator) -> bytes:
 #: cases a long run found failing once (every run replays them): a damaged receiver clock left a record without a
 #: time (KeyError 'tod_s'; a merge on a null time), a date in the year 0 (strftime), a satellite number of 14 000 000
 FOUND = (("device-gnss", 134), ("gnsslogger", 25), ("gnsslogger", 49), ("rtklib-pos", 32), ("rtklib-pos", 141), ("librsf", 146),
-         ("osnma-vector", 139), ("osnma-key", 41))  # (and an OSNMA vector that authenticated nothing, a key file not UTF-8)
+         ("osnma-vector", 139), ("osnma-key", 41),  # (and an OSNMA vector that authenticated nothing, a key file not UTF-8,
+         ("roads-dbf", 19), ("roads-geojson", 10))  # a .dbf naming two columns alike, a road coordinate of 400 digits)
 
 
 def _cases() -> list[tuple[str, int]]:
-    kinds = [k for k in SEEDS if (SHARED / SEEDS[k][0]).exists()] + list(WRITTEN)
-    per_kind = max(EXAMPLES // (len(SEEDS) + len(WRITTEN)), 2)
+    kinds = [k for k in SEEDS if (SHARED / SEEDS[k][0]).exists()] + list(WRITTEN) + list(ROADS)
+    per_kind = max(EXAMPLES // (len(SEEDS) + len(WRITTEN) + len(ROADS)), 2)
     cases = [(kind, i) for kind in kinds for i in range(per_kind)]
     return cases + [c for c in FOUND if c not in cases and c[0] in kinds]
 
@@ -171,6 +202,14 @@ def test_a_mutated_real_file_gets_a_documented_exit(tmp_path, kind, case):
         data = (_mutate_ubx if kind.startswith("ubx") else _mutate_text)(data, rng)
     if kind in WRITTEN:
         runs = _written_runs(tmp_path, kind, data)
+    elif kind in ROADS:
+        files = dict(_road_files())
+        files[_road_target(kind)] = data
+        for name, content in files.items():
+            (tmp_path / name).write_bytes(content)
+        main = "roads.shp" if kind in ("roads-shp", "roads-dbf", "roads-prj") else _road_target(kind)
+        out = tmp_path / "geo.geojson"
+        runs = ((("geoobjects", "build", str(tmp_path / main), "-q", "-o", str(out)), out),)
     elif kind in OSNMA_KINDS:
         log = tmp_path / os.path.basename(SEEDS[kind][0])  # (a test vector's name gives its start time)
         log.write_bytes(data)

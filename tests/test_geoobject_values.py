@@ -54,6 +54,7 @@ CASES = {
     "length as text": (lambda doc: doc["features"][0]["properties"].__setitem__("length_m", "1200"), "not a length"),
     "negative tunnel": (lambda doc: doc["features"][0]["properties"].__setitem__("tunnel_m", -5), "not a length"),
     "road class a number": (lambda doc: doc["features"][0]["properties"].__setitem__("road_class", 7), "not a name"),
+    "direction sideways": (lambda doc: doc["features"][0]["properties"].__setitem__("direction", "sideways"), "is none of"),
 }
 
 

@@ -41,7 +41,7 @@ def feature_geometry(feature) -> tuple[object | None, str]:
     try:
         with np.errstate(invalid="ignore"):
             geom = shapely.geometry.shape(feature.get("geometry") or {})
-    except (ValueError, TypeError, AttributeError, KeyError, IndexError, shapely.errors.ShapelyError) as exc:
+    except (ValueError, TypeError, AttributeError, KeyError, IndexError, OverflowError, shapely.errors.ShapelyError) as exc:
         return None, f"unreadable geometry ({type(exc).__name__}: {' '.join(str(exc).split())})"  # one line: GEOS ends its messages with a newline
     coords = shapely.get_coordinates(geom)
     if not np.isfinite(coords).all():
@@ -66,7 +66,7 @@ def feature_geometries(features: list, kind: str) -> np.ndarray:
         if isinstance(coords, list) and len(coords) >= 2:
             try:
                 run = np.asarray(coords, dtype=float)
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):  # (an integer of hundreds of digits)
                 run = None
             if run is not None and run.ndim == 2 and run.shape[1] == 2 and np.isfinite(run).all():
                 simple.append(i)

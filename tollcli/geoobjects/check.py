@@ -56,6 +56,8 @@ HAL_MIN_CHECK_M = 5.0
 #: the widest a geo-object may be (degrees of longitude or latitude, ≈ 650 km): its metric frame is centred on it,
 #: and a polygon from 2°E to 153°E was never matched (nor said so)
 MAX_EXTENT_DEG = 6.0
+#: the values of ``direction`` (carriageways.py reads forward/oneway/one-way as one-way; both is two-way)
+DIRECTIONS = ("forward", "oneway", "one-way", "both")
 #: the length properties a charge may be priced by (per km) and their largest value (m): a section is never 1 000 km
 LENGTH_PROPERTIES = ("section_length_m", "length_m", "tunnel_m", "gap_m")
 MAX_LENGTH_M = 1_000_000.0
@@ -133,6 +135,9 @@ def check_features(features: list, hal_min_m: float = HAL_MIN_CHECK_M) -> list[F
         for name in LENGTH_PROPERTIES:
             if name in props and props[name] is not None and not _a_length(props[name]):
                 findings.append(Finding(fid, f"{name} {str(props[name])[:40]!r} is not a length: give metres, a number in [0, {MAX_LENGTH_M:g}]"))
+        if props.get("direction") is not None and str(props["direction"]).lower() not in DIRECTIONS:
+            findings.append(Finding(fid, f"direction {str(props['direction'])[:40]!r} is none of {', '.join(DIRECTIONS)} "
+                                         "(a one-way road read as two-way would charge the wrong carriageway)"))  # fmt: skip
         if "road_class" in props and not isinstance(props["road_class"], str):
             findings.append(Finding(fid, f"road_class {str(props['road_class'])[:40]!r} is not a name (text)"))
         hal = props.get("hal_m")

@@ -22,7 +22,7 @@ STORE_FORMAT = 7
 #: polygons projected and written as WKB per block
 CHUNK = 8192
 #: the properties the store and ``geoobjects check`` read (the others — the build's report — are not kept)
-USED_PROPERTIES = frozenset(("id", "name", "road_class", "hal_m", "crs_metric", "section_length_m", "length_m", "tunnel",
+USED_PROPERTIES = frozenset(("id", "name", "road_class", "hal_m", "crs_metric", "section_length_m", "length_m", "tunnel", "direction",
                              "tunnel_m", "gap_m", "axis", "opposite"))  # fmt: skip
 
 

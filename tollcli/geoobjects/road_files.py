@@ -11,6 +11,8 @@ come back as plain Python values.
 
 from __future__ import annotations
 
+import warnings
+
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +40,9 @@ def read_road_features(path: str) -> list[dict]:
     import pyogrio
 
     try:
-        frame = pyogrio.read_dataframe(path)
+        with warnings.catch_warnings():  # GDAL's notes on a field it read partly (a damaged .dbf) are no messages of ours
+            warnings.simplefilter("ignore", RuntimeWarning)
+            frame = pyogrio.read_dataframe(path)
     except Exception as exc:  # pyogrio raises its own and GDAL's errors: any of them means the file is unreadable
         raise DataError(f"{path}: not a readable vector file ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
     if frame.crs is None:
@@ -52,10 +56,14 @@ def read_road_features(path: str) -> list[dict]:
     geoms = np.asarray(geometry.array, dtype=object)
     if reproject:
         geoms = shapely.transform(geoms, _round_degrees)
-    columns = [c for c in frame.columns if c != frame.geometry.name]
+    columns, seen = [], set()
+    for j, c in enumerate(frame.columns):  # by position: a damaged .dbf can name two columns alike (the first one counts)
+        if c != frame.geometry.name and str(c) not in seen:
+            seen.add(str(c))
+            columns.append((j, str(c)))
     features = []
     for k, geom in enumerate(geoms.tolist()):
-        props = {c: _plain(frame[c].iat[k]) for c in columns}
+        props = {c: _plain(frame.iat[k, j]) for j, c in columns}
         features.append({"type": "Feature", "properties": {c: v for c, v in props.items() if v is not None},
                          "geometry": shapely.geometry.mapping(geom) if geom is not None else None})  # fmt: skip
     return features
