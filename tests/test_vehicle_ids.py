@@ -50,3 +50,26 @@ def test_an_impossible_id_fails_its_log_and_only_it(tmp_path):
     by_log = {o["log"].rsplit("/", 1)[-1]: o for o in summary["outcomes"]}
     assert by_log["empty.nmea"]["status"] == "done" and by_log["empty.nmea"]["vehicle"] == "empty"  # the file name
     assert "control characters" in by_log["tab.nmea"]["error"] and "300 characters" in by_log["long.nmea"]["error"]
+
+
+def test_three_consecutive_fleet_logs_are_charged_each_as_its_own(tmp_path):
+    """The issue's case: one drive cut into three consecutive logs headed ``FLEET 1``, ``FLEET 2``, ``FLEET 3`` — three
+    vehicles. Read as one vehicle ``FLEET``, batch priced the later passages as ``continued`` at 0.00; now the batch
+    total is the sum of each log charged alone."""
+    lines = (SAMPLES / "straight-drive.nmea").read_text().splitlines()
+    starts = [i for i, line in enumerate(lines) if line.startswith("$GNRMC")]
+    cuts = [0, starts[len(starts) // 3], starts[2 * len(starts) // 3], len(lines)]
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    alone = []
+    for k in range(3):
+        path = logs / f"part{k + 1}.nmea"
+        path.write_text(f"# vehicle: FLEET {k + 1}\n" + "\n".join(lines[cuts[k] : cuts[k + 1]]) + "\n")
+        out = tmp_path / f"alone{k}.json"
+        assert run_cli("process", str(path), "--geo", GEO, "--tariff", TARIFF, "-o", str(out), "-q").returncode == 0
+        alone.append(json.loads(out.read_text())["total"])
+    done = run_cli("batch", str(logs), "--geo", GEO, "--tariff", TARIFF, "-o", str(tmp_path / "out"), "-q")
+    assert done.returncode == 0, done.stderr.decode()
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert sorted((o["vehicle"], o["total"]) for o in summary["outcomes"]) == [(f"FLEET {k + 1}", alone[k]) for k in range(3)]
+    assert sum(float(t) for t in alone) > 0
