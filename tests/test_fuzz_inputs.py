@@ -19,6 +19,8 @@ import pytest
 from conftest import REPO, run_main
 from conftest import SHARED_DATA as SHARED
 
+from tollcli.readers.ubx_frames import checksum
+
 GEO = str(REPO / "geoobjects" / "example-geoobjects.geojson")
 TARIFF = str(REPO / "geoobjects" / "example-tariff.toml")
 RURAL = REPO / "samples" / "sim" / "rural-clean"
@@ -124,14 +126,6 @@ def _ubx_frames(data: bytes) -> list[tuple[int, int]]:
     return frames
 
 
-def _ubx_checksum(frame: bytearray) -> None:
-    a = b = 0
-    for x in frame[2:-2]:
-        a = (a + x) & 255
-        b = (b + a) & 255
-    frame[-2], frame[-1] = a, b
-
-
 def _mutate_ubx(data: bytes, rng: np.random.Generator) -> bytes:
     frames = _ubx_frames(data)
     start, size = frames[int(rng.integers(len(frames)))]
@@ -139,11 +133,11 @@ def _mutate_ubx(data: bytes, rng: np.random.Generator) -> bytes:
     how = int(rng.integers(5))
     if how == 0 and size > 8:  # a payload byte flipped, the checksum made good
         frame[6 + int(rng.integers(size - 8))] ^= 1 << int(rng.integers(8))
-        _ubx_checksum(frame)
+        frame[-2:] = checksum(bytes(frame[2:-2]))
     elif how == 1:  # the length edited (the checksum made good over what is there)
         n = int(rng.choice([0, 1, 0xFFFF, size - 9, size + 7]))
         frame[4:6] = (max(n, 0) & 0xFFFF).to_bytes(2, "little")
-        _ubx_checksum(frame)
+        frame[-2:] = checksum(bytes(frame[2:-2]))
     elif how == 2:  # the frame twice
         frame = frame + frame
     elif how == 3:  # NUL run

@@ -12,6 +12,8 @@ import json
 import pytest
 from conftest import REPO, run_cli, shared
 
+from tollcli.readers.ubx_frames import checksum
+
 DERIVED = ("gsdc2021", "Pixel4_derived.csv")
 DEVICE = ("gsdc2022", "device_gnss.csv")
 
@@ -86,13 +88,6 @@ def test_the_real_files_lose_no_row(tmp_path):
         assert json.loads(done.stdout)["skipped_lines"] == 0
 
 
-def _ubx_checksum(frame: bytearray) -> None:
-    a = b = 0
-    for x in frame[2:-2]:
-        a, b = (a + x) & 255, (b + ((a + x) & 255)) & 255
-    frame[-2], frame[-1] = a, b
-
-
 def _nav_pvt_year(data: bytes, year: int, only_pvt: bool) -> bytes:
     """Every NAV-PVT of a UBX log dated ``year`` (checksums recomputed); ``only_pvt``: nothing else kept."""
     out, i = bytearray(), 0
@@ -101,7 +96,7 @@ def _nav_pvt_year(data: bytes, year: int, only_pvt: bool) -> bytes:
         frame = bytearray(data[i : i + 8 + length])
         if data[i + 2 : i + 4] == b"\x01\x07" and length == 92:
             frame[10:12] = year.to_bytes(2, "little")
-            _ubx_checksum(frame)
+            frame[-2:] = checksum(bytes(frame[2:-2]))
             out += frame
         elif not only_pvt:
             out += frame

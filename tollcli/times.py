@@ -9,6 +9,8 @@ import pandas as pd
 #: the years a receiver's date may fall in: GPS time starts in 1980; beyond 2200 a date is a damaged field (and pandas'
 #: nanosecond timestamps end in 2262)
 PLAUSIBLE_YEARS = (1980, 2200)
+#: the same span as ms since 1970: 1980-01-06 (GPS time's start) to 2200-01-01
+PLAUSIBLE_MS = (315_964_800_000, 7_258_118_400_000)
 
 
 def plausible_date(year, month, day, hour=0, minute=0, second=0):

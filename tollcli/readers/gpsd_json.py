@@ -38,6 +38,7 @@ from tollcli.readers.nav_tables import TableBuilder, skip_malformed, text_line_b
 from tollcli.readers.nmea.line_reader import ReadStats
 from tollcli.readers.nmea.reader import CHUNK_EPOCHS, NmeaTables
 from tollcli.readers.nmea.satellite_ids import by_number
+from tollcli.times import PLAUSIBLE_MS
 
 #: gpsd gnssid → constellation
 GNSS_NAME = {0: "GPS", 1: "SBAS", 2: "Galileo", 3: "BeiDou", 5: "QZSS", 6: "GLONASS", 7: "NavIC"}
@@ -51,24 +52,18 @@ _QUALITY = {2: 2, 3: 4, 4: 5, 5: 6}
 
 
 def _float(report: dict, *names: str) -> float:
-    """The first of ``names`` that is a number, as a float (NaN: none is, or it is too large for one)."""
+    """The first of ``names`` that is a number, as a float (NaN: none is; a report with an integer too large for one
+    was skipped as malformed: :func:`_damaged`)."""
     for name in names:
         value = report.get(name)
         if isinstance(value, (int, float)) and not isinstance(value, bool):
-            try:
-                return float(value)
-            except OverflowError:  # an integer of hundreds of digits
-                return math.nan
+            return float(value)
     return math.nan
 
 
 def _small_int(value) -> int | None:
     """``value`` if it is an integer an id or a count can be (|value| < 2³¹), else None."""
     return value if isinstance(value, int) and not isinstance(value, bool) and -(2**31) < value < 2**31 else None
-
-
-#: the times a gpsd report may carry (ms since 1970): 1980 to 2200 — beyond, a damaged field
-_TIME_RANGE_MS = (315_964_800_000, 7_258_118_400_000)
 
 
 def _time_ms(text) -> int | None:
@@ -78,7 +73,7 @@ def _time_ms(text) -> int | None:
         ms = int(np.datetime64(text.rstrip("Z"), "ms").astype(np.int64))
     except (ValueError, OverflowError):
         return None
-    return ms if _TIME_RANGE_MS[0] <= ms < _TIME_RANGE_MS[1] else None
+    return ms if PLAUSIBLE_MS[0] <= ms < PLAUSIBLE_MS[1] else None
 
 
 def _damaged(report) -> str:

@@ -31,6 +31,7 @@ from tollcli.errors import DataError
 from tollcli.readers.nav_tables import TableBuilder, skip_malformed, text_line_blocks
 from tollcli.readers.nmea.line_reader import ReadStats
 from tollcli.readers.nmea.reader import CHUNK_EPOCHS, NmeaTables
+from tollcli.times import PLAUSIBLE_MS
 
 #: RTKLIB's solution quality Q → GGA fix quality
 Q_TO_GGA = {1: 4, 2: 5, 3: 2, 4: 2, 5: 1, 6: 1}
@@ -64,10 +65,6 @@ class _Layout:
         return self.cols.index(name) if name in self.cols else None
 
 
-#: the times a solution may have (ms since 1970): 1980 to 2200
-_TIME_RANGE_MS = (315_964_800_000, 7_258_118_400_000)
-
-
 def _utc_ms(date_or_week: str, time_or_tow: str, timesys: str) -> int:
     """A solution's time as UTC ms since 1970."""
     if "/" in date_or_week:
@@ -75,7 +72,7 @@ def _utc_ms(date_or_week: str, time_or_tow: str, timesys: str) -> int:
     else:
         stamp = _GPS_EPOCH + np.timedelta64(int(date_or_week) * 7 * 86_400_000 + round(float(time_or_tow) * 1000), "ms")
     ms = int(stamp.astype(np.int64))
-    if not _TIME_RANGE_MS[0] <= ms < _TIME_RANGE_MS[1]:  # year 0, 60000: a damaged field (malformed line)
+    if not PLAUSIBLE_MS[0] <= ms < PLAUSIBLE_MS[1]:  # year 0, 60000: a damaged field (malformed line)
         raise ValueError(f"a time outside 1980–2200 ({date_or_week} {time_or_tow})")
     if timesys == "GPST":
         from tollcli.readers.gps_time import gps_millis_to_utc
