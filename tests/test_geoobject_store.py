@@ -14,6 +14,7 @@ import shapely
 from conftest import REPO, SAMPLES, run_cli
 
 from tollcli.geoobjects import store as geoobject_store
+from tollcli.geoobjects.store_files import manifest_of, manifest_sha256, read_verified
 from tollcli.geoobjects.build import build_from_roads, roads_of
 from tollcli.charging.recognition import candidate_pairs
 from tollcli.errors import DataError
@@ -63,7 +64,9 @@ def test_build_leaves_the_store_process_would_make(tmp_path, monkeypatch):
     assert store.is_dir() and not list(store.parent.glob("*.tmp"))
     compiled, parsed_digest = geoobject_store.compile_file(str(geo))
     assert parsed_digest == digest
-    _same_columns(geoobject_store.read_store(store), compiled)
+    mapped, store_digest = read_verified(store, geoobject_store.STORE_FORMAT, digest)
+    _same_columns(mapped, compiled)
+    assert store_digest == manifest_sha256(manifest_of(compiled, geoobject_store.STORE_FORMAT, digest))  # as in memory
 
 
 def test_compile_command(tmp_path, monkeypatch):
@@ -207,14 +210,30 @@ def test_overlaps_found_block_by_block_are_every_pair_measured_at_once(monkeypat
     assert found == expected and len(expected) > 20
 
 
-def test_a_store_damaged_inside_says_so(tmp_path, monkeypatch):
-    """Bytes of a polygon changed on disk after the store was written: a one-line error naming the store, exit 1."""
+def test_a_store_damaged_inside_is_compiled_again(tmp_path, monkeypatch):
+    """Bytes of a polygon changed on disk after the store was written: the manifest check finds them, the store is
+    compiled again (one note on stderr) and the invoice is the one charged without a cache; a store changed after it
+    was checked (in this process) is a one-line error naming it."""
     monkeypatch.setenv("TOLLCLI_CACHE_DIR", str(tmp_path / "cache"))
     store = geoobject_store.load_geoobjects(GEO).store
     wkb = np.load(store / "metric_wkb.npy")
     wkb[1:5] = 0xFF  # the first polygon's geometry type
     np.save(store / "metric_wkb.npy", wkb)
-    r = run_cli("process", str(SAMPLES / "sim" / "urban-fault" / "drive.nmea"), "--geo", GEO, "--tariff", TARIFF, "-o", str(tmp_path / "i.json"), "-q")
-    assert r.returncode == 1, r.stderr
-    assert b"metric_wkb.npy: damaged" in r.stderr and b"geoobjects compile" in r.stderr and r.stderr.count(b"\n") == 1
-    assert not (tmp_path / "i.json").exists()
+    drive = str(SAMPLES / "sim" / "urban-fault" / "drive.nmea")
+    r = run_cli("process", drive, "--geo", GEO, "--tariff", TARIFF, "-o", str(tmp_path / "i.json"), "-q")
+    assert r.returncode == 0, r.stderr
+    assert b"metric_wkb.npy differs from its digest): compiled again" in r.stderr and r.stderr.count(b"\n") == 1
+    monkeypatch.setenv("TOLLCLI_CACHE_DIR", "off")
+    assert run_cli("process", drive, "--geo", GEO, "--tariff", TARIFF, "-o", str(tmp_path / "off.json"), "-q").returncode == 0
+    assert (tmp_path / "i.json").read_bytes() == (tmp_path / "off.json").read_bytes()
+    monkeypatch.setenv("TOLLCLI_CACHE_DIR", str(tmp_path / "cache"))
+    geo = geoobject_store.load_geoobjects(GEO)  # checked and mapped; then changed under the mapping
+    wkb = np.load(store / "metric_wkb.npy")
+    wkb[1:5] = 0xFF
+    with open(store / "metric_wkb.npy", "r+b") as fh:  # in place: the mapping sees it
+        fh.seek(128)
+        fh.write(wkb[:8].tobytes())
+    with pytest.raises(DataError, match="metric_wkb.npy: damaged"):
+        geo.polygons[0]
+
+

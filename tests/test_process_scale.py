@@ -176,17 +176,26 @@ json_values = st.recursive(
 @settings(max_examples=300, deadline=None)
 @given(json_values)
 def test_canonical_json_is_json_dumps_indented_sorted(value):
-    assert canonical_json(value) == json.dumps(value, indent=2, sort_keys=True, ensure_ascii=False)
+    try:
+        expected = json.dumps(value, indent=2, sort_keys=True, ensure_ascii=False, allow_nan=False)
+    except ValueError:  # a NaN or an infinity: not JSON, refused by both
+        with pytest.raises(ValueError):
+            canonical_json(value)
+        return
+    assert canonical_json(value) == expected
 
 
 def test_canonical_json_of_a_real_invoice_and_unusual_values():
     invoice, _ = charge_log(str(SAMPLES / "straight-drive.nmea"), GEO, TARIFF, ChargeSettings())
     body = dict(invoice)
     assert canonical_json(body) == json.dumps(body, indent=2, sort_keys=True, ensure_ascii=False)
-    odd = {"a": np.float64(1.5), "b": [True, np.float64("nan")], "c": {"é": "\n\"\u2028"}}
+    odd = {"a": np.float64(1.5), "b": [True, np.float64("2.5")], "c": {"é": "\n\"\u2028"}}
     int_keys = {3: "int key", 10: [1]}  # left to json.dumps
     for value in (odd, int_keys):
         assert canonical_json(value) == json.dumps(value, indent=2, sort_keys=True, ensure_ascii=False)
+    for not_json in ({"hal_m": float("inf")}, {"b": [np.float64("nan")]}, {3: -float("inf")}):  # an invoice is JSON
+        with pytest.raises(ValueError, match="not JSON compliant"):
+            canonical_json(not_json)
     with pytest.raises(TypeError):  # what json.dumps refuses, it still refuses
         canonical_json({"x": np.int64(3)})
 

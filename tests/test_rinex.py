@@ -183,8 +183,8 @@ def test_several_navigation_files_are_read_as_one(tmp_path):
     single = tmp_path / "single.json"
     assert run_cli("process", str(obs), "--nav", str(nav), "--geo", geo, "--tariff", tariff, "-q", "-o", str(single)).returncode == 0
     assert isinstance(json.loads(single.read_text())["inputs"]["nav"], str)  # one file: recorded as before
-    for value in (json.dumps(str(nav)), json.dumps([str(gps), str(galileo)])):  # a settings file: one path or a list
+    for value in (json.dumps(str(nav)), json.dumps([str(gps), str(galileo)])):  # files come from the command line only
         (tmp_path / "settings.toml").write_text(f"nav = {value}\n")
         done = run_cli("process", str(obs), "--config", str(tmp_path / "settings.toml"), "--geo", geo, "--tariff", tariff,
                        "-q", "-o", str(tmp_path / "c.json"))  # fmt: skip
-        assert done.returncode == 0, done.stderr.decode()
+        assert done.returncode == 2 and b"'nav' is not a setting" in done.stderr and not (tmp_path / "c.json").exists()

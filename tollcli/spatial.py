@@ -110,7 +110,7 @@ def feature_collection_text(doc: dict, chunk: int = 2000):
     time, so a network of any size is never held as one text nor as Python coordinate lists."""
     import json
 
-    dumps = lambda value: json.dumps(value, separators=(",", ":"), sort_keys=True)  # noqa: E731
+    dumps = lambda value: json.dumps(value, separators=(",", ":"), sort_keys=True, allow_nan=False)  # noqa: E731  (NaN is not JSON)
     rest = {k: v for k, v in doc.items() if k != "features"}
     keys = sorted([*rest, "features"])
     yield "{"

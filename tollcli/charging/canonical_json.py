@@ -1,7 +1,8 @@
 """The invoice's canonical JSON text, written faster than ``json.dumps`` with an indent.
 
 ``canonical_json(obj)`` is byte for byte ``json.dumps(obj, indent=2, sort_keys=True,
-ensure_ascii=False)`` (tested on invoices and on random documents). The standard
+ensure_ascii=False, allow_nan=False)`` (tested on invoices and on random documents): a NaN or an infinity
+is refused (ValueError), never written as the ``NaN``/``Infinity`` that JSON readers reject. The standard
 library encodes an indented document with its pure-Python generator encoder; this
 writer joins strings directly and encodes strings with the standard library's C
 string encoder. Anything it does not know (a non-string key, an object of another
@@ -22,13 +23,12 @@ class _Unusual(Exception):
 
 
 def _float(x: float) -> str:
-    if x != x:
-        return "NaN"
-    if x == float("inf"):
-        return "Infinity"
-    if x == -float("inf"):
-        return "-Infinity"
+    if x != x or x in (_INF, -_INF):  # NaN and infinities are not JSON: an invoice holding one is refused
+        raise ValueError(f"Out of range float values are not JSON compliant: {x!r}")
     return float.__repr__(x)
+
+
+_INF = float("inf")
 
 
 def _value(o, newline: str) -> str:
@@ -97,8 +97,8 @@ def _dict(o: dict, inner: str, newline: str) -> str:
 
 
 def canonical_json(obj) -> str:
-    """``json.dumps(obj, indent=2, sort_keys=True, ensure_ascii=False)``, the same text, faster."""
+    """``json.dumps(obj, indent=2, sort_keys=True, ensure_ascii=False, allow_nan=False)``, the same text, faster."""
     try:
         return _value(obj, "\n")
     except (_Unusual, RecursionError):
-        return json.dumps(obj, indent=2, sort_keys=True, ensure_ascii=False)
+        return json.dumps(obj, indent=2, sort_keys=True, ensure_ascii=False, allow_nan=False)

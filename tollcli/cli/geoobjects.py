@@ -184,7 +184,7 @@ def info(
 @app.command("compile")
 def compile_store(
     path: Annotated[str, typer.Argument(metavar="FILE", help="Geo-object file (GeoJSON from 'tollcli geoobjects build' or elsewhere).")],
-    as_json: Annotated[bool, typer.Option("--json", help="What was compiled (file, SHA-256, geo-objects, store folder and size, seconds) as JSON on stdout.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="What was compiled (file, SHA-256, geo-objects, store folder, its manifest digest and size, seconds) as JSON on stdout.")] = False,
     quiet: opt.Quiet = False,
 ) -> None:
     """Compile a geo-object file into its store ahead of the logs: checked, projected, indexed and kept as arrays in the
@@ -197,15 +197,15 @@ def compile_store(
     from tollcli.geoobjects.store import load_geoobjects
 
     if cache_dir() is None:
-        raise UsageError("TOLLCLI_CACHE_DIR=off: there is no cache to compile into")
+        raise UsageError("there is no cache to compile into (TOLLCLI_CACHE_DIR=off, or a folder others can write)")
     start = time.perf_counter()
     geo = load_geoobjects(path)
     seconds = time.perf_counter() - start
     if geo.store is None:
         raise DataError(f"{path}: the store could not be written in {cache_dir()}")
-    size = sum(f.stat().st_size for f in geo.store.iterdir())
+    size = sum(f.stat().st_size for f in geo.store.glob("*.npy"))  # (the arrays: other files come and go with readers)
     summary = {"file": path, "sha256": geo.source_sha256, "geoobjects": len(geo.ids), "store": str(geo.store),
-               "store_bytes": size, "seconds": round(seconds, 3)}  # fmt: skip
+               "store_sha256": geo.store_sha256, "store_bytes": size, "seconds": round(seconds, 3)}  # fmt: skip
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
     else:

@@ -33,8 +33,28 @@ def _reader_gone() -> None:
     sys.exit(0)
 
 
+def _say_cache_notes() -> None:
+    """A cache that is not used is said once per message on stderr, as a note (the run goes on without it)."""
+    import warnings
+
+    from tollcli.cache import CacheNotUsed
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, CacheNotUsed):
+            sys.stderr.write(f"tollcli: note: {' '.join(str(message).split())}\n")
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+    warnings.simplefilter("once", CacheNotUsed)
+
+
 def main(argv: list[str] | None = None) -> None:
     from tollcli.cli.app import COMMANDS, build_app
+
+    _say_cache_notes()
 
     args = sys.argv[1:] if argv is None else argv
     first = next((a for a in args if not a.startswith("-")), None)

@@ -33,7 +33,9 @@ FILES = (
 )
 ENVIRONMENT = (
     ("TOLLCLI_CACHE_DIR", "where the cache goes (default $XDG_CACHE_HOME/tollcli or ~/.cache/tollcli); "
-                          "'off' turns it off. Results never depend on it: every cached file is named by all its inputs"),
+                          "'off' turns it off. Results never depend on it: every cached file is named by all its inputs "
+                          "and checked against the SHA-256 written with it before use; a folder others can write is not "
+                          "used (a sticky shared one holds a private tollcli-UID folder per user); verify reads no cache"),
     ("NO_COLOR", "no colours in the tables shown on a terminal"),
 )
 

@@ -33,8 +33,11 @@ COMMANDS = ("process", "batch", "integrity")
 DERIVED = frozenset({"valid_statuses", "policy_used", "integrity_sources_used", "continued"})
 #: an invoice's parameter name → the option's name, where the two differ
 PARAMETER_OPTION = {"sigma_m": "sigma", "tc_s": "tc", "vehicle_attrs": "vehicle_attr"}
-#: options a settings file cannot hold: what names the file itself, and what only prints
-NOT_SETTINGS = frozenset({"config", "help", "quiet", "as_json"})
+#: options a settings file cannot hold: the files a run reads and writes, its output format, how it is executed and
+#: what only prints. They come from the command line alone: a settings file may be an invoice from anyone, and must
+#: not make a run read a network or tariff, or write a file, that the user did not name
+NOT_SETTINGS = frozenset({"config", "help", "quiet", "as_json", "log", "inputs", "output", "out_fmt", "fmt", "geo", "tariff",
+                          "nav", "roads", "osnma_merkle", "osnma_public_key", "fleet", "workers", "scheduler", "force"})  # fmt: skip
 
 
 def _known_elsewhere() -> set[str]:
@@ -95,7 +98,8 @@ def settings_for(command: str, doc: dict, path: str, options: set[str]) -> dict:
         name = key.replace("-", "_")
         name = "out_fmt" if name == "format" else name  # -f/--format's parameter
         if name in NOT_SETTINGS:
-            raise UsageError(f"--config {path}: {key!r} is not a setting")
+            raise UsageError(f"--config {path}: {key!r} is not a setting (files, outputs and how a run is executed are "
+                             "given on the command line)")  # fmt: skip
         if name in options:
             if isinstance(value, (dt.date, dt.time)):  # a TOML date (date = 2026-03-02, unquoted): as the option writes it
                 value = value.isoformat(timespec="seconds") if isinstance(value, dt.datetime) else value.isoformat()
@@ -113,6 +117,25 @@ def _takes_a_date(param) -> bool:
     return isinstance(getattr(param, "type", None), click.DateTime)
 
 
+def _check_type(param, value, path: str) -> None:
+    """UsageError unless a settings value has its option's type: a boolean is true or false (never "yes"), a number a
+    number (never text or a boolean), anything else text (or a list of texts for an option given several times)."""
+    bare = param.bare_type() if callable(getattr(param, "bare_type", None)) else getattr(param, "type", None)
+    name = bare if isinstance(bare, str) else getattr(bare, "__name__", "")  # (typer gives the annotation, or its text)
+    if name == "bool" or isinstance(bare, click.types.BoolParamType) or getattr(param, "is_flag", False):
+        ok, want = isinstance(value, bool), "true or false"
+    elif name == "int" or isinstance(bare, click.types.IntParamType):
+        ok, want = isinstance(value, int) and not isinstance(value, bool), "a whole number"
+    elif name == "float" or isinstance(bare, click.types.FloatParamType):
+        ok, want = isinstance(value, (int, float)) and not isinstance(value, bool), "a number"
+    elif getattr(param, "multiple", False):
+        ok, want = isinstance(value, list) and all(isinstance(v, str) for v in value), "a list of texts"
+    else:
+        ok, want = isinstance(value, str), "a text"
+    if not ok:
+        raise UsageError(f"--config {path}: {param.name} = {str(value)[:40]!r} is not {want}")
+
+
 def _load(ctx: typer.Context, param: typer.CallbackParam, value: str | None) -> str | None:
     if not value:
         return value
@@ -123,6 +146,8 @@ def _load(ctx: typer.Context, param: typer.CallbackParam, value: str | None) -> 
     for p in ctx.command.params:  # a date or time option takes text (a TOML date became text above); a number is none
         if p.name in defaults and _takes_a_date(p) and not isinstance(defaults[p.name], str):
             raise UsageError(f"--config {value}: {p.name} = {str(defaults[p.name])[:40]!r} is not a date (write it as 2026-03-02)")
+        if p.name in defaults:
+            _check_type(p, defaults[p.name], value)
     ctx.default_map = {**(ctx.default_map or {}), **defaults}
     return value
 

@@ -17,8 +17,9 @@ from tollcli.spatial import HAL_MAX_M, feature_geometries, feature_geometry, hal
 
 #: 6: a folder of memory-mapped arrays with a grid index (5 and before: one .npz read whole); 7: the same arrays, made
 #: only from files that pass the stricter check (a HAL that is a number in (0, 10 000] m, rings closed, at most 6°
-#: across): a store an older version made of a file now refused is not used
-STORE_FORMAT = 7
+#: across): a store an older version made of a file now refused is not used; 8: with a manifest of every file's
+#: digest, verified before use (:mod:`tollcli.geoobjects.store_files`)
+STORE_FORMAT = 8
 #: polygons projected and written as WKB per block
 CHUNK = 8192
 #: the properties the store and ``geoobjects check`` read (the others — the build's report — are not kept)

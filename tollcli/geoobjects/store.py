@@ -14,22 +14,20 @@ Loading memory-maps the arrays: nothing is parsed, the workers of a batch (and D
 pages, and a run decodes only the polygons of the geo-objects near its track — its cost grows with the drive, not
 with the network. ``tollcli geoobjects build`` compiles what it writes, ``tollcli geoobjects compile`` a file made
 elsewhere; ``process`` compiles a file met for the first time. ``TOLLCLI_CACHE_DIR=off`` keeps the store in memory
-only; a cache that cannot be written is silently skipped; a damaged store is compiled again.
+only; a cache that cannot be written is silently skipped. Every file of a store is checked against the digests of its
+manifest before use (:mod:`tollcli.geoobjects.store_files`); a store that fails is compiled again, said on stderr.
 """
 
 from __future__ import annotations
 
-import json
-import os
-import shutil
-import tempfile
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import shapely
 
-from tollcli.cache import cache_dir
+from tollcli.cache import CacheNotUsed, cache_dir, trusted_folder
 from tollcli.geoobjects.compiled import (  # noqa: F401  (section_lengths, tunnel_lengths: re-exported)
     STORE_FORMAT,
     compile_features,
@@ -38,7 +36,10 @@ from tollcli.geoobjects.compiled import (  # noqa: F401  (section_lengths, tunne
     tunnel_lengths,
 )
 from tollcli.geoobjects.index import GridIndex, StoredGeometries
+from tollcli.geoobjects.store_files import StoreRejected, TempStore, manifest_of, manifest_sha256, put_in_place, read_verified
 from tollcli.errors import DataError
+from tollcli.geoobjects.check import MAX_LENGTH_M
+from tollcli.spatial import HAL_MAX_M
 from tollcli.io.sources import file_sha256
 
 #: the slowest traffic a tunnel's GNSS outage is allowed for (7.2 km/h, a congested tunnel), m/s
@@ -77,6 +78,8 @@ class GeoObjects:
     directed_mask: np.ndarray | None = None
     #: the store folder the arrays are mapped from (None: compiled in memory)
     store: Path | None = None
+    #: SHA-256 of the store's manifest (the digests of its arrays): what the invoice records beside the file's
+    store_sha256: str | None = None
 
     def directed(self) -> np.ndarray:
         """Which geo-objects count a position only in their direction of travel."""
@@ -97,41 +100,60 @@ class GeoObjects:
 
 
 def load_geoobjects(path: str, sha256: str | None = None) -> GeoObjects:
-    """A geo-object file (as written by ``tollcli geoobjects build``) ready for recognition: its store memory-mapped,
-    compiled first when there is none. ``sha256``: the file's digest when the caller has just computed it (a batch);
-    a file compiled here must still have it."""
+    """A geo-object file (as written by ``tollcli geoobjects build``) ready for recognition: its store memory-mapped
+    when one verifies (:mod:`tollcli.geoobjects.store_files`), compiled first when there is none or it fails its check
+    (said once on stderr). ``sha256``: the file's digest when the caller has just computed it (a batch); a file
+    compiled here must still have it."""
     try:
         digest = sha256 or file_sha256(path)
     except OSError:
         digest = None  # the compile says why it cannot be read
     folder = store_path(digest) if digest is not None else None
-    if folder is not None and folder.is_dir():
+    if folder is not None and (folder.exists() or folder.is_symlink()):
         try:
-            geo = geoobjects_from_columns(read_store(folder))
-            geo.source_sha256, geo.store = digest, folder
-            return geo
-        except (OSError, ValueError, KeyError, EOFError, TypeError, json.JSONDecodeError):
-            pass  # a damaged store: compile again
-    spill = _spill_beside(folder) if folder is not None else None
+            columns, store_digest = read_verified(folder, STORE_FORMAT, digest)
+            return _geoobjects(columns, digest, folder, store_digest)
+        except StoreRejected as exc:
+            warnings.warn(f"geo-object store {folder} not used ({exc}): compiled again", CacheNotUsed, stacklevel=2)
+    temp = _temp_beside(folder) if folder is not None else None
+    spill = _Spill(temp.folder) if temp is not None else None
     try:
         columns, parsed_digest = compile_file(path, spill)
         if digest is not None and parsed_digest != digest:
             raise DataError(f"{path}: the file changed while it was read (SHA-256 {parsed_digest[:12]}…, expected {digest[:12]}…)")
     except BaseException:
-        if spill is not None:
-            shutil.rmtree(spill.folder, ignore_errors=True)
+        if temp is not None:
+            temp.discard()
         raise
-    stored = write_store(folder, columns) if folder is not None else None
-    geo = geoobjects_from_columns(read_store(stored) if stored is not None else columns)
-    geo.source_sha256, geo.store = parsed_digest, stored  # hashed once, for the store's key and for the invoice
+    return _geoobjects_written(folder, temp, columns, parsed_digest)
+
+
+def _geoobjects_written(folder: Path | None, temp: "TempStore | None", columns: dict, digest: str) -> GeoObjects:
+    """Geo-objects of columns just compiled: their store put in place and mapped from there when the cache can be
+    written, else (or when the folder cannot be read back) the columns themselves."""
+    placed = put_in_place(temp, folder, columns, STORE_FORMAT, digest) if temp is not None else None
+    if placed is not None:
+        try:
+            mapped, store_digest = read_verified(placed[0], STORE_FORMAT, digest)
+            return _geoobjects(mapped, digest, placed[0], store_digest)
+        except StoreRejected:
+            pass  # replaced or removed meanwhile: the columns in memory are the same
+    return _geoobjects(columns, digest, None, manifest_sha256(manifest_of(columns, STORE_FORMAT, digest)))
+
+
+def _geoobjects(columns: dict, digest: str | None, folder: Path | None, store_digest: str) -> GeoObjects:
+    geo = geoobjects_from_columns(columns)
+    geo.source_sha256, geo.store, geo.store_sha256 = digest, folder, store_digest
     return geo
 
 
-def _spill_beside(folder: Path) -> "_Spill | None":
+def _temp_beside(folder: Path) -> "TempStore | None":
     """A temporary store folder beside ``folder`` to compile into (None: the cache cannot be written)."""
     try:
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        return _Spill(Path(tempfile.mkdtemp(dir=folder.parent, suffix=".tmp")))
+        folder.parent.mkdir(mode=0o700, exist_ok=True)
+        if not trusted_folder(folder.parent):
+            return None
+        return TempStore(folder.parent)
     except OSError:
         return None
 
@@ -140,17 +162,23 @@ def precompile(features: list, path: str, digest: str) -> Path | None:
     """The store of a file just written from ``features`` (which passed ``geoobjects check``) under its SHA-256
     ``digest``: the store its first ``process`` would make, made now (None: the cache is off or not writable)."""
     folder = store_path(digest)
-    if folder is None or folder.is_dir():
-        return folder
-    spill = _spill_beside(folder)
-    if spill is None:
+    if folder is None:
         return None
     try:
-        compile_features(features, path, checked=True, columns=spill)
+        read_verified(folder, STORE_FORMAT, digest)
+        return folder
+    except StoreRejected:
+        pass
+    temp = _temp_beside(folder)
+    if temp is None:
+        return None
+    try:
+        columns = compile_features(features, path, checked=True, columns=_Spill(temp.folder))
     except BaseException:
-        shutil.rmtree(spill.folder, ignore_errors=True)
+        temp.discard()
         raise
-    return write_store(folder, spill)
+    placed = put_in_place(temp, folder, columns, STORE_FORMAT, digest)
+    return placed[0] if placed is not None else None
 
 
 class _Spill(dict):
@@ -179,7 +207,7 @@ class _Spill(dict):
                 np.save(self.folder / f"{name}.npy", np.ascontiguousarray(value), allow_pickle=False)
                 value = np.load(self.folder / f"{name}.npy", mmap_mode="r", allow_pickle=False)
             except OSError:
-                pass  # kept in memory: write_store tries again, and says nothing if it cannot
+                pass  # kept in memory: put_in_place tries again, and says nothing if it cannot
         super().__setitem__(name, value)
 
 
@@ -198,7 +226,8 @@ def geoobjects_from_columns(columns: dict) -> GeoObjects:
     n = len(ids)
     for name in (*FLOAT_COLUMNS, *INT_COLUMNS, "metric_ends", "bounds"):
         if len(columns[name]) != n:
-            raise ValueError(f"store column {name}: {len(columns[name])} rows for {n} geo-objects")
+            raise StoreRejected(f"store column {name}: {len(columns[name])} rows for {n} geo-objects")
+    _check_values(columns, strings)
     metric = StoredGeometries(columns["metric_wkb"], columns["metric_ends"])
     if n and int(metric.ends[-1]) != len(metric.wkb):
         raise ValueError("store: the polygons' bytes are cut short")
@@ -218,36 +247,21 @@ def geoobjects_from_columns(columns: dict) -> GeoObjects:
 _EMPTY_LINE_WKB = len(shapely.to_wkb(shapely.LineString()))
 
 
-def write_store(folder: Path, columns: dict) -> Path | None:
-    """Write the store's arrays into ``folder`` atomically (a temporary folder renamed); None when it cannot be
-    written (the cache is then skipped) — a folder another process has just written is kept."""
-    tmp = columns.folder if isinstance(columns, _Spill) else None
-    try:
-        if tmp is None:
-            folder.parent.mkdir(parents=True, exist_ok=True)
-            tmp = Path(tempfile.mkdtemp(dir=folder.parent, suffix=".tmp"))
-        for name, value in columns.items():
-            if name == "strings":
-                (tmp / "strings.json").write_text(json.dumps(value, ensure_ascii=False), encoding="utf-8")
-            elif not (isinstance(value, np.memmap) and Path(value.filename).parent == tmp):  # not already there
-                np.save(tmp / f"{name}.npy", np.ascontiguousarray(value), allow_pickle=False)
-        if folder.is_dir():  # a damaged store: set aside (processes that mapped its files keep them until they end)
-            aside = Path(tempfile.mkdtemp(dir=folder.parent, suffix=".old"))
-            os.replace(folder, aside / folder.name)
-            shutil.rmtree(aside, ignore_errors=True)
-        os.replace(tmp, folder)
-        return folder
-    except OSError:
-        if tmp is not None:
-            shutil.rmtree(tmp, ignore_errors=True)
-        return folder if folder.is_dir() else None
-
-
-def read_store(folder: Path) -> dict:
-    """The store's arrays, memory-mapped (read-only: shared by every process that maps them)."""
-    columns: dict = {"strings": json.loads((folder / "strings.json").read_text(encoding="utf-8"))}
-    for file in folder.glob("*.npy"):
-        columns[file.stem] = np.load(file, mmap_mode="r", allow_pickle=False)
-    return columns
-
-
+def _check_values(columns: dict, strings: dict) -> None:
+    """StoreRejected unless every value is one a checked geo-object file can give: a HAL in (0, HAL_MAX_M], lengths
+    in [0, MAX_LENGTH_M] (a section's may be NaN: none given), finite boxes, codes within their tables."""
+    hal = np.asarray(columns["hal_m"])
+    if not np.all((hal > 0) & (hal <= HAL_MAX_M)):
+        raise StoreRejected(f"a hal_m outside (0, {HAL_MAX_M:g}] m")
+    length = np.asarray(columns["length_m"])
+    if not np.all(np.isnan(length) | ((length >= 0) & (length <= MAX_LENGTH_M))):
+        raise StoreRejected("a length_m outside [0, 1 000 km]")
+    for name in ("tunnel_m", "gap_m"):
+        if not np.all((np.asarray(columns[name]) >= 0) & (np.asarray(columns[name]) <= MAX_LENGTH_M)):
+            raise StoreRejected(f"a {name} outside [0, 1 000 km]")
+    if not np.all(np.isfinite(np.asarray(columns["bounds"]))):
+        raise StoreRejected("a box that is not finite")
+    for name, table in (("frame", "frames"), ("names_code", "names"), ("road_class_code", "road_class")):
+        codes = np.asarray(columns[name])
+        if codes.size and (codes.min() < 0 or codes.max() >= len(strings[table])):
+            raise StoreRejected(f"{name} outside its table")

@@ -131,13 +131,18 @@ def read_json(path: str, what: str):
 
     try:
         with open(path, encoding="utf-8") as fh:
-            return json.load(fh)
+            return json.load(fh, parse_constant=_not_json)
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:  # (ValueError: not JSON, or an integer of over 4 300 digits)
         raise DataError(f"{path}: not {what} ({' '.join(str(exc).split())[:200]})") from None
     except RecursionError:
         raise DataError(f"{path}: not {what} (nested too deeply)") from None
+
+
+def _not_json(constant: str):
+    """``NaN``, ``Infinity``, ``-Infinity``: what Python's json reads and JSON does not have."""
+    raise ValueError(f"{constant} is not a JSON number")
 
 
 #: the input formats (``--format``): ``auto`` is :func:`sniff_format`

@@ -258,7 +258,7 @@ class TableWriter:
     # -------------------------------------------------------------- GeoJSON sequence
     def _write_geojsonseq(self, fh: IO, df: pd.DataFrame) -> None:
         for feature in _point_features(df):
-            fh.write(json.dumps(feature, separators=(",", ":")) + "\n")
+            fh.write(json.dumps(feature, separators=(",", ":"), allow_nan=False) + "\n")
 
     def _close_geojsonseq(self, fh: IO) -> None:
         pass
@@ -278,7 +278,7 @@ class TableWriter:
 
     def _record(self, fh: IO, obj: dict) -> None:
         """One JSON record, comma-separated from the previous one."""
-        fh.write(("" if self._records == 0 else ",\n") + json.dumps(obj, separators=(",", ":")))
+        fh.write(("" if self._records == 0 else ",\n") + json.dumps(obj, separators=(",", ":"), allow_nan=False))
         self._records += 1
 
 

@@ -124,8 +124,16 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
     if attrs is not None and (not isinstance(attrs, dict) or not all(isinstance(k, str) and isinstance(v, str) and k and v
                                                                         for k, v in attrs.items())):  # fmt: skip
         bad("vehicle_attrs (--vehicle-attr)", attrs, "a table of attribute → value, both texts")
-    if not isinstance(settings.require_authenticated, bool):
-        bad("require_authenticated (--require-authenticated)", settings.require_authenticated, "true or false")
+    for name in ("require_authenticated", "fde", "strict"):
+        if not isinstance(getattr(settings, name), bool):  # ("yes" is not true: a settings value is typed)
+            bad(f"{name} (--{name.replace('_', '-')})", getattr(settings, name), "true or false")
+    if settings.date is not None and not _is_date(settings.date):
+        bad("date (--date)", settings.date, "a date YYYY-MM-DD")
+    for name in ("vehicle", "policy"):
+        if getattr(settings, name) is not None and not isinstance(getattr(settings, name), str):
+            bad(f"{name} (--{name})", getattr(settings, name), "a text")
+    if not isinstance(settings.sigma_model, str):
+        bad("sigma_model (--sigma-model)", settings.sigma_model, "a text")
     if attrs and "vehicle_class" in attrs:
         bad("vehicle_attrs (--vehicle-attr)", attrs, "the vehicle class is given by --vehicle-class")
     if tariff is not None:
@@ -138,6 +146,19 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
         why = check_vehicle(attrs or {}, tariff.vehicle, tariff.source) if tariff.tables else ""
         if why:
             bad("vehicle_attrs (--vehicle-attr)", attrs, why)
+
+
+def _is_date(value) -> bool:
+    """Whether ``value`` is a date written YYYY-MM-DD (as ``--date`` takes it, and an invoice records it)."""
+    import datetime as dt
+
+    if not isinstance(value, str) or len(value) != 10:
+        return False
+    try:
+        dt.date.fromisoformat(value)
+    except ValueError:
+        return False
+    return True
 
 
 def _check_continued(continued) -> None:
@@ -203,7 +224,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         step_s = charger.step_s
         log_sha256 = run.sha256
     inputs = {"log": printable_path(log), "geoobjects": printable_path(geo), "tariff": printable_path(tariff),
-              "geoobjects_sha256": geo_objects.source_sha256 or file_sha256(geo), "tariff_sha256": file_sha256(tariff)}  # fmt: skip
+              "geoobjects_sha256": geo_objects.source_sha256 or file_sha256(geo), "tariff_sha256": file_sha256(tariff),
+              "geoobjects_store_sha256": geo_objects.store_sha256}  # fmt: skip
     if log != "-":  # (a log read from stdin cannot be found again: its invoice records no digest to verify against)
         inputs["log_sha256"] = log_sha256
     if isinstance(nav, str):
