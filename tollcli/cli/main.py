@@ -61,7 +61,8 @@ def main(argv: list[str] | None = None) -> None:
     lean = first in COMMANDS and "--install-completion" not in args and "--show-completion" not in args
     if first is None and "--version" in args:
         lean, first = True, ""  # no command needed
-    app = build_app(first if lean else None)
+    listing = first is None and not lean and "--install-completion" not in args and "--show-completion" not in args
+    app = build_app(first if lean else None, listing=listing)  # (no command given: its help, from the summaries)
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _on_sigterm)
 

@@ -1,0 +1,44 @@
+"""``tollcli`` and ``tollcli --help`` start at once: the list of commands comes from their summaries, no command module
+(and so no numpy, pandas, scipy or the simulator) is imported; the list is the full application's, byte for byte."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import click
+import pytest
+import typer
+from conftest import REPO
+
+from tollcli.cli.app import COMMANDS, SUMMARIES, build_app
+
+HEAVY = ("numpy", "pandas", "scipy", "matplotlib", "shapely", "pyproj", "pyarrow", "tollcli.simulate", "tollcli.charging",
+         "tollcli.integrity", "tollcli.readers")  # fmt: skip
+
+
+def _help(app: typer.Typer) -> str:
+    command = typer.main.get_command(app)
+    return command.get_help(click.Context(command, info_name="tollcli", terminal_width=100, max_content_width=100))
+
+
+def test_the_listing_is_the_full_applications_help():
+    assert _help(build_app(listing=True)) == _help(build_app())
+
+
+def test_each_summary_is_its_commands_own():
+    full = typer.main.get_command(build_app())
+    ctx = click.Context(full)
+    assert set(SUMMARIES) == set(COMMANDS)
+    for name in COMMANDS:
+        assert (full.get_command(ctx, name).help or "").split("\n\n")[0] == SUMMARIES[name], name
+
+
+@pytest.mark.parametrize("args", [["--help"], [], ["info", "--help"]])
+def test_help_imports_no_heavy_module(args):
+    probe = ("import sys\nfrom tollcli.cli.main import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
+             f"print('imported:' + ','.join(m for m in {HEAVY!r} if m in sys.modules))\n")  # fmt: skip
+    r = subprocess.run([sys.executable, "-c", probe, *args], capture_output=True, text=True, cwd=REPO, timeout=60)
+    imported = r.stdout.rsplit("imported:", 1)[1].strip()
+    assert imported == "", f"tollcli {' '.join(args)} imported {imported}"
+    assert "Usage: tollcli" in r.stdout + r.stderr
