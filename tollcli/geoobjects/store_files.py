@@ -24,6 +24,7 @@ import shutil
 import stat
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -170,7 +171,8 @@ def remove_dead_writers(parent: Path) -> None:
             fd = os.open(folder / WRITER, os.O_RDONLY)
         except FileNotFoundError:  # no lock file: a writer just starting, or a folder set aside and not yet removed
             try:
-                if time.time() - os.lstat(folder).st_mtime > YOUNG_S or folder.suffix == ".old" and _holding_cache_lock(parent):
+                stale = time.time() - os.lstat(folder).st_mtime > YOUNG_S
+                if stale or (folder.suffix == ".old" and _cache_lock_free(parent)):
                     shutil.rmtree(folder, ignore_errors=True)
             except OSError:
                 pass
@@ -186,8 +188,8 @@ def remove_dead_writers(parent: Path) -> None:
             os.close(fd)
 
 
-def _holding_cache_lock(parent: Path) -> bool:
-    """Whether the cache's lock is free now (no writer is setting a store aside): taken and released at once."""
+def _cache_lock_free(parent: Path) -> bool:
+    """Whether no writer holds the cache's lock now (none is setting a store aside): taken and released at once."""
     try:
         with _cache_lock(parent, wait=False):
             return True
@@ -195,23 +197,15 @@ def _holding_cache_lock(parent: Path) -> bool:
         return False
 
 
-class _cache_lock:
+@contextmanager
+def _cache_lock(parent: Path, wait: bool = True):
     """The cache's lock (``<parent>/.lock``): held while a store is put in place or set aside."""
-
-    def __init__(self, parent: Path, wait: bool = True):
-        self.parent, self.wait = parent, wait
-
-    def __enter__(self):
-        self.fd = os.open(self.parent / ".lock", os.O_WRONLY | os.O_CREAT, 0o600)
-        try:
-            fcntl.flock(self.fd, fcntl.LOCK_EX | (0 if self.wait else fcntl.LOCK_NB))
-        except OSError:
-            os.close(self.fd)
-            raise
-        return self
-
-    def __exit__(self, *exc):
-        os.close(self.fd)
+    fd = os.open(parent / ".lock", os.O_WRONLY | os.O_CREAT, 0o600)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        yield
+    finally:
+        os.close(fd)
 
 
 def put_in_place(temp: TempStore, folder: Path, columns: dict, fmt: int, source_sha256: str | None) -> tuple[Path, str] | None:
