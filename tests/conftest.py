@@ -17,6 +17,9 @@ REPO = Path(__file__).resolve().parents[1]
 os.environ.setdefault("TOLLCLI_CACHE_DIR", tempfile.mkdtemp(prefix="tollcli-test-cache-"))
 SHARED_DATA = REPO.parent / "shared" / "data"
 SAMPLES = REPO / "samples"
+#: when the Berlin drive (libRSF: seconds from its start, no date) is said to have started: a Tuesday noon, outside every
+#: band of the example tariff (an invoice needs a clock: process --start-time)
+BERLIN_START = "2019-06-04T12:00:00+02:00"
 
 
 def shared(*parts: str) -> Path:
@@ -59,7 +62,7 @@ def roads_along_the_berlin_drive(tmp_path: Path) -> Path:
                 for k in range(len(lon_lat) // 4)]  # fmt: skip
     (tmp_path / "roads.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": features}))
     geo = tmp_path / "geo.geojson"
-    geo.write_text(json.dumps(build_geoobjects(str(tmp_path / "roads.geojson"))))
+    geo.write_text(json.dumps(build_geoobjects(str(tmp_path / "roads.geojson"), hal_min_m=5.0)))  # HAL down to 5 m where asked
     return geo
 
 

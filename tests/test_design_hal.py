@@ -230,7 +230,11 @@ def test_sections_with_no_stretch_at_the_design_hal_fall_back_and_are_listed(tmp
         ({"id": "STREET", "tolled": False}, [(-100, 30), (1100, 30)]),  # a parallel street 30 m away all along
     ])  # fmt: skip
     geo = tmp_path / "g.geojson"
+    # by default no fallback: the section is skipped, naming the road that takes it (a newcomer's build kept 1 m
+    # geo-objects at HAL 5 m that charged a whole section from one position)
     r = run_cli("geoobjects", "build", str(roads), "-o", str(geo), "--json")
+    assert r.returncode == 1 and "NARROW: no stretch of 13.9 m can have HAL 25 m" in r.stderr.decode() and "(STREET)" in r.stderr.decode()
+    r = run_cli("geoobjects", "build", str(roads), "-o", str(geo), "--json", "--hal-min", "5")  # the operator asks
     assert r.returncode == 0, r.stderr
     summary = json.loads(r.stdout)
     assert summary["below_design_hal"] == [{"id": "NARROW", "hal_m": 15.0, "design_hal_m": [25.0, 50.0]}]

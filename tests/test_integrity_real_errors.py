@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import SAMPLES, run_cli, shared
+from conftest import BERLIN_START, SAMPLES, run_cli, shared
 
 from tollcli.errors import DataError
 from tollcli.gnss.wls import observation_matrix, wls_geometry
@@ -235,7 +235,8 @@ def test_on_the_real_city_drive_the_defaults_charge_the_street_driven_and_no_oth
                                                                                "--positioning", "snapshot")))  # fmt: skip
     for name, args in runs:
         invoice, report = tmp_path / f"{name}.json", tmp_path / f"{name}-audit.json"
-        proc = run_cli("process", _berlin("Input.txt"), "--geo", geo, "--tariff", str(tariff), "-o", str(invoice), *args)
+        proc = run_cli("process", _berlin("Input.txt"), "--geo", geo, "--tariff", str(tariff), "-o", str(invoice),
+                       "--start-time", BERLIN_START, *args)  # fmt: skip
         assert proc.returncode == 0, proc.stderr.decode()
         doc = json.loads(invoice.read_text())
         if name == "defaults":

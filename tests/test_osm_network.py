@@ -86,7 +86,8 @@ def test_no_section_is_connected_to_a_road_that_only_crosses_it(helsinki):
 
 def test_cli_builds_a_clean_network_and_lists_what_it_skipped(tmp_path):
     out = tmp_path / "helsinki.geojson"
-    r = run_cli("geoobjects", "build", str(shared("osm", "helsinki.osm.pbf")), "--tolled", "highway=primary", "-o", str(out), "--json")
+    r = run_cli("geoobjects", "build", str(shared("osm", "helsinki.osm.pbf")), "--tolled", "highway=primary", "-o", str(out), "--json",
+                "--hal-min", "5")  # fmt: skip
     assert r.returncode == 0, r.stderr
     summary = json.loads(r.stdout)
     assert summary["geoobjects"] >= 25 and summary["hal_min_m"] >= 5.0 and len(summary["frames"]) == 1
@@ -243,4 +244,4 @@ def test_the_same_map_as_osm_xml_gives_the_same_geoobjects(tmp_path):
         r = run_cli("geoobjects", "build", str(source), "--tolled", "highway=primary", "-o", str(out), "-q")
         assert r.returncode == 0, r.stderr
         outs.append(out.read_bytes())
-    assert outs[0] == outs[1] and len(json.loads(outs[0])["features"]) == 34
+    assert outs[0] == outs[1] and len(json.loads(outs[0])["features"]) == 10  # no HAL fallback unless asked

@@ -66,11 +66,12 @@ def test_a_real_pseudorange_drive_streamed_is_the_whole_log(tmp_path, monkeypatc
     """The Berlin drive (libRSF pseudoranges and odometry speed, 1 372 epochs) through the one charge path in 37-epoch
     chunks, with 500 m roads laid along its own track: the invoice of the whole log, passages and findings included,
     with the smoothed trajectory (the default) and with snapshot positions."""
-    from conftest import roads_along_the_berlin_drive, shared
+    from conftest import BERLIN_START, roads_along_the_berlin_drive, shared
 
     log = str(shared("smartloc", "Berlin_Potsdamer_Platz_Input.txt"))
     geo = roads_along_the_berlin_drive(tmp_path)
     for settings in ({}, {"positioning": "snapshot"}, {"environment": "open", "positioning": "snapshot"}):
+        settings = {**settings, "start_time": BERLIN_START}
         monkeypatch.setattr(pipeline, "STREAM_ROUNDS", False)
         monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 1_000_000)
         whole = charge_log(log, str(geo), TARIFF, ChargeSettings(**settings))[0]
@@ -79,7 +80,7 @@ def test_a_real_pseudorange_drive_streamed_is_the_whole_log(tmp_path, monkeypatc
         monkeypatch.setattr(streaming, "ROUND_ROWS", 1)
         streamed = charge_log(log, str(geo), TARIFF, ChargeSettings(**settings))[0]
         assert invoice_json(streamed) == invoice_json(whole)
-        if not settings:  # the smoothed trajectory: the city positions charge
+        if "positioning" not in settings:  # the smoothed trajectory: the city positions charge
             assert whole["lines"] and whole["parameters"]["positioning_used"] == "smoothed"
         else:  # each epoch alone: mostly not (declared open: some)
             assert whole["not_charged"] and whole["findings"]["items"]

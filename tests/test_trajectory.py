@@ -119,7 +119,7 @@ def test_the_invoice_says_which_positioning_and_verify_reproduces_it(tmp_path):
     invoice made before the estimator verifies)."""
     import pandas as pd
 
-    from conftest import REPO, roads_along_the_berlin_drive
+    from conftest import BERLIN_START, REPO, roads_along_the_berlin_drive
 
     log = str(shared(*BERLIN))
     geo = roads_along_the_berlin_drive(tmp_path)
@@ -128,7 +128,7 @@ def test_the_invoice_says_which_positioning_and_verify_reproduces_it(tmp_path):
     for positioning in ("smoothed", "snapshot"):
         out = tmp_path / f"{positioning}.json"
         extra = () if positioning == "smoothed" else ("--positioning", positioning)
-        proc = run_cli("process", log, "--geo", str(geo), "--tariff", tariff, "-o", str(out), "-q", *extra)
+        proc = run_cli("process", log, "--geo", str(geo), "--tariff", tariff, "-o", str(out), "-q", "--start-time", BERLIN_START, *extra)
         assert proc.returncode == 0, proc.stderr.decode()
         invoices[positioning] = json.loads(out.read_text())
     assert invoices["smoothed"]["parameters"]["positioning"] == "auto"  # the default: smoothed, the log has odometry

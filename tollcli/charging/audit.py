@@ -53,14 +53,27 @@ def driven_from_truth(path: str, geo) -> set[str]:
     return set(truth_passages(path, geo)["geoobject"])
 
 
-def truth_span(path: str) -> tuple[pd.Timestamp, pd.Timestamp, set[str]] | None:
+def start_time_of(invoices: list[dict], names: list[str]) -> str | None:
+    """The ``--start-time`` the invoices placed a relative-clock log at (None: none did); DataError when they differ."""
+    given = {}
+    for invoice, name in zip(invoices, names):
+        value = (invoice.get("parameters") or {}).get("start_time") if isinstance(invoice.get("parameters"), dict) else None
+        if value is not None:
+            given.setdefault(str(value), name)
+    if len(given) > 1:
+        (a, first), (b, second) = list(given.items())[:2]
+        raise DataError(f"{first} places the log at {a}, {second} at {b}: one truth cannot be on both clocks")
+    return next(iter(given), None)
+
+
+def truth_span(path: str, start_time: str | None = None) -> tuple[pd.Timestamp, pd.Timestamp, set[str]] | None:
     """First and last time of a truth trajectory and its vehicle ids (a ``vehicle`` column; empty when none);
     None for an id list or a trajectory without times."""
     if is_id_list(path):
         return None
     try:
-        points = truth_trajectory(path)
-    except DataError:
+        points = truth_trajectory(path, start_time)
+    except (DataError, ValueError):
         return None
     times = points["time_utc"].dropna()
     if times.empty:
@@ -73,10 +86,10 @@ def truth_span(path: str) -> tuple[pd.Timestamp, pd.Timestamp, set[str]] | None:
     return times.min(), times.max(), vehicles
 
 
-def check_same_trip(invoices: list[dict], names: list[str], truth: str) -> None:
+def check_same_trip(invoices: list[dict], names: list[str], truth: str, start_time: str | None = None) -> None:
     """DataError unless every invoice's period overlaps the truth's times (and its vehicle is the truth's, when
     the truth names one): comparing a 2024 invoice with a 2026 drive says nothing."""
-    span = truth_span(truth)
+    span = truth_span(truth, start_time)
     if span is None:
         return
     start, end, vehicles = span

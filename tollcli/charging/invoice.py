@@ -155,6 +155,8 @@ WHY_NOT = {
     "fault_detected": "a satellite disagreed with the others (a detected fault)",
     "probable_false_alarm": "the RAIM test failed (the papers' ETC at a HAL this small fails often without a fault)",
     "wrong_direction": "the vehicle drove against this carriageway's direction: the other carriageway",
+    "valid_outside": "the position the integrity check vouched for (its own solution, after any exclusion) lies "
+                     "outside the geo-object, though the receiver's lies inside",
     "direction_unknown": "no course or too slow to tell the direction on this carriageway",
     "speed_inconsistent": "the positions were not where the reported (Doppler) velocity took them (a fault)",
     "mm_off_road": "the position jumped off the road the vehicle was matched to (a fault)",

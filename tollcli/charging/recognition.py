@@ -30,6 +30,9 @@ from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim
 
 VALID_STATUSES = ("valid", "excluded_valid")
+#: a position inside whose vouched position (the RAIM's own solution, after any exclusion) lies outside the geo-object:
+#: trusted, but not here — its own status, so that a passage's statuses add up to its valid count
+VALID_OUTSIDE = "valid_outside"
 PASSAGE_GAP_S = 120.0
 
 
@@ -212,6 +215,8 @@ def pair_verdicts(pairs: dict[str, np.ndarray], geo: GeoObjects, epoch_why: np.n
     rows, obj = pairs["epoch_row"] - row_offset, pairs["obj"]
     valid = pairs["raim_valid"].copy()
     verdict = pairs["raim_status"].copy()
+    # a position the RAIM vouched for only after moving it (its own solution, an exclusion) outside the geo-object
+    verdict[np.isin(verdict, VALID_STATUSES) & ~valid] = VALID_OUTSIDE
     if "direction" in pairs:  # a carriageway counts a position only in its direction of travel
         # travelling against it is the other carriageway whatever the RAIM says (the revenue at risk must not count
         # it); an unknown direction only matters where the position would count

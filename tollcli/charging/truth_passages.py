@@ -64,8 +64,12 @@ def passages_from_ids(ids) -> pd.DataFrame:
                          "exit_utc": pd.Series(pd.NaT, index=range(len(ids)), dtype="datetime64[ns, UTC]")})  # fmt: skip
 
 
-def truth_trajectory(path: str) -> pd.DataFrame:
-    """A trajectory as ``lat_deg``, ``lon_deg``, ``time_utc`` (NaT when it has none) and ``course_deg`` if given."""
+def truth_trajectory(path: str, start_time: str | None = None) -> pd.DataFrame:
+    """A trajectory as ``lat_deg``, ``lon_deg``, ``time_utc`` (NaT when it has none) and ``course_deg`` if given.
+
+    ``start_time`` (ISO 8601): when a trajectory whose times are seconds from its start (libRSF ``point3``) began,
+    as the invoices it is compared with were placed (their ``parameters.start_time``); None leaves it at 1970-01-01.
+    """
     if path.lower().endswith(".parquet"):
         from tollcli.io.sources import read_table
 
@@ -76,7 +80,12 @@ def truth_trajectory(path: str) -> pd.DataFrame:
     if text.startswith(("point3 ", "pseudorange3 ", "odom3 ")):
         from tollcli.readers.librsf import librsf_truth
 
-        return librsf_truth(path)[["lat_deg", "lon_deg", "time_utc"]]
+        from tollcli.readers.librsf import LIBRSF_T0
+
+        points = librsf_truth(path)[["lat_deg", "lon_deg", "time_utc"]]
+        if start_time is not None:
+            points["time_utc"] = points["time_utc"] + (pd.Timestamp(start_time).tz_convert("UTC") - LIBRSF_T0)
+        return points
     from io import StringIO
 
     try:
@@ -194,8 +203,9 @@ def passages_from_trajectory(points: pd.DataFrame, geo) -> pd.DataFrame:
     return out.sort_values(["entry_utc", "geoobject"], kind="stable").reset_index(drop=True) if timed else out
 
 
-def truth_passages(path: str, geo) -> pd.DataFrame:
-    """The passages really driven (``geoobject``, ``entry_utc``, ``exit_utc``) from a truth file."""
+def truth_passages(path: str, geo, start_time: str | None = None) -> pd.DataFrame:
+    """The passages really driven (``geoobject``, ``entry_utc``, ``exit_utc``) from a truth file (``start_time``: see
+    :func:`truth_trajectory`)."""
     if is_id_list(path):
         text = read_truth_text(path).strip()
         if text.startswith("["):
@@ -211,4 +221,4 @@ def truth_passages(path: str, geo) -> pd.DataFrame:
         return passages_from_ids(ids)
     if geo is None:
         raise UsageError("a truth trajectory needs --geo to know where the geo-objects are")
-    return passages_from_trajectory(truth_trajectory(path), geo)
+    return passages_from_trajectory(truth_trajectory(path, start_time), geo)

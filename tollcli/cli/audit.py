@@ -19,6 +19,7 @@ from tollcli.charging.audit import (
     findings_of,
     load_invoice,
     risk_report,
+    start_time_of,
 )
 from tollcli.charging.recognition import load_geoobjects
 from tollcli.charging.tariffs import load_tariff
@@ -138,8 +139,9 @@ def audit(
     found = _expand(runs)
     paths = [p for p, _ in found]
     invoices = [inv for _, inv in found]
+    start_time = start_time_of(invoices, paths)  # a relative-clock truth is placed where the invoices placed the log
     if truth:
-        check_same_trip(invoices, paths, truth)
+        check_same_trip(invoices, paths, truth, start_time)
     geo_objects = load_geoobjects(geo) if geo else None
     if tariff and geo_objects is None:
         raise UsageError("--tariff prices geo-objects by their road class: give --geo too")
@@ -147,7 +149,7 @@ def audit(
     if truth:
         if geo_objects is None and not is_id_list(truth):
             raise UsageError("a truth trajectory needs --geo to know where the geo-objects are")
-        passages = truth_passages(truth, geo_objects)
+        passages = truth_passages(truth, geo_objects, start_time)
         report = {"mode": "truth", **audit_with_truth(invoices, passages, {}, invoice_error, pricer)}
         if report["share_within"] is None:
             money = f"money unknown ({MONEY_UNKNOWN})"

@@ -34,7 +34,7 @@ CHARGE_PARAMETERS = (
     ("fde", opt.Fde, False), ("sigma_model", opt.SigmaModel, "nominal"), ("sigma", opt.Sigma, 5.0), ("tc", opt.Tc, 5.0),
     ("n_th", opt.NTh, 1), ("require_authenticated", opt.RequireAuthenticated, False), ("osnma_merkle", opt.OsnmaMerkle, None),
     ("osnma_public_key", opt.OsnmaPublicKey, None), ("strict", opt.Strict, False), ("date", opt.DateOpt, None),
-    ("max_bad", opt.MaxBad, None),
+    ("start_time", opt.StartTime, None), ("max_bad", opt.MaxBad, None),
 )  # fmt: skip
 
 
@@ -68,6 +68,7 @@ class ChargeOptions:
     osnma_public_key: list[str] | None
     strict: bool
     date: object
+    start_time: str | None
     max_bad: int | None
 
     def __post_init__(self) -> None:
@@ -79,7 +80,7 @@ class ChargeOptions:
             vehicle_class=self.vehicle_class, vehicle_attrs=opt.vehicle_attrs(self.vehicle_attr), vehicle=vehicle, raim=self.raim,
             p_md=self.p_md, p_fa=self.p_fa, fde=self.fde, environment=self.environment, p_sat=self.p_sat, p_const=self.p_const,
             sigma_model=self.sigma_model, sigma_m=self.sigma, tc_s=self.tc, n_th=self.n_th, strict=self.strict,
-            date=self.date.date().isoformat() if self.date else None, policy=self.policy,
+            date=self.date.date().isoformat() if self.date else None, start_time=self.start_time, policy=self.policy,
             integrity_sources=self.integrity_sources, input_format=opt.check_input_format(input_format or self.input_format),
             require_authenticated=self.require_authenticated, positioning=self.positioning,
         )  # fmt: skip

@@ -8,7 +8,6 @@ from typing import Annotated, Optional
 
 import typer
 
-from tollcli.geoobjects.design_hal import HAL_FLOOR_M
 from tollcli.geoobjects.build import CONNECT_TOL_M, TRIM_FACTOR
 from tollcli.cli import options as opt
 from tollcli.cli.console import note
@@ -26,7 +25,10 @@ def build(
     tolled: Annotated[Optional[list[str]], typer.Option("--tolled", help="OpenStreetMap: the tolled ways, e.g. 'highway=motorway,trunk', 'toll=yes', 'way:ID,ID', 'ref:E18' (repeat: any matches).")] = None,
     hal: Annotated[Optional[list[str]], typer.Option("--hal", help="Design HAL, m: 25 (exactly), 25-50 (the largest the roads kept clear of allow) or CLASS=VALUE for one road class (repeat). Default 25-50, the papers' range.")] = None,
     hal_max: Annotated[Optional[float], typer.Option("--hal-max", hidden=True, help="Before the design HAL: the largest HAL (now --hal 25-M).", min=0.1)] = None,
-    hal_min: Annotated[float, typer.Option("--hal-min", help="Where no stretch of a section can have its design HAL: the smallest HAL to fall back to (listed); below it the section is skipped (listed), m.", min=0.0)] = HAL_FLOOR_M,
+    hal_min: Annotated[Optional[float], typer.Option("--hal-min", help="Where no stretch of a section can have its design HAL: the smallest HAL to fall back to (listed); below it the section is skipped (listed), m. Default: no fallback, such a section is skipped (listed, with why).", min=0.0)] = None,
+    n_th: Annotated[int, typer.Option("--n-th", help="The valid independent positions process will need per passage (its --n-th): with --tc and the section's speed (maxspeed, else its road class's), it sets the shortest stretch a geo-object is built on, speed × ((N_th − 1) · T_c + 1 s).", min=1, max=1000)] = 1,
+    tc: Annotated[float, typer.Option("--tc", help="The correlation time process will use (its --tc), s: see --n-th.", min=0.1, max=86_400.0)] = 5.0,
+    min_core: Annotated[Optional[float], typer.Option("--min-core", help="The shortest stretch of centre line a geo-object is built on, m (instead of the one --n-th and --tc give).", min=0.0, max=100_000.0)] = None,
     trim_factor: Annotated[float, typer.Option("--trim-factor", help="Junction ends are cut by this × HAL.", min=0.0)] = TRIM_FACTOR,
     connect_tol: Annotated[float, typer.Option("--connect-tol", help="Roads closer than this on one level meet (a junction), m.", min=0.0)] = CONNECT_TOL_M,
     as_json: Annotated[bool, typer.Option("--json", help="Summary (counts, coverage, sections below their design HAL, skipped sections and why) as JSON on stdout; needs -o FILE.")] = False,
@@ -37,8 +39,9 @@ def build(
 
     Tolled roads are cut into sections at junctions (OpenStreetMap: shared nodes; other files: roads meeting on one
     level). A section cut around a near road keeps several parts, charged once per passage at its whole length. Where
-    no stretch can have the design HAL, the largest HAL down to --hal-min is used and listed. Nothing is written that
-    'geoobjects check' or 'process' would refuse."""
+    no stretch can have the design HAL, the section is skipped and said why — or, where --hal-min asks for it, the largest
+    HAL down to it is used and listed. A stretch shorter than a passage needs to be seen (--n-th, --tc at the section's
+    speed; --min-core) is no geo-object. Nothing is written that 'geoobjects check' or 'process' would refuse."""
     from tollcli.geoobjects.geojson_stream import gc_paused
 
     if out_fmt is not None and out_fmt.lower() != "geojson":
@@ -48,14 +51,14 @@ def build(
     if as_json and output == "-":
         raise UsageError("--json writes the summary on stdout: give -o FILE for the geo-objects")
     with gc_paused():  # millions of dicts and lists, no cycles: the collector would cost more than the build
-        _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet)
+        _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet, (n_th, tc, min_core))
 
 
-def _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet) -> None:
+def _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet, seen_by=(1, 5.0, None)) -> None:
     from tollcli.geoobjects.design_hal import parse_design_hal
     from tollcli.geoobjects.check import HAL_MIN_CHECK_M, check_features
     from tollcli.geoobjects.store import precompile
-    from tollcli.geoobjects.build import build_from_roads, fallbacks, roads_of
+    from tollcli.geoobjects.build import SeenBy, build_from_roads, fallbacks, roads_of
     from tollcli.geoobjects.osm import is_osm
     from tollcli.spatial import feature_collection_text
 
@@ -72,17 +75,19 @@ def _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_to
         raise UsageError("--tolled selects ways of an OpenStreetMap file; a GeoJSON network says tolled per feature")
     else:
         network = roads_of(roads, connect_tol)
-    doc, skipped = build_from_roads(network, roads, design, connect_tol, trim_factor, hal_min, shapely_geometry=True)
+    doc, skipped = build_from_roads(network, roads, design, connect_tol, trim_factor, hal_min, shapely_geometry=True,
+                                    seen=SeenBy(*seen_by))  # fmt: skip
     del network  # the centre lines: not needed to write and compile the geo-objects
     if not doc["features"]:
         raise DataError(f"{roads}: no tolled section could be built ({len(skipped)} skipped: {skipped[0]['id']}: {skipped[0]['reason'] if skipped else ''})")
-    refused = check_features(doc["features"], hal_min)
+    refused = check_features(doc["features"], hal_min if hal_min is not None else HAL_MIN_CHECK_M)
+    lowest = min(f["properties"]["hal_m"] for f in doc["features"])
     if refused:  # what check and process would say of the file, said before it is written
         more = f" and {len(refused) - 1} more" if len(refused) > 1 else ""
         raise DataError(f"{roads}: not writing geo-objects that check and process would refuse: {refused[0]}{more}")
     digest = hashlib.sha256()
     write_text_atomic(output, _hashed(feature_collection_text(doc), digest))
-    if hal_min >= HAL_MIN_CHECK_M:  # what process will load: compiled now (with a smaller --hal-min, load checks it)
+    if lowest >= HAL_MIN_CHECK_M:  # what process will load: compiled now (with a smaller HAL, load checks it)
         precompile(doc["features"], output, digest.hexdigest())
     below = fallbacks(doc)
     _tell(roads, doc, below, skipped, design.describe(), quiet)

@@ -133,8 +133,12 @@ def integrity(
                "integrity_sources": sources, "integrity_sources_setting": integrity_sources, "gst_rms_ignored": ignored,
                "raim": raim, "hal_m": hal, "p_md": p_md, "p_fa": p_fa if raim != "etc" else None,
                "fde": fde, "sigma_model": sigma_model, "environment_setting": environment,
-               "environments": {k[1]: n for k, n in sorted(counts.items()) if k[0] == "environment"},
+               "environments": {k[1] or "unknown": n for k, n in sorted(counts.items()) if k[0] == "environment"},
                "skipped_lines": counts["skipped", "lines"]}  # fmt: skip
+    if kind == "gpsd-json" and not set(sources) & {"grs", "pseudorange"}:  # what gpsd's JSON lost of the receiver's evidence
+        from tollcli.job.pipeline import GPSD_DROPPED
+
+        summary["receiver_notes"] = {"gpsd_json": GPSD_DROPPED}
     if kind not in NAVIGATION_KINDS:
         summary.update(positioning=positioning, positioning_used=used)
         if note_why:
@@ -152,10 +156,17 @@ def integrity(
                         "open": "environment open, as declared: the nominal σ",
                         "urban": "environment urban, as declared: the urban σ"}.get(environment, environment) + ")")  # fmt: skip
         if summary["environments"]:
-            text += "; environment " + ", ".join(f"{n} {e or 'unknown'}" for e, n in summary["environments"].items())
+            text += "; environment " + ", ".join(f"{n} {e}" for e, n in summary["environments"].items())
         if ignored:
-            text += f"; GST RMS ignored on {sum(ignored.values())} epochs (no range-residual RMS: " + ", ".join(
-                f"{n} {k}" for k, n in ignored.items()) + ")"
+            rms = {k: n for k, n in ignored.items() if k != "contradictory"}
+            if rms:
+                text += f"; GST RMS ignored on {sum(rms.values())} epochs (no range-residual RMS: " + ", ".join(
+                    f"{n} {k}" for k, n in rms.items()) + ")"
+            if ignored.get("contradictory"):
+                text += (f"; GST ignored on {ignored['contradictory']} epochs (it contradicts itself: its ellipse and its "
+                         f"σ's are not one covariance; no evidence)")  # fmt: skip
+        if "receiver_notes" in summary:
+            text += "; " + summary["receiver_notes"]["gpsd_json"].split(": the positions")[0]
         note(text, quiet)
     if kind in NAVIGATION_KINDS:
         check_partial(stats, max_bad)

@@ -107,6 +107,27 @@ JsonSummary = Annotated[
     bool,
     typer.Option("--json", help="Print a machine-readable summary as JSON on stdout (needs -o FILE)."),
 ]
+def start_time_value(value: str | None) -> str | None:
+    """``--start-time``: an ISO 8601 date and time with its UTC offset (``Z`` or ``+02:00``), written back in UTC."""
+    if value is None:
+        return None
+    try:
+        t = _dt.datetime.fromisoformat(value.replace("Z", "+00:00").replace("z", "+00:00"))
+    except ValueError:
+        raise typer.BadParameter(f"{value!r} is not a date and time (write it as 2019-06-01T08:00:00+02:00)") from None
+    if t.tzinfo is None:
+        raise typer.BadParameter(f"{value!r} has no UTC offset (write Z or +02:00 after the time)")
+    if not 1980 <= t.astimezone(_dt.timezone.utc).year <= 2200:
+        raise typer.BadParameter(f"{value!r} is not between 1980 and 2200")
+    return t.astimezone(_dt.timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+StartTime = Annotated[
+    Optional[str],
+    typer.Option("--start-time", callback=start_time_value, help="When a log whose times are seconds from its start (libRSF) "
+                 "began: an ISO 8601 date and time with its UTC offset (2019-06-01T08:00:00+02:00). An invoice needs it: "
+                 "time bands, day types and the period are priced on this clock."),
+]
 DateOpt = Annotated[
     Optional[_dt.datetime],
     typer.Option("--date", formats=["%Y-%m-%d"], help="UTC date of the first epoch, for logs without RMC/ZDA dates (YYYY-MM-DD)."),

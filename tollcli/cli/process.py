@@ -59,7 +59,7 @@ def process(
         typer.echo(json.dumps(invoice_summary(invoice, output, stats), sort_keys=True))
     else:
         note(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged{_why_not(invoice)}, "
-             f"total {invoice['total']} {invoice['currency']}{_checks_said(invoice)}", quiet)  # fmt: skip
+             f"total {invoice['total']} {invoice['currency']}{_checks_said(invoice)}{_nothing_seen(invoice)}", quiet)  # fmt: skip
     if stats is not None:
         check_partial(stats, charge.max_bad)
 
@@ -72,6 +72,14 @@ def invoice_summary(invoice: dict, output: str, stats=None) -> dict:
             "integrity_sources_used": invoice["parameters"].get("integrity_sources_used"),
             "policy_used": invoice["parameters"].get("policy_used"), "findings": len((invoice.get("findings") or {}).get("items") or []),
             "skipped_lines": int(stats.skipped) if stats is not None else 0}
+
+
+def _nothing_seen(invoice: dict) -> str:
+    """For an invoice that saw no geo-object: how far the track stayed from the network."""
+    from tollcli.charging.nothing_seen import nothing_seen_words
+
+    report = invoice.get("nothing_seen")
+    return f"; nothing seen: {nothing_seen_words(report)}" if report else ""
 
 
 def _checks_said(invoice: dict) -> str:

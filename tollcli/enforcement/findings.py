@@ -473,10 +473,27 @@ def _raim_alarm(epochs: pd.DataFrame, raim: pd.DataFrame, t: np.ndarray, s: Find
         lat, lon = _where(epochs, a)
         out.append(_finding("raim_persistent_alarm", (a, b), t[a], t[b], lat, lon, alarm_share=float(np.mean(alarm[a : b + 1])),
                             expected_false_alarm_share=float(np.mean(np.clip(p_fa[a : b + 1], 0.0, 1.0))),
-                            median_test_stat=float(np.nanmedian(raim["test_stat"].to_numpy(float)[a : b + 1])),
-                            median_threshold=_nanmedian(raim["threshold"].to_numpy(float)[a : b + 1]),  # NaN: ss
-                            median_hdop=float(np.nanmedian(hdop[a : b + 1]))))  # fmt: skip
+                            **_alarm_statistic(raim, a, b), median_hdop=float(np.nanmedian(hdop[a : b + 1]))))  # fmt: skip
     return out
+
+
+def _alarm_statistic(raim: pd.DataFrame, a: int, b: int) -> dict:
+    """What a window's alarms were tested with: the statistic, the receiver output it came from and its median against
+    the threshold it was tested against — a test statistic against its χ² threshold, or (solution separation, whose
+    threshold is per subset) the largest separation over its threshold, which alarms above 1."""
+    rows = slice(a, b + 1)
+    out = {"median_test_stat": _nanmedian(raim["test_stat"].to_numpy(float)[rows])}
+    if "test_stat_source" in raim:
+        sources = raim["test_stat_source"].astype(str).to_numpy()[rows]
+        sources = sources[(sources != "none") & (sources != "<NA>") & (sources != "")]
+        if sources.size:
+            names, counts = np.unique(sources, return_counts=True)
+            out["statistic_source"] = str(names[np.argmax(counts)])  # the receiver output the residuals came from
+    threshold = _nanmedian(raim["threshold"].to_numpy(float)[rows])
+    if np.isfinite(threshold) or "separation_ratio" not in raim:
+        return {**out, "statistic": "test_stat", "median_threshold": threshold}
+    return {**out, "statistic": "separation_ratio", "median_separation_ratio": _nanmedian(raim["separation_ratio"].to_numpy(float)[rows]),
+            "median_threshold": 1.0}  # fmt: skip
 
 
 def _nanmedian(values: np.ndarray) -> float:

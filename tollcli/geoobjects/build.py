@@ -19,8 +19,10 @@ with its design HAL ``[low, high]`` (``design_hal.py``; default the papers' 25�
    than ``2 · low`` is cut around — the stretches of the centre line within ``2 · HAL`` of it are removed — and the
    nearest one beyond bounds HAL = min(high, ½ · its distance). No position within HAL of another road can then
    lie in the geo-object: a vehicle there, valid with HPL ≤ HAL, is never charged for this section.
-3. Where nothing of the section is left at ``low``, the build falls back to the largest HAL down to ``hal_min_m``
-   that leaves a stretch (listed in the build's report); below that the section is skipped (listed, with why).
+3. A stretch shorter than a passage needs to be seen (``min_core.py``: N_th positions T_c apart at the section's
+   speed) is no stretch. Where nothing of the section is left at ``low``, the section is skipped (listed, with the
+   roads that took it); only where the operator asks (``hal_min_m``, ``--hal-min``) does the build fall back to the
+   largest HAL down to it that leaves a stretch (listed in the build's report).
 4. The geo-object is what is left buffered by HAL (round caps). A section cut around a road may keep several
    stretches: its geo-object is then a MultiPolygon of ``parts`` (``[from_m, to_m]`` along the section, in the
    polygons' order), charged once per passage through any of them (``gap_m``: the longest stretch between two
@@ -39,7 +41,8 @@ import numpy as np
 import shapely
 
 from tollcli.geoobjects.carriageways import opposite_pairs
-from tollcli.geoobjects.design_hal import HAL_FLOOR_M, DesignHal
+from tollcli.geoobjects.design_hal import DesignHal
+from tollcli.geoobjects.min_core import min_core_m
 from tollcli.geoobjects.check import check_geoobjects  # noqa: F401  (re-exported)
 from tollcli.geoobjects.section_cut import (
     cut_section,
@@ -58,6 +61,24 @@ from tollcli.spatial import (
 
 CONNECT_TOL_M = 1.0
 TRIM_FACTOR = 2.0
+
+
+@dataclass(frozen=True)
+class SeenBy:
+    """What the recognition needs to see a passage (``N_th`` positions ``T_c`` apart), or a core length the operator
+    sets (``min_core_m``): the shortest stretch a geo-object is built on."""
+
+    n_th: int = 1
+    tc_s: float = 5.0
+    core_m: float | None = None
+
+    def min_core_m(self, props: dict) -> float:
+        return self.core_m if self.core_m is not None else min_core_m(props, self.n_th, self.tc_s)
+
+    def describe(self) -> str:
+        if self.core_m is not None:
+            return f"{self.core_m:g} m"
+        return f"the section's speed × ((N_th − 1) · T_c + 1 s), N_th {self.n_th}, T_c {self.tc_s:g} s"
 
 
 def _feature_id(feature, index: int) -> str:
@@ -151,28 +172,32 @@ def roads_of(path: str, connect_tol_m: float = CONNECT_TOL_M) -> Roads:
 
 
 def build_geoobjects(path: str, design: DesignHal | None = None, connect_tol_m: float = CONNECT_TOL_M,
-                     trim_factor: float = TRIM_FACTOR, hal_min_m: float = HAL_FLOOR_M) -> dict:  # fmt: skip
+                     trim_factor: float = TRIM_FACTOR, hal_min_m: float | None = None, seen: SeenBy | None = None) -> dict:  # fmt: skip
     """A roads file → a GeoJSON FeatureCollection of geo-objects (dict, WGS-84); DataError when none can be built."""
-    doc, skipped = build_from_roads(roads_of(path, connect_tol_m), path, design, connect_tol_m, trim_factor, hal_min_m)
+    doc, skipped = build_from_roads(roads_of(path, connect_tol_m), path, design, connect_tol_m, trim_factor, hal_min_m, seen=seen)
     if not doc["features"]:
         raise DataError(f"{path}: no tolled section could be built ({len(skipped)} skipped: {skipped[0]['reason'] if skipped else ''})")
     return doc
 
 
 def build_from_roads(roads: Roads, path: str, design: DesignHal | None = None, connect_tol_m: float = CONNECT_TOL_M,
-                     trim_factor: float = TRIM_FACTOR, hal_min_m: float = HAL_FLOOR_M,
-                     shapely_geometry: bool = False) -> tuple[dict, list[dict]]:  # fmt: skip
+                     trim_factor: float = TRIM_FACTOR, hal_min_m: float | None = None,
+                     shapely_geometry: bool = False, seen: SeenBy | None = None) -> tuple[dict, list[dict]]:  # fmt: skip
     """Geo-objects of the tolled roads, each built in its own metric frame (:func:`tollcli.spatial.local_frame`).
 
     Returns the FeatureCollection (with a foreign member ``tollcli``: the design, ``hal_min_m`` and the sections
     skipped, which ``tollcli geoobjects info`` counts in the tolled length) and the sections skipped — ``{"id", "reason"}``: nothing of them can have a HAL of
     ``hal_min_m`` — in id order. Sections built below their design HAL say so in their properties
     (``hal_m`` < ``design_hal_m[0]``; :func:`fallbacks` lists them). ``shapely_geometry``: each feature's
+    ``hal_min_m``: the smallest HAL to fall back to where no stretch can have the design's (None: no fallback, the
+    section is skipped — a fallback only where the operator asks). ``seen``: what the recognition needs to see a
+    passage, which sets the shortest core kept (:mod:`tollcli.geoobjects.min_core`).
     ``geometry`` is its shapely polygon (WGS-84) rather than a GeoJSON dict — what
     :func:`tollcli.spatial.feature_collection_text` writes out a few at a time (a national network's coordinates are
     never all held as Python lists).
     """
     design = design or DesignHal()
+    seen = seen or SeenBy()
     props, lines = roads.props, roads.lines
     tolled = np.array([is_tolled(p) for p in props])
     if not tolled.any():
@@ -186,12 +211,13 @@ def build_from_roads(roads: Roads, path: str, design: DesignHal | None = None, c
     for frame in sorted(set(frames[tolled])):
         group = np.flatnonzero(tolled & (frames == frame))
         built, gone = _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m,
-                                      shapely_geometry)  # fmt: skip
+                                      shapely_geometry, seen)  # fmt: skip
         features.update(built)
         skipped += gone
     order = sorted(features, key=lambda i: roads.ids[i])  # by id: the same file whatever order the roads came in
     skipped = sorted(skipped, key=lambda s: s["id"])
-    build = {"design_hal_m": design.describe(), "hal_min_m": hal_min_m, "skipped": skipped}  # for geoobjects info
+    build = {"design_hal_m": design.describe(), "hal_min_m": hal_min_m, "skipped": skipped,  # for geoobjects info
+             "min_core": seen.describe()}
     return {"type": "FeatureCollection", "features": [features[i] for i in order], "tollcli": build}, skipped
 
 
@@ -208,7 +234,9 @@ def fallbacks(doc: dict) -> list[dict]:
 #: buffered geo-objects are densified to this vertex spacing (m) before going back to longitude/latitude, so that
 #: a straight edge in the metric frame stays within a millimetre of the edge between its vertices in any frame
 SEGMENT_M = 100.0
-def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m, shapely_geometry=False):
+def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m, shapely_geometry=False,
+                    seen: SeenBy | None = None):  # fmt: skip
+    seen = seen or SeenBy()
     ids, props = roads.ids, roads.props
     metric = project(lines, frame)
     tree = shapely.STRtree(metric)
@@ -236,10 +264,13 @@ def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, t
         met = right[mine][meets[mine]]
         met_union = shapely.union_all(metric[met]) if met.size else None
         others, other_dist = right[mine][kept_clear[mine]], dist[mine][kept_clear[mine]]
-        cut = cut_section(line, met_union, others, other_dist, metric, low, high, trim_factor, hal_min_m)
+        shortest = seen.min_core_m(props[i])
+        cut = cut_section(line, met_union, others, other_dist, metric, low, high, trim_factor, hal_min_m, shortest)
         if cut is None:
-            skipped.append({"id": ids[i], "section_length_m": round(line.length, 1),
-                            "reason": skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, hal_min_m)})  # fmt: skip
+            floor = hal_min_m if hal_min_m is not None and hal_min_m < low else low
+            skipped.append({"id": ids[i], "section_length_m": round(line.length, 1), "min_core_m": shortest,
+                            "reason": skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, floor, shortest,
+                                                  met)})  # fmt: skip
             continue
         polys, spans = section_parts(line, cut.core, cut.hal, frame)
         polygons.append(polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys))

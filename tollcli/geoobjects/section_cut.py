@@ -40,10 +40,11 @@ class SectionCut:
     trimmed_away: bool  # nothing left after the junction trims alone
     bound: int | None = None  # index into the roads kept clear of of the one that holds HAL below `high` (None: none)
     bound_m: float = float("nan")  # its distance from the section (the centre line; a road cut around: what is left)
+    min_core: float = MIN_CORE_M  # the shortest core worth building on (min_core.py)
 
     @property
     def ok(self) -> bool:
-        return not self.core.is_empty and self.core.length >= MIN_CORE_M
+        return not self.core.is_empty and self.core.length >= self.min_core
 
 
 def _mm(value: float) -> float:
@@ -51,7 +52,7 @@ def _mm(value: float) -> float:
     return float(np.floor(value * 1000.0 + 1e-6) / 1000.0)
 
 
-def _attempt(line, met_union, others, other_dist, metric, low, high, trim_factor) -> SectionCut:
+def _attempt(line, met_union, others, other_dist, metric, low, high, trim_factor, min_core: float = MIN_CORE_M) -> SectionCut:
     """The section built for [low, high]: trim at the roads met, cut around the others closer than 2·low."""
     near = other_dist < 2 * low
     far = np.flatnonzero(~near)
@@ -63,7 +64,7 @@ def _attempt(line, met_union, others, other_dist, metric, low, high, trim_factor
     core = line
     if met_union is not None:
         core = shapely.difference(core, _clear_of(met_union, trim_factor * hal))
-    trimmed_away = core.is_empty or core.length < MIN_CORE_M
+    trimmed_away = core.is_empty or core.length < min_core
     cut_m = 0.0
     if near.any() and not trimmed_away:
         cut_around = metric[others[near]]
@@ -75,39 +76,67 @@ def _attempt(line, met_union, others, other_dist, metric, low, high, trim_factor
             if _mm(d.min() / 2.0) < hal:
                 k = int(np.argmin(d))
                 bound, bound_m, hal = int(np.flatnonzero(near)[k]), float(d[k]), _mm(d.min() / 2.0)
-    return SectionCut(hal, low, core, others[near], cut_m, trimmed_away, bound, bound_m)
+    return SectionCut(hal, low, core, others[near], cut_m, trimmed_away, bound, bound_m, min_core)
 
 
-def cut_section(line, met_union, others, other_dist, metric, low, high, trim_factor, hal_min_m) -> SectionCut | None:
-    """The section at its design HAL; else at the largest HAL ≥ ``hal_min_m`` that leaves a stretch; else None."""
-    cut = _attempt(line, met_union, others, other_dist, metric, low, high, trim_factor)
+def cut_section(line, met_union, others, other_dist, metric, low, high, trim_factor, hal_min_m: float | None,
+                min_core: float = MIN_CORE_M) -> SectionCut | None:  # fmt: skip
+    """The section at its design HAL; else at the largest HAL down to the design's low end that leaves a stretch of
+    ``min_core`` m — or, where the operator asks for a fallback (``hal_min_m`` below ``low``), down to ``hal_min_m``;
+    else None."""
+    cut = _attempt(line, met_union, others, other_dist, metric, low, high, trim_factor, min_core)
     if cut.ok:
         return cut
-    if hal_min_m > high:
+    lowest = hal_min_m if hal_min_m is not None and hal_min_m < low else low
+    if lowest >= high:
         return None
-    floor = _attempt(line, met_union, others, other_dist, metric, hal_min_m, hal_min_m, trim_factor)
+    floor = _attempt(line, met_union, others, other_dist, metric, lowest, lowest, trim_factor, min_core)
     if not floor.ok:
         return None
-    good, bad = hal_min_m, high  # a stretch is left at `good`, none at `bad` (fewer roads cut, narrower cuts below)
+    good, bad = lowest, high  # a stretch is left at `good`, none at `bad` (fewer roads cut, narrower cuts below)
     best = floor
     while bad - good > HAL_STEP_M:
         mid = (good + bad) / 2.0
-        trial = _attempt(line, met_union, others, other_dist, metric, mid, mid, trim_factor)
+        trial = _attempt(line, met_union, others, other_dist, metric, mid, mid, trim_factor, min_core)
         good, bad, best = (mid, bad, trial) if trial.ok else (good, mid, best)
     stepped = round(float(np.floor(good / HAL_STEP_M) * HAL_STEP_M), 2)
-    if stepped > hal_min_m:
-        trial = _attempt(line, met_union, others, other_dist, metric, stepped, stepped, trim_factor)
+    if stepped > lowest:
+        trial = _attempt(line, met_union, others, other_dist, metric, stepped, stepped, trim_factor, min_core)
         if trial.ok:
             best = trial
     return best
 
 
-def skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, hal_min_m) -> str:
-    at_floor = _attempt(line, met_union, others, other_dist, metric, hal_min_m, hal_min_m, trim_factor)
+def skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, floor_m: float, min_core: float = MIN_CORE_M,
+                met: np.ndarray | None = None) -> str:  # fmt: skip
+    """Why no geo-object is built on a section at HAL ``floor_m`` (its design's low end, or the fallback asked for),
+    naming the roads that take it: a tolled road running along it (overlapping), the roads met at its junctions, the
+    roads cut around."""
+    at_floor = _attempt(line, met_union, others, other_dist, metric, floor_m, floor_m, trim_factor, min_core)
     if at_floor.trimmed_away:
-        return f"too short ({line.length:.1f} m) to trim {trim_factor:g} × HAL {hal_min_m:g} m at its junctions"
+        overlap = _overlapping(line, metric, met, ids)
+        if overlap:
+            return (f"overlapped by {overlap}: the same road twice in the network? Trimming {trim_factor:g} × HAL {floor_m:g} m "
+                    f"at the roads it meets leaves {at_floor.core.length:.1f} m of its {line.length:.1f} m (less than {min_core:g} m)")  # fmt: skip
+        names = ", ".join(sorted(ids[j] for j in met)) if met is not None and met.size else "none"
+        return (f"too short: trimming {trim_factor:g} × HAL {floor_m:g} m at the roads it meets ({names}) leaves "
+                f"{at_floor.core.length:.1f} m of its {line.length:.1f} m, less than the {min_core:g} m a passage needs to be seen")  # fmt: skip
     names = ", ".join(sorted(ids[j] for j in at_floor.near))
-    return f"no stretch can have HAL {hal_min_m:g} m: nothing left after cutting {at_floor.cut_m:.1f} m around the roads within {2 * hal_min_m:g} m ({names})"
+    return (f"no stretch of {min_core:g} m can have HAL {floor_m:g} m: {at_floor.core.length:.1f} m left after cutting "
+            f"{at_floor.cut_m:.1f} m around the roads within {2 * floor_m:g} m ({names})")  # fmt: skip
+
+
+#: a road met that runs along a section for this share of its length overlaps it (the same road drawn twice)
+OVERLAP_SHARE = 0.5
+
+
+def _overlapping(line, metric, met: np.ndarray | None, ids) -> str:
+    """The roads met that run along ``line`` for at least :data:`OVERLAP_SHARE` of it, with how far ('' when none)."""
+    if met is None or not met.size or line.length <= 0:
+        return ""
+    along = shapely.length(shapely.intersection(line, shapely.buffer(metric[met], 1.0)))
+    hits = [(ids[j], float(a)) for j, a in zip(met.tolist(), along) if a >= OVERLAP_SHARE * line.length]
+    return ", ".join(f"{name} along {a:.0f} m" for name, a in sorted(hits))
 
 
 def section_parts(line, core, hal: float, frame: str):

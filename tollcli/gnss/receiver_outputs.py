@@ -25,6 +25,12 @@
   value, the receiver's field is ignored for the rest of the log: it is not a range
   RMS on that receiver (``gst_rms_note``: ``implausible`` on the epoch that showed it,
   ``implausible_earlier`` after it; '' where used or absent).
+* A GST that contradicts itself is no evidence: its ellipse and its latitude/longitude σ's describe one covariance, so
+  major² + minor² = σ_lat² + σ_lon² (the trace). Where both are given and the two sums differ more than
+  ``GST_TRACE_RATIO_MAX``-fold (and by more than ``GST_TRACE_SLACK_M2``, the rounding of small values), the sentence
+  gives no verdict at all — neither a bound nor a fault (a SkyTraq DGPS receiver writes σ 0.9/0.4 m beside an
+  ellipse of 15.1 × 6.6 m and an RMS of 15.9: its "faults" are the sentence's, not the sky's);
+  ``gst_rms_note`` ``contradictory``.
 """
 
 from __future__ import annotations
@@ -36,13 +42,30 @@ import pandas as pd
 
 #: a range RMS more than this many times the range σ the ellipse implies is not a range RMS
 RMS_RANGE_RATIO_MAX = 10.0
-GST_RMS_NOTES = ("", "implausible", "implausible_earlier")
+GST_RMS_NOTES = ("", "implausible", "implausible_earlier", "contradictory")
+#: a GST whose two traces (major² + minor², σ_lat² + σ_lon²) differ more than this factor contradicts itself ...
+GST_TRACE_RATIO_MAX = 4.0
+#: ... and by more than this, m² (a σ of 0.1 m written 0.1 or 0.2 doubles its square)
+GST_TRACE_SLACK_M2 = 1.0
 #: what each note tells an auditor (the integrity summary and the invoice quote it)
 GST_RMS_NOTE_MEANINGS = {
     "implausible": "the GST RMS field is more than {ratio:g}× the range σ its own error ellipse implies: not a "
     "range-residual RMS; ignored (neither validates nor faults the epoch)",
     "implausible_earlier": "an earlier epoch showed this receiver's GST RMS field is not a range-residual RMS: ignored",
+    "contradictory": "the GST sentence contradicts itself (its error ellipse and its latitude/longitude σ's are not one "
+    "covariance: major² + minor² differs from σ_lat² + σ_lon² more than {trace:g}-fold): no evidence, neither a bound nor a fault",
 }
+
+
+def gst_contradicts(major_m: np.ndarray, minor_m: np.ndarray, sigma_lat_m: np.ndarray, sigma_lon_m: np.ndarray) -> np.ndarray:
+    """Per epoch: the GST's ellipse and its σ's are given and are not one covariance (their traces differ more than
+    ``GST_TRACE_RATIO_MAX``-fold and by more than ``GST_TRACE_SLACK_M2``); False where either is not given."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        a = major_m**2 + minor_m**2
+        b = sigma_lat_m**2 + sigma_lon_m**2
+        given = np.isfinite(a) & np.isfinite(b) & (a > 0) & (b > 0)
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        return given & (hi > GST_TRACE_RATIO_MAX * lo) & (hi - lo > GST_TRACE_SLACK_M2)
 
 
 @dataclass
@@ -110,7 +133,8 @@ def receiver_outputs(epochs: pd.DataFrame, carry: RmsCarry | None = None) -> Rec
     unknowns = np.where(mode == 2, 3, 4)
     redundant = ~(np.isfinite(n_used) & (n_used > 0) & (n_used <= unknowns))
     gst_sigmas = (_column(epochs, "sigma_major_m"), _column(epochs, "sigma_lat_m"), _column(epochs, "sigma_lon_m"))
-    gst_impossible = _impossible(*gst_sigmas)
+    contradictory = gst_contradicts(gst_sigmas[0], _column(epochs, "sigma_minor_m"), gst_sigmas[1], gst_sigmas[2])
+    gst_impossible = _impossible(*gst_sigmas) | contradictory  # no bound, and no RMS to fault with, from such a GST
     gst = np.where(gst_impossible, np.nan, _largest(*gst_sigmas))  # a σ ≤ 0 is no bound: no GST verdict that epoch
     rms = np.where(gst_impossible, np.nan, _column(epochs, "rms_residual_m"))
     given = np.isfinite(rms)
@@ -125,6 +149,7 @@ def receiver_outputs(epochs: pd.DataFrame, carry: RmsCarry | None = None) -> Rec
         earlier[first + 1 :] = True
         carry.implausible_line = int(epochs["line"].iat[first]) if "line" in epochs else first
     note = np.where(given & earlier & ~bad, 2, note)
+    note = np.where(contradictory, 3, note)
     used = given & (note == 0)
     return ReceiverOutputs(gbs, failed, ratio, _column(epochs, "gbs_p_md"), redundant, gst, np.where(used, rms, np.nan),
                            note.astype(np.int8), _column(epochs, "hdop"))  # fmt: skip

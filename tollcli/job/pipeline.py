@@ -18,6 +18,7 @@ from tollcli.charging.invoice import (
     file_sha256,
     seal,
 )
+from tollcli.charging.nothing_seen import TrackExtent
 from tollcli.charging.rate_tables import check_vehicle
 from tollcli.charging.recognition import inside_pairs, load_geoobjects
 from tollcli.charging.tariffs import load_tariff
@@ -67,6 +68,8 @@ class ChargeSettings:
     n_th: int = 1
     strict: bool = False
     date: str | None = None  # YYYY-MM-DD for logs without dates
+    #: when a log whose times are seconds from its start (libRSF) began: ISO 8601 in UTC (``--start-time``)
+    start_time: str | None = None
     policy: str | None = None  # which checks a position must pass (None: the strictest the inputs support)
     #: which integrity sources may validate a position (integrity.sources.LEVELS; "auto": the strictest the log supports)
     integrity_sources: str = "auto"
@@ -129,6 +132,8 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
             bad(f"{name} (--{name.replace('_', '-')})", getattr(settings, name), "true or false")
     if settings.date is not None and not _is_date(settings.date):
         bad("date (--date)", settings.date, "a date YYYY-MM-DD")
+    if settings.start_time is not None and _start_time(settings.start_time) is None:
+        bad("start_time (--start-time)", settings.start_time, "a date and time with its UTC offset (2019-06-01T08:00:00Z)")
     for name in ("vehicle", "policy"):
         if getattr(settings, name) is not None and not isinstance(getattr(settings, name), str):
             bad(f"{name} (--{name})", getattr(settings, name), "a text")
@@ -146,6 +151,17 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
         why = check_vehicle(attrs or {}, tariff.vehicle, tariff.source) if tariff.tables else ""
         if why:
             bad("vehicle_attrs (--vehicle-attr)", attrs, why)
+
+
+def _start_time(value) -> pd.Timestamp | None:
+    """``--start-time`` as a UTC timestamp (None: not a date and time with its offset)."""
+    if not isinstance(value, str):
+        return None
+    try:
+        t = pd.Timestamp(value)
+    except (TypeError, ValueError):
+        return None
+    return t.tz_convert("UTC") if t.tzinfo is not None and 1980 <= t.year <= 2200 else None
 
 
 def _is_date(value) -> bool:
@@ -211,13 +227,15 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         epoch_raim = replace(params, fde=False)
         finding_settings = FindingSettings.for_class(settings.vehicle_class)
         charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
+        ignored: dict[str, list[int]] = {}  # receiver outputs that were no evidence: note → [epochs, first line]
+        track = TrackExtent()  # where the log was, said when it came near no geo-object
         with run.named_errors():  # one charge for every input kind: its chunks of epochs and measurements, streamed
             stats = ReadStats() if kind in NAVIGATION_KINDS else None
             placed: dict[str, str] = {}  # how a pseudorange log's epochs were placed: positioning, and a note why not
             chunks = (_navigation_chunks(run, kind, settings, nominal, stats) if kind in NAVIGATION_KINDS
                       else _pseudorange_chunks(run, kind, nav, settings, nominal, placed, charger))  # fmt: skip
             params = _charge_chunks(chunks, settings, geo_objects, params, epoch_raim, charger, epoch_table, osnma, auth_counts,
-                                    failure_fixes)  # fmt: skip
+                                    failure_fixes, ignored, track)  # fmt: skip
             if stats is not None:
                 check_usable(stats)
         policy, table, details, found, period = charger.finish()
@@ -266,6 +284,12 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     if osnma is not None or settings.require_authenticated:
         record_in_invoice(invoice, osnma, auth_counts, settings.require_authenticated)
     invoice["findings"] = {"settings": asdict(finding_settings), "items": found}
+    if ignored:
+        invoice["receiver_notes"] = receiver_notes(ignored)
+    if kind == "gpsd-json" and parameters["integrity_sources_used"] != "residual":
+        invoice["receiver_notes"] = {**invoice.get("receiver_notes", {}), "gpsd_json": GPSD_DROPPED}
+    if not invoice["lines"] and not invoice["not_charged"]:  # nothing seen: say where the track was
+        invoice["nothing_seen"] = track.report(geo_objects)
     _check_notes(invoice, period, step_s)
     explain_not_charged(invoice)
     return seal(invoice), stats
@@ -291,7 +315,7 @@ KEPT_EPOCH_COLUMNS = ("epoch", "time_utc", "tod_s", "line", "lat_deg", "lon_deg"
                       "course_deg", "sigma_major_m", "pos_disagreement_m", "date_disagreement_days", "date_jump_days",
                       "snapshot_lat_deg", "snapshot_lon_deg")  # fmt: skip
 #: per-epoch RAIM columns kept (the policy checks and the findings use them)
-KEPT_RAIM_COLUMNS = ("raim_status", "n_used", "test_stat", "threshold", "p_fa")
+KEPT_RAIM_COLUMNS = ("raim_status", "n_used", "test_stat", "threshold", "p_fa", "test_stat_source", "separation_ratio")
 #: epochs per chunk: the working set of the satellite-level steps (an hour at 1 Hz)
 CHUNK_EPOCHS = 3_600
 #: bytes read at a time (a chunk ends at a block's end: tests make both small to cut logs often)
@@ -312,6 +336,9 @@ def _navigation_chunks(run: LogRun, kind: str, settings: ChargeSettings, nominal
                                         block_bytes=BLOCK_BYTES):  # fmt: skip
         if chunk.epochs.empty:
             continue
+        if epochs_seen == 0 and date is not None and kind != "nmea":
+            _check_given_date(chunk.epochs, run.name, settings.date)
+        check_not_future(chunk.epochs, run.name)
         epochs_seen += len(chunk.epochs)
         yield chunk.epochs, nmea_measurements(chunk.epochs, chunk.satellites, model, settings.sigma_m, nominal, carry=carry), chunk.satellites
     if epochs_seen == 0:
@@ -329,6 +356,11 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
     from there on the chunks take the same path as a navigation log's."""
     epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
     epochs, meas, positioning = with_trajectory(epochs, meas, settings.positioning)
+    if kind in RELATIVE_CLOCK_KINDS:
+        epochs = on_the_clock(epochs, run.name, settings)
+    elif settings.date is not None:
+        _check_given_date(epochs, run.name, settings.date)
+    check_not_future(epochs, run.name)
     placed["positioning"] = positioning
     if "positioning_note" in epochs.attrs:
         placed["note"] = epochs.attrs["positioning_note"]
@@ -339,9 +371,67 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
         yield epochs.iloc[rows].reset_index(drop=True), meas.take(rows), None
 
 
+#: logs whose times are seconds from the start of the recording: no date, no time of day (readers.librsf)
+RELATIVE_CLOCK_KINDS = ("librsf",)
+
+
+def on_the_clock(epochs: pd.DataFrame, name: str, settings: ChargeSettings) -> pd.DataFrame:
+    """A relative-clock log's epochs placed at ``--start-time`` (its ``time_utc`` start at ``LIBRSF_T0``).
+
+    Without it no invoice can be made: time bands, day types and the period would be priced on an invented clock
+    (1970-01-01, a night). ``--date`` alone gives no time of day, so it is refused for such a log.
+    """
+    from tollcli.readers.librsf import LIBRSF_T0
+
+    start = _start_time(settings.start_time) if settings.start_time is not None else None
+    if start is None:
+        example = f"{settings.date or '2019-06-01'}T08:00:00+02:00"
+        given = f"--date {settings.date} gives no time of day; " if settings.date else ""
+        raise DataError(f"{name}: its times are seconds from the start of the recording, with no date or time of day, "
+                        f"and an invoice is priced on the clock: {given}give --start-time (e.g. {example})")  # fmt: skip
+    if settings.date and settings.date != f"{start:%Y-%m-%d}":
+        raise UsageError(f"--date {settings.date} contradicts --start-time {settings.start_time} (UTC date {start:%Y-%m-%d})")
+    return epochs.assign(time_utc=epochs["time_utc"] + (start - LIBRSF_T0))
+
+
+#: how far after today a log's epochs may be dated (time zones, a receiver's clock a little ahead), days
+FUTURE_SLACK_DAYS = 1
+
+
+def check_not_future(epochs: pd.DataFrame, name: str) -> None:
+    """DataError when an epoch is dated more than a day after today: no receiver logged it then — a GPS week-number
+    rollover guessed wrong (gpsd dates a 2015 log in 2034), or a damaged clock; an invoice on that calendar is wrong."""
+    if "time_utc" not in epochs or not len(epochs):
+        return
+    latest = epochs["time_utc"].max()
+    limit = pd.Timestamp.now(tz="UTC") + pd.Timedelta(days=FUTURE_SLACK_DAYS)
+    if pd.notna(latest) and latest > limit:
+        row = int(np.argmax((epochs["time_utc"] > limit).to_numpy()))
+        line = f":{int(epochs['line'].iat[row])}" if "line" in epochs and pd.notna(epochs["line"].iat[row]) else ""
+        raise DataError(f"{name}{line}: dated {epochs['time_utc'].iat[row]:%Y-%m-%d}, after today ({limit - pd.Timedelta(days=FUTURE_SLACK_DAYS):%Y-%m-%d}): "
+                        f"no receiver logged it then (a GPS week-number rollover guessed wrong, or a damaged clock): "
+                        f"no invoice on that calendar")  # fmt: skip
+
+
+#: what gpsd's JSON does not carry of a receiver's evidence (the invoice's ``receiver_notes``, the integrity summary)
+GPSD_DROPPED = ("gpsd's JSON carries no range residuals here (no prRes), and never the receiver's own RAIM (NMEA GBS) or "
+                "its GRS residuals: the positions were checked only against what is left (GST, the satellites' geometry); "
+                "the receiver's raw log may hold the residual test (u-blox NAV-SAT, NMEA GRS): process it for the "
+                "strongest evidence")  # fmt: skip
+
+
+def _check_given_date(epochs: pd.DataFrame, name: str, date: str) -> None:
+    """DataError when ``--date`` contradicts the date of a log that carries its own (its first dated epoch's)."""
+    dated = epochs["time_utc"].dropna() if "time_utc" in epochs else pd.Series([], dtype=object)
+    if len(dated) and f"{dated.iat[0]:%Y-%m-%d}" != date:
+        raise DataError(f"{name}: --date says {date}, the log's own first date is {dated.iat[0]:%Y-%m-%d}: leave --date out "
+                        f"(it is for logs without dates)")  # fmt: skip
+
+
 def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams, charger: TailCharger,
                    epoch_table: list | None = None, osnma: OsnmaEvidence | None = None, auth_counts: dict | None = None,
-                   failure_fixes: list | None = None) -> RaimParams:  # fmt: skip
+                   failure_fixes: list | None = None, ignored: dict | None = None,
+                   track: TrackExtent | None = None) -> RaimParams:  # fmt: skip
     """Charge a log chunk by chunk (``chunks``: epochs, RAIM measurements, satellite table or None): each chunk's
     environment, RAIM, geo-object pairs and OSNMA authentication are done before the next, and handed to ``charger``
     with the few per-epoch columns it needs.
@@ -372,6 +462,10 @@ def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, ep
             for status, n in auth["nav_auth"].value_counts().items():
                 auth_counts[status] = auth_counts.get(status, 0) + int(n)
         charger.add(kept, raim[list(KEPT_RAIM_COLUMNS)], cn0, pairs)
+        if ignored is not None:
+            _count_ignored(raim, epochs, ignored)
+        if track is not None and "lon_deg" in epochs:
+            track.add(epochs["lon_deg"].to_numpy(float), epochs["lat_deg"].to_numpy(float))
         if epoch_table is not None:
             table_parts.append(pd.concat([epochs.reset_index(drop=True).rename(columns={"n_used": "n_used_receiver"}),
                                           env_columns, raim.reset_index(drop=True), *([auth] if auth is not None else [])],
@@ -381,6 +475,34 @@ def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, ep
     if epoch_table is not None and table_parts:
         epoch_table.append(pd.concat(table_parts, ignore_index=True))
     return params
+
+
+#: receiver outputs an invoice says were no evidence (``gst_rms_note`` values), and what the invoice calls them
+IGNORED_OUTPUTS = {"contradictory": "gst_contradictory"}
+
+
+def _count_ignored(raim: pd.DataFrame, epochs: pd.DataFrame, ignored: dict) -> None:
+    """Count a chunk's epochs whose receiver output contradicted itself (``ignored``: note → [epochs, first line])."""
+    if "gst_rms_note" not in raim:
+        return
+    notes = raim["gst_rms_note"].astype(str).to_numpy()
+    for note in IGNORED_OUTPUTS:
+        hit = np.flatnonzero(notes == note)
+        if hit.size:
+            line = int(epochs["line"].iat[hit[0]]) if "line" in epochs else -1
+            seen = ignored.setdefault(note, [0, line])
+            seen[0] += int(hit.size)
+
+
+def receiver_notes(ignored: dict) -> dict[str, str]:
+    """The invoice's ``receiver_notes``: each receiver output that was no evidence, what it means, how often, from where."""
+    from tollcli.gnss.receiver_outputs import GST_RMS_NOTE_MEANINGS, GST_TRACE_RATIO_MAX
+
+    out = {}
+    for note, (n, line) in sorted(ignored.items()):
+        where = f", first at line {line}" if line >= 0 else ""
+        out[IGNORED_OUTPUTS[note]] = GST_RMS_NOTE_MEANINGS[note].format(trace=GST_TRACE_RATIO_MAX) + f" ({n} epochs{where})"
+    return out
 
 
 def settings_from_invoice(invoice: dict) -> ChargeSettings:

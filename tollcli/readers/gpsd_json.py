@@ -21,7 +21,8 @@ between fixes). An epoch without a SKY of its own takes the latest SKY of at mos
 ``SKY_MAX_AGE_S`` earlier: receivers report satellites less often than fixes. Lines that are not JSON (NMEA
 echoed in a ``.chk``, gpsd's ``#`` comments) are another protocol on the stream, counted as unused; a line that
 starts as JSON and does not parse, or a report without its ``class``, is malformed: skipped and counted, an error
-with ``--strict``.
+with ``--strict``. A TPV without a ``time`` (before a first fix; a Quectel EG25 reports its fixes so) is no epoch: skipped
+and counted (``untimed_reports``), never an epoch that asks for ``--date``.
 """
 
 from __future__ import annotations
@@ -202,6 +203,9 @@ class _Epochs:
             self.stats.unused += 1
             return
         when = _time_ms(report.get("time"))
+        if kind == "TPV" and when is None:
+            self.stats.untimed_reports += 1  # a fix without a time belongs to no epoch (no fix yet, or a receiver's quirk)
+            return
         if kind == "TPV":
             key = when if when is not None else ("line", line)
             timed = [k for k in self.open if isinstance(k, int)]

@@ -33,6 +33,8 @@ class DateCarry:
 
     last_tod_s: float = float("nan")
     last_day: int = -1  # days since 1970-01-01, -1 unknown
+    #: the date ``--date`` gave (days since 1970-01-01), until the log's own first date has been compared with it
+    given_day: int = -1
 
 
 def resolve_days(tod_s: np.ndarray, date_days: np.ndarray, carry: DateCarry) -> tuple[np.ndarray, np.ndarray]:
@@ -83,6 +85,24 @@ def resolve_days(tod_s: np.ndarray, date_days: np.ndarray, carry: DateCarry) -> 
     if days[-1] >= 0:
         carry.last_day = int(days[-1])
     return days, jump
+
+
+def first_own_date_contradiction(tod_s: np.ndarray, date_days: np.ndarray, carry: DateCarry) -> tuple[int, int, int] | None:
+    """Where a log's own first date (RMC/ZDA) contradicts the date ``--date`` gave: (row, own day, day counted on
+    from ``--date`` through the midnights before it), or None (no own date in this chunk, or they agree).
+
+    ``carry.given_day`` is cleared once an own date has been compared."""
+    if carry.given_day < 0:
+        return None
+    own = np.flatnonzero(date_days >= 0)
+    if not own.size:
+        return None
+    k = int(own[0])
+    counted, _ = resolve_days(tod_s[: k + 1], np.full(k + 1, -1, dtype=np.int64), DateCarry(carry.last_tod_s, carry.last_day))
+    carry.given_day = -1
+    if int(counted[-1]) == int(date_days[k]):
+        return None
+    return k, int(date_days[k]), int(counted[-1])
 
 
 def to_time_utc_ms(days: np.ndarray, tod_s: np.ndarray) -> np.ndarray:

@@ -39,6 +39,7 @@ class ReadStats:
     per_line_epochs: int = 0  # of which assembled line by line (the bulk reader's slow path; all with the reference reader)
     satellite_rows: int = 0
     undated_epochs: int = 0
+    untimed_reports: int = 0  # gpsd fixes (TPV) without a time: skipped (no epoch can be placed without one)
     first_problem: str = ""
     unused_types: dict[str, int] = field(default_factory=dict)
 
@@ -69,6 +70,8 @@ class ReadStats:
             text += f"; text before the sentence dropped on {self.discarded_text} lines"
         if self.undated_epochs:
             text += f"; {self.undated_epochs} epochs without a date (no RMC/ZDA; use --date)"
+        if self.untimed_reports:
+            text += f"; skipped {self.untimed_reports} fixes without a time"
         if self.per_line_epochs:
             text += f"; {self.per_line_epochs} epochs read line by line"
         return text

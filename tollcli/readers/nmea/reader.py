@@ -30,7 +30,7 @@ from tollcli.io.sources import (
 )
 from tollcli.readers.nmea.assembler import EpochAssembler
 from tollcli.readers.nmea.bulk_reader import BulkReader, merge_arrays
-from tollcli.readers.nmea.dates import DateCarry, resolve_days, to_time_utc_ms
+from tollcli.readers.nmea.dates import DateCarry, first_own_date_contradiction, resolve_days, to_time_utc_ms
 from tollcli.readers.nmea.line_reader import ReadStats, feed_lines
 from tollcli.readers.nmea.tables import epoch_frame, satellite_frame
 
@@ -83,7 +83,7 @@ def iter_nmea_tables(
     stats.source = name
     carry = DateCarry()
     if date is not None:
-        carry.last_day = (date - _dt.date(1970, 1, 1)).days
+        carry.last_day = carry.given_day = (date - _dt.date(1970, 1, 1)).days
     pending: list[dict[str, np.ndarray]] = []
     stream = open_binary(source)
     if engine == "bulk":
@@ -151,6 +151,13 @@ def _emit(
         pending.clear()
     if arrays["epoch"].size == 0:
         return
+    wrong = first_own_date_contradiction(arrays["tod_s"], arrays["date_days"], carry)
+    if wrong is not None:
+        row, own, counted = wrong
+        day = _dt.date(1970, 1, 1).toordinal()
+        raise DataError(f"{stats.source}:{int(arrays['line'][row])}: --date says {_dt.date.fromordinal(day + counted).isoformat()} "
+                        f"here, the log's own date is {_dt.date.fromordinal(day + own).isoformat()}: leave --date out "
+                        f"(it is for logs without RMC/ZDA dates)")  # fmt: skip
     days, arrays["date_jump_days"] = resolve_days(arrays["tod_s"], arrays["date_days"], carry)
     time_utc = to_time_utc_ms(days, arrays["tod_s"])
     epochs = epoch_frame(arrays, time_utc)
