@@ -17,7 +17,9 @@ GBS (the receiver's RAIM, no failed satellite), no GRS; the share of the segment
 charged, the parallel roads (300 m apart) charged, the findings, and the time ``pynmea2.parse`` alone needs
 for the file are printed beside.
 ``--mix satellites-only``: the same 25 m/s drive with the sentences of a real SiRF IV receiver that writes GGA RMC GSA
-GSV only (``bu353s4.log``): the ``model`` level; with ``--environment open`` (open country declared) it is charged.
+GSV only (``bu353s4.log``): the ``model`` level; with ``--environment open`` (open country declared) it is charged, and
+so it is with ``--declare open`` (the geo-objects built with ``geoobjects build --environment motorway=open``: the
+operator declares the motorways open, process runs with its defaults); ``--declare urban``: nothing is charged.
 ``--mix ubx``: the drive as u-blox NAV-SAT (with prRes) + NAV-PVT frames replayed from the real OSNMA recording
 (``../shared/data/osnma/ublox/current_config.ubx``); ``--bias-m 60`` adds 60 m to one used satellite's prRes for 60
 epochs mid-drive and prints the verdicts there (the residual test must flag them).
@@ -135,6 +137,8 @@ def main() -> None:
                         help="the drive's sentence mix: compose, ublox (ZED-F9P NMEA), satellites-only (bu353s4 GSA+GSV), "
                         "ubx (the OSNMA recording's NAV-PVT + NAV-SAT)")  # fmt: skip
     parser.add_argument("--environment", default="auto", help="tollcli's --environment (satellites-only: open declares open country)")
+    parser.add_argument("--declare", choices=("open", "urban"), default=None,
+                        help="build the geo-objects with the motorways declared open or urban (geoobjects build --environment motorway=...)")
     parser.add_argument("--bias-m", type=float, default=0.0, help="ubx mix: add this to one used satellite's prRes for 60 s mid-drive")
     args = parser.parse_args()
     n_epochs = int(args.hours * 3600)
@@ -155,7 +159,9 @@ def main() -> None:
         road_file = Path(tmp) / "roads.geojson"
         road_file.write_text(json.dumps(roads(args.objects, n_epochs * speed)))
         start = time.perf_counter()
-        geo = build_geoobjects(str(road_file))
+        from tollcli.geoobjects.declared_environment import DeclaredEnvironments
+
+        geo = build_geoobjects(str(road_file), environments=DeclaredEnvironments(by_class={"motorway": args.declare}) if args.declare else None)
         t_build = time.perf_counter() - start
         geo_file = Path(tmp) / "geo.geojson"
         geo_file.write_text(json.dumps(geo))
@@ -182,11 +188,15 @@ def main() -> None:
         under = {f["properties"]["id"] for f in geo["features"] if f["properties"]["id"].startswith("R0-")}
         driven = {i for i in under if int(i.split("-")[1]) * 250.0 + 250.0 <= (n_epochs - 1) * speed}  # wholly under the track
         charged = {line["geoobject"] for line in invoice["lines"]}
-        print(f"mix {args.mix}: {len(charged & driven)} of {len(driven)} segments under the track charged "
+        declared = f", declared {args.declare}" if args.declare else ""
+        whys = sorted({p.get("why", "").split(" (")[0] for p in invoice["not_charged"]})
+        print(f"mix {args.mix}{declared}: {len(charged & driven)} of {len(driven)} segments under the track charged "
               f"({len(charged & driven) / max(len(driven), 1):.1%}), {len(charged - under)} on parallel roads; "
               f"findings: {sorted({f['kind'] for f in invoice['findings']['items']}) or 'none'}; "
               f"level {invoice['parameters']['integrity_sources_used']}, vouched by "
-              f"{sorted({s for line in invoice['lines'] for s in line['vouched_by']})}")  # fmt: skip
+              f"{sorted({s for line in invoice['lines'] for s in line['vouched_by']})}; passages not charged: {len(invoice['not_charged'])}"
+              f"{', every one saying why' if all(p.get('why') for p in invoice['not_charged']) else ', SOME WITHOUT WHY'}"
+              f"{' (' + whys[0][:80] + '…)' if whys else ''}")  # fmt: skip
         if args.mix == "ubx" and args.bias_m:
             import pandas as pd
 

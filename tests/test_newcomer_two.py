@@ -221,6 +221,44 @@ def test_geoobjects_build_keeps_no_stretch_too_short_to_be_seen_and_names_the_re
     assert "overlapped by A" in reasons["A-again"] and "the same road twice" in reasons["A-again"]
 
 
+# ------------------------------------------------------------------------------------------------ 7. the map's environment
+def test_receivers_that_report_only_satellites_are_charged_where_the_operator_declares_the_road_open(tmp_path):
+    """A real GSA+GSV-only receiver (bu353s4.log, SiRF IV) replayed over 20 minutes along a motorway with parallel tolled
+    roads 300 m away: built with the defaults nothing is charged (the urban σ: no residual says open); built with
+    ``--environment motorway=open`` (the operator's declaration) every segment under the track is charged and no
+    parallel one, each line recording the declaration; declared ``urban``, nothing, each passage saying why; an
+    explicit ``process --environment urban`` is never weakened by an ``open`` declaration."""
+    import sys
+
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    import process_throughput as drive
+
+    shared("gpsd", drive.SATELLITES_ONLY_LOG)
+    n = 1200
+    drive.satellites_only_drive(tmp_path / "drive.nmea", n)
+    (tmp_path / "roads.geojson").write_text(json.dumps(drive.roads(300, n * drive.UBLOX_SPEED)))
+    under = {f"R0-{k}" for k in range(int((n - 1) * drive.UBLOX_SPEED // 250))}
+    invoices = {}
+    for declared in ("", "open", "urban"):
+        geo = tmp_path / f"geo-{declared or 'none'}.geojson"
+        r = run_cli("geoobjects", "build", str(tmp_path / "roads.geojson"), "-o", str(geo), "-q",
+                    *(("--environment", f"motorway={declared}") if declared else ()))  # fmt: skip
+        assert r.returncode == 0, r.stderr.decode()
+        code, err, invoices[declared] = _process(tmp_path / "drive.nmea", geo, out=tmp_path / f"{declared or 'none'}.json")
+        assert code == 0, err
+    assert not invoices[""]["lines"] and not invoices["urban"]["lines"]
+    opened = invoices["open"]
+    charged = {line["geoobject"] for line in opened["lines"]}
+    assert charged >= under and all(gid.startswith("R0-") for gid in charged)  # every segment under the track, no parallel
+    assert all(line["environment"] == "open" and line["vouched_by"] == {"model": line["n_valid_independent"]} for line in opened["lines"])
+    assert all("declared urban by the operator" in p["why"] for p in invoices["urban"]["not_charged"])
+    assert invoices["urban"]["not_charged"] and all("environment" not in p for p in invoices[""]["not_charged"])
+    code, _, explicit = _process(tmp_path / "drive.nmea", tmp_path / "geo-open.geojson", "--environment", "urban", out=tmp_path / "x.json")
+    assert code == 0 and not explicit["lines"]
+    proc = run_cli("geoobjects", "build", str(tmp_path / "roads.geojson"), "-o", str(tmp_path / "bad.geojson"), "--environment", "sunny")
+    assert proc.returncode == 2 and "--environment 'sunny'" in proc.stderr.decode()
+
+
 # ------------------------------------------------------------------------------------------------ 12. small ones
 def test_integrity_names_an_unknown_environment(tmp_path):
     proc = run_cli("integrity", str(shared("gpsd", "skytraq.log")), "-o", str(tmp_path / "e.csv"), "--json")

@@ -62,6 +62,8 @@ def build_invoice(charges: pd.DataFrame, positions: pd.DataFrame | None, geo: Ge
             "n_valid": int(n_valid), "n_valid_independent": int(n_indep),
             "statuses": statuses[(gid, passage)],
         }  # fmt: skip
+        if geo.environment is not None and geo.environment[i]:  # the operator's declaration the model level took
+            base["environment"] = str(geo.environment[i])
         if n_parts[i] > 1:  # a section cut around other roads: the parts (geo-objects) of it that saw the passage
             base["parts_seen"] = list(parts_seen[k])
         if not charged:
@@ -176,6 +178,9 @@ def explain_not_charged(invoice: dict) -> None:
         top = max(sorted(failing), key=failing.get)
         words = notes[top].split(". ")[0] if top in notes else WHY_NOT.get(top, top)
         passage["why"] = f"{words} ({top}: {failing[top]} of {passage.get('n_inside', sum(failing.values()))} positions)"
+        if passage.get("environment") and invoice.get("parameters", {}).get("integrity_sources_used") == "model":
+            passage["why"] += (f"; its road is declared {passage['environment']} by the operator: the "
+                               f"{'nominal' if passage['environment'] == 'open' else 'urban'} σ there")  # fmt: skip
 
 
 def _rate_fields(price) -> dict:

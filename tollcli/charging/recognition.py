@@ -114,12 +114,15 @@ OPTIONAL_PAIR_COLUMNS = ("direction", "hpl_m", "separation_ratio", "part")
 
 
 def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams, row_offset: int = 0,
-                 geometry: Geometry | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+                 geometry: Geometry | None = None, environment: str = "auto") -> dict[str, np.ndarray]:  # fmt: skip
     """Every (epoch, geo-object) with the position inside, and the RAIM verdict under that geo-object's HAL.
 
     ``raim_valid``: RAIM-valid and, after an exclusion, the shifted position still inside.
     ``row_offset`` is added to the epoch rows (for a chunk of a longer log). ``geometry``:
-    the WLS geometry of ``meas`` when the caller has it (the same for every HAL).
+    the WLS geometry of ``meas`` when the caller has it (the same for every HAL). Where a geo-object declares the
+    environment its road runs in (``geo.environment``), the ``model`` level takes that environment's σ for the
+    positions inside it that no residual measured (``environment``: the ``--environment`` given, which a declaration
+    never weakens: :func:`~tollcli.integrity.environment.with_declared_environment`).
     """
     rows, obj, px, py = candidate_pairs(epochs, geo)
     if rows.size == 0:
@@ -128,8 +131,12 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
                 "separation_ratio": np.zeros(0),
                 "test_stat_source": np.zeros(0, object), "integrity_source": np.zeros(0, object),
                 "raim_valid": np.zeros(0, bool), "direction": np.zeros(0, object), "part": np.zeros(0, np.int64)}  # fmt: skip
-    raim = run_raim(meas.take(rows), params, hal_m=geo.hal_m[obj],
-                    geometry=take_epochs(geometry, rows) if geometry is not None else None)
+    inside = meas.take(rows)
+    if geo.environment is not None:
+        from tollcli.integrity.environment import with_declared_environment
+
+        inside = with_declared_environment(inside, geo.environment[obj], environment)
+    raim = run_raim(inside, params, hal_m=geo.hal_m[obj], geometry=take_epochs(geometry, rows) if geometry is not None else None)
     status = raim["raim_status"].to_numpy(dtype=object)
     # the position the RAIM vouches for: its own weighted solution, after any exclusion
     de = raim["fde_shift_e_m"].to_numpy() + raim["wls_shift_e_m"].to_numpy()

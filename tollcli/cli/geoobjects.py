@@ -28,6 +28,7 @@ def build(
     hal_min: Annotated[Optional[float], typer.Option("--hal-min", help="Where no stretch of a section can have its design HAL: the smallest HAL to fall back to (listed); below it the section is skipped (listed), m. Default: no fallback, such a section is skipped (listed, with why).", min=0.0)] = None,
     n_th: Annotated[int, typer.Option("--n-th", help="The valid independent positions process will need per passage (its --n-th): with --tc and the section's speed (maxspeed, else its road class's), it sets the shortest stretch a geo-object is built on, speed × ((N_th − 1) · T_c + 1 s).", min=1, max=1000)] = 1,
     tc: Annotated[float, typer.Option("--tc", help="The correlation time process will use (its --tc), s: see --n-th.", min=0.1, max=86_400.0)] = 5.0,
+    environment: Annotated[Optional[list[str]], typer.Option("--environment", help="The environment the roads run in, as the operator declares it: open (outside built-up land), urban, or CLASS=open|urban for one road class (repeat; a road's own 'environment' property wins). Recorded per geo-object: where a receiver gives no residuals (satellites only), the model level takes that environment's error model there; never weaker than what the residuals measure or process's --environment urban.")] = None,
     min_core: Annotated[Optional[float], typer.Option("--min-core", help="The shortest stretch of centre line a geo-object is built on, m (instead of the one --n-th and --tc give).", min=0.0, max=100_000.0)] = None,
     trim_factor: Annotated[float, typer.Option("--trim-factor", help="Junction ends are cut by this × HAL.", min=0.0)] = TRIM_FACTOR,
     connect_tol: Annotated[float, typer.Option("--connect-tol", help="Roads closer than this on one level meet (a junction), m.", min=0.0)] = CONNECT_TOL_M,
@@ -51,10 +52,11 @@ def build(
     if as_json and output == "-":
         raise UsageError("--json writes the summary on stdout: give -o FILE for the geo-objects")
     with gc_paused():  # millions of dicts and lists, no cycles: the collector would cost more than the build
-        _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet, (n_th, tc, min_core))
+        _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet, (n_th, tc, min_core), environment)
 
 
-def _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet, seen_by=(1, 5.0, None)) -> None:
+def _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet, seen_by=(1, 5.0, None),
+           environment=None) -> None:  # fmt: skip
     from tollcli.geoobjects.design_hal import parse_design_hal
     from tollcli.geoobjects.check import HAL_MIN_CHECK_M, check_features
     from tollcli.geoobjects.store import precompile
@@ -75,8 +77,10 @@ def _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_to
         raise UsageError("--tolled selects ways of an OpenStreetMap file; a GeoJSON network says tolled per feature")
     else:
         network = roads_of(roads, connect_tol)
+    from tollcli.geoobjects.declared_environment import parse_declared_environments
+
     doc, skipped = build_from_roads(network, roads, design, connect_tol, trim_factor, hal_min, shapely_geometry=True,
-                                    seen=SeenBy(*seen_by))  # fmt: skip
+                                    seen=SeenBy(*seen_by), environments=parse_declared_environments(environment))  # fmt: skip
     del network  # the centre lines: not needed to write and compile the geo-objects
     if not doc["features"]:
         raise DataError(f"{roads}: no tolled section could be built ({len(skipped)} skipped: {skipped[0]['id']}: {skipped[0]['reason'] if skipped else ''})")

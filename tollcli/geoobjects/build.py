@@ -41,6 +41,7 @@ import numpy as np
 import shapely
 
 from tollcli.geoobjects.carriageways import opposite_pairs
+from tollcli.geoobjects.declared_environment import DeclaredEnvironments
 from tollcli.geoobjects.design_hal import DesignHal
 from tollcli.geoobjects.min_core import min_core_m
 from tollcli.geoobjects.check import check_geoobjects  # noqa: F401  (re-exported)
@@ -172,9 +173,11 @@ def roads_of(path: str, connect_tol_m: float = CONNECT_TOL_M) -> Roads:
 
 
 def build_geoobjects(path: str, design: DesignHal | None = None, connect_tol_m: float = CONNECT_TOL_M,
-                     trim_factor: float = TRIM_FACTOR, hal_min_m: float | None = None, seen: SeenBy | None = None) -> dict:  # fmt: skip
+                     trim_factor: float = TRIM_FACTOR, hal_min_m: float | None = None, seen: SeenBy | None = None,
+                     environments: DeclaredEnvironments | None = None) -> dict:  # fmt: skip
     """A roads file → a GeoJSON FeatureCollection of geo-objects (dict, WGS-84); DataError when none can be built."""
-    doc, skipped = build_from_roads(roads_of(path, connect_tol_m), path, design, connect_tol_m, trim_factor, hal_min_m, seen=seen)
+    doc, skipped = build_from_roads(roads_of(path, connect_tol_m), path, design, connect_tol_m, trim_factor, hal_min_m, seen=seen,
+                                    environments=environments)  # fmt: skip
     if not doc["features"]:
         raise DataError(f"{path}: no tolled section could be built ({len(skipped)} skipped: {skipped[0]['reason'] if skipped else ''})")
     return doc
@@ -182,7 +185,8 @@ def build_geoobjects(path: str, design: DesignHal | None = None, connect_tol_m: 
 
 def build_from_roads(roads: Roads, path: str, design: DesignHal | None = None, connect_tol_m: float = CONNECT_TOL_M,
                      trim_factor: float = TRIM_FACTOR, hal_min_m: float | None = None,
-                     shapely_geometry: bool = False, seen: SeenBy | None = None) -> tuple[dict, list[dict]]:  # fmt: skip
+                     shapely_geometry: bool = False, seen: SeenBy | None = None,
+                     environments: DeclaredEnvironments | None = None) -> tuple[dict, list[dict]]:  # fmt: skip
     """Geo-objects of the tolled roads, each built in its own metric frame (:func:`tollcli.spatial.local_frame`).
 
     Returns the FeatureCollection (with a foreign member ``tollcli``: the design, ``hal_min_m`` and the sections
@@ -191,13 +195,15 @@ def build_from_roads(roads: Roads, path: str, design: DesignHal | None = None, c
     (``hal_m`` < ``design_hal_m[0]``; :func:`fallbacks` lists them). ``shapely_geometry``: each feature's
     ``hal_min_m``: the smallest HAL to fall back to where no stretch can have the design's (None: no fallback, the
     section is skipped — a fallback only where the operator asks). ``seen``: what the recognition needs to see a
-    passage, which sets the shortest core kept (:mod:`tollcli.geoobjects.min_core`).
+    passage, which sets the shortest core kept (:mod:`tollcli.geoobjects.min_core`). ``environments``: the environment
+    the operator declares each road runs in (:mod:`tollcli.geoobjects.declared_environment`), recorded per geo-object.
     ``geometry`` is its shapely polygon (WGS-84) rather than a GeoJSON dict — what
     :func:`tollcli.spatial.feature_collection_text` writes out a few at a time (a national network's coordinates are
     never all held as Python lists).
     """
     design = design or DesignHal()
     seen = seen or SeenBy()
+    environments = environments or DeclaredEnvironments()
     props, lines = roads.props, roads.lines
     tolled = np.array([is_tolled(p) for p in props])
     if not tolled.any():
@@ -211,13 +217,13 @@ def build_from_roads(roads: Roads, path: str, design: DesignHal | None = None, c
     for frame in sorted(set(frames[tolled])):
         group = np.flatnonzero(tolled & (frames == frame))
         built, gone = _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m,
-                                      shapely_geometry, seen)  # fmt: skip
+                                      shapely_geometry, seen, environments)  # fmt: skip
         features.update(built)
         skipped += gone
     order = sorted(features, key=lambda i: roads.ids[i])  # by id: the same file whatever order the roads came in
     skipped = sorted(skipped, key=lambda s: s["id"])
     build = {"design_hal_m": design.describe(), "hal_min_m": hal_min_m, "skipped": skipped,  # for geoobjects info
-             "min_core": seen.describe()}
+             "min_core": seen.describe(), "environment": environments.describe()}
     return {"type": "FeatureCollection", "features": [features[i] for i in order], "tollcli": build}, skipped
 
 
@@ -235,8 +241,9 @@ def fallbacks(doc: dict) -> list[dict]:
 #: a straight edge in the metric frame stays within a millimetre of the edge between its vertices in any frame
 SEGMENT_M = 100.0
 def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, trim_factor, hal_min_m, shapely_geometry=False,
-                    seen: SeenBy | None = None):  # fmt: skip
+                    seen: SeenBy | None = None, environments: DeclaredEnvironments | None = None):  # fmt: skip
     seen = seen or SeenBy()
+    environments = environments or DeclaredEnvironments()
     ids, props = roads.ids, roads.props
     metric = project(lines, frame)
     tree = shapely.STRtree(metric)
@@ -281,6 +288,9 @@ def _build_in_frame(group, frame, roads, lines, levels, design, connect_tol_m, t
             "design_hal_m": [low, high],
         }  # fmt: skip
         properties.update(hal_bound(cut, metric[others], [ids[j] for j in others], low))
+        declared = environments.for_road(props[i])
+        if declared:
+            properties["environment"] = declared
         if cut.near.size:
             properties.update(crossings=sorted(ids[j] for j in cut.near), cut_m=round(cut.cut_m, 1))
         if spans is not None:

@@ -58,6 +58,9 @@ HAL_MIN_CHECK_M = 5.0
 MAX_EXTENT_DEG = 6.0
 #: the values of ``direction`` (carriageways.py reads forward/oneway/one-way as one-way; both is two-way)
 DIRECTIONS = ("forward", "oneway", "one-way", "both")
+#: what an operator may declare of where a geo-object's road runs (``environment``): the error model the ``model``
+#: level takes there when the receiver gives no residuals (integrity/environment.py: with_declared_environment)
+DECLARED_ENVIRONMENTS = ("open", "urban")
 #: the length properties a charge may be priced by (per km) and their largest value (m): a section is never 1 000 km
 LENGTH_PROPERTIES = ("section_length_m", "length_m", "tunnel_m", "gap_m")
 MAX_LENGTH_M = 1_000_000.0
@@ -138,6 +141,9 @@ def check_features(features: list, hal_min_m: float = HAL_MIN_CHECK_M) -> list[F
         if props.get("direction") is not None and str(props["direction"]).lower() not in DIRECTIONS:
             findings.append(Finding(fid, f"direction {str(props['direction'])[:40]!r} is none of {', '.join(DIRECTIONS)} "
                                          "(a one-way road read as two-way would charge the wrong carriageway)"))  # fmt: skip
+        if props.get("environment") not in (None, "") and props["environment"] not in DECLARED_ENVIRONMENTS:
+            findings.append(Finding(fid, f"environment {str(props['environment'])[:40]!r} is none of {', '.join(DECLARED_ENVIRONMENTS)} "
+                                         "(the operator's declaration of where the road runs)"))  # fmt: skip
         if "road_class" in props and not isinstance(props["road_class"], str):
             findings.append(Finding(fid, f"road_class {str(props['road_class'])[:40]!r} is not a name (text)"))
         hal = props.get("hal_m")

@@ -18,13 +18,13 @@ from tollcli.spatial import HAL_MAX_M, feature_geometries, feature_geometry, hal
 #: 6: a folder of memory-mapped arrays with a grid index (5 and before: one .npz read whole); 7: the same arrays, made
 #: only from files that pass the stricter check (a HAL that is a number in (0, 10 000] m, rings closed, at most 6°
 #: across): a store an older version made of a file now refused is not used; 8: with a manifest of every file's
-#: digest, verified before use (:mod:`tollcli.geoobjects.store_files`)
-STORE_FORMAT = 8
+#: digest, verified before use (:mod:`tollcli.geoobjects.store_files`); 9: with each geo-object's declared environment
+STORE_FORMAT = 9
 #: polygons projected and written as WKB per block
 CHUNK = 8192
 #: the properties the store and ``geoobjects check`` read (the others — the build's report — are not kept)
 USED_PROPERTIES = frozenset(("id", "name", "road_class", "hal_m", "crs_metric", "section_length_m", "length_m", "tunnel", "direction",
-                             "tunnel_m", "gap_m", "axis", "opposite"))  # fmt: skip
+                             "tunnel_m", "gap_m", "axis", "opposite", "environment"))  # fmt: skip
 
 
 def compile_file(path: str, columns: dict | None = None) -> tuple[dict[str, np.ndarray], str]:
@@ -102,11 +102,14 @@ def compile_features(features: list, path: str, checked: bool = False, columns: 
         del search_wkb
     names_values, names_code = np.unique(np.array([str(p.get("name", "")) for p in props], dtype=object), return_inverse=True)
     class_values, class_code = np.unique(np.array([str(p.get("road_class", "")) for p in props], dtype=object), return_inverse=True)
+    env_values, env_code = np.unique(np.array([str(p.get("environment") or "") for p in props], dtype=object), return_inverse=True)
     for name, value in {
         "hal_m": hals, "length_m": section_lengths(props), "tunnel_m": tunnel_lengths(props),
         "gap_m": np.nan_to_num(np.array([_float(p.get("gap_m")) for p in props])), "frame": frame, "n_parts": n_parts,
         "names_code": names_code.astype(np.int64), "road_class_code": class_code.astype(np.int64),
+        "environment_code": env_code.astype(np.int64),
         "strings": {"ids": ids, "names": names_values.tolist(), "road_class": class_values.tolist(), "crs": crs,
+                    "environment": env_values.tolist(),
                     "frames": list(frames), "format": STORE_FORMAT},
     }.items():  # fmt: skip
         columns[name] = value

@@ -45,7 +45,7 @@ from tollcli.io.sources import file_sha256
 #: the slowest traffic a tunnel's GNSS outage is allowed for (7.2 km/h, a congested tunnel), m/s
 TUNNEL_MIN_SPEED_MPS = 2.0
 FLOAT_COLUMNS = ("hal_m", "length_m", "tunnel_m", "gap_m")
-INT_COLUMNS = ("frame", "n_parts", "names_code", "road_class_code")
+INT_COLUMNS = ("frame", "n_parts", "names_code", "road_class_code", "environment_code")
 
 
 @dataclass
@@ -80,6 +80,9 @@ class GeoObjects:
     store: Path | None = None
     #: SHA-256 of the store's manifest (the digests of its arrays): what the invoice records beside the file's
     store_sha256: str | None = None
+    #: per geo-object: the environment the operator declared its road runs in ('open', 'urban'; '' none): the error
+    #: model the ``model`` level takes there (integrity/environment.py: with_declared_environment)
+    environment: np.ndarray | None = None
 
     def directed(self) -> np.ndarray:
         """Which geo-objects count a position only in their direction of travel."""
@@ -239,9 +242,11 @@ def geoobjects_from_columns(columns: dict) -> GeoObjects:
         directed = (axes.ends - starts) > _EMPTY_LINE_WKB  # an empty line's WKB is 9 bytes: "no axis"
     names = np.array(strings["names"], dtype=object)[np.asarray(columns["names_code"])]
     road_class = np.array(strings["road_class"], dtype=object)[np.asarray(columns["road_class_code"])]
+    environment = np.array(strings["environment"], dtype=object)[np.asarray(columns["environment_code"])]
     return GeoObjects(ids, names, road_class, columns["hal_m"], metric, strings["crs"], GridIndex(columns, search),
                       tuple(strings["frames"]), columns["frame"], None, columns["length_m"], columns["tunnel_m"], axes,
-                      columns["gap_m"], columns["n_parts"], directed)  # fmt: skip
+                      columns["gap_m"], columns["n_parts"], directed,
+                      environment=environment if (environment != "").any() else None)  # fmt: skip
 
 
 _EMPTY_LINE_WKB = len(shapely.to_wkb(shapely.LineString()))
@@ -261,7 +266,10 @@ def _check_values(columns: dict, strings: dict) -> None:
             raise StoreRejected(f"a {name} outside [0, 1 000 km]")
     if not np.all(np.isfinite(np.asarray(columns["bounds"]))):
         raise StoreRejected("a box that is not finite")
-    for name, table in (("frame", "frames"), ("names_code", "names"), ("road_class_code", "road_class")):
+    if not set(strings.get("environment", [])) <= {"", "open", "urban"}:
+        raise StoreRejected("an environment that is not declared open or urban")
+    for name, table in (("frame", "frames"), ("names_code", "names"), ("road_class_code", "road_class"),
+                        ("environment_code", "environment")):  # fmt: skip
         codes = np.asarray(columns[name])
         if codes.size and (codes.min() < 0 or codes.max() >= len(strings[table])):
             raise StoreRejected(f"{name} outside its table")

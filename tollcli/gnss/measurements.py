@@ -37,6 +37,7 @@ class Measurements:
     #: they measured none (:func:`tollcli.integrity.environment.with_environment`); None: not set (urban σ)
     model_sigma_m: np.ndarray | None = None
     model_open: np.ndarray | None = None  # (E,) bool: the model bound may take open sky (measured, or declared)
+    env_measured: np.ndarray | None = None  # (E,) bool: the residuals measured the epoch's environment (open or urban)
     #: (E,) bool: the receiver says the fix is corrected (GGA quality 2 DGNSS/SBAS, 4 RTK fixed, 5 RTK float, 9 SBAS;
     #: u-blox diffSoln/carrSoln; gpsd DGPS/RTK): its σ is the corrected one, at the ``model`` level too
     corrected_fix: np.ndarray | None = None

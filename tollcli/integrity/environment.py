@@ -136,17 +136,44 @@ def with_environment(meas: Measurements, time_s: np.ndarray, setting: str = "aut
     """
     t, k = robust_statistics(meas)
     factor = variance_factor(np.asarray(time_s, float), t, k, carry=carry)
+    measured = np.isfinite(factor)
     if setting == "open":
         n = meas.mask.shape[0]
-        return replace(meas, model_sigma_m=meas.sigma_m, model_open=np.ones(n, bool)), classify(factor), factor
+        return replace(meas, model_sigma_m=meas.sigma_m, model_open=np.ones(n, bool), env_measured=measured), classify(factor), factor
     env = classify(factor, setting)
     urban = env == "urban"
     open_sky = env == "open"
     if open_sky.all():  # the error model holds throughout: nothing to widen (the arrays stay the very same)
-        return replace(meas, model_sigma_m=meas.sigma_m, model_open=open_sky), env, factor
+        return replace(meas, model_sigma_m=meas.sigma_m, model_open=open_sky, env_measured=measured), env, factor
     urban_sigma = np.where(meas.mask, np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)), meas.sigma_m)
     sigma = np.where(urban[:, None], urban_sigma, meas.sigma_m) if urban.any() else meas.sigma_m
     corrected = (env == "") & (meas.corrected_fix if meas.corrected_fix is not None else np.zeros(env.shape, bool))
     keep = open_sky | corrected  # unknown: the urban σ (no residual says open), but for a corrected fix
     model = np.where(keep[:, None], meas.sigma_m, urban_sigma)
-    return replace(meas, sigma_m=sigma, model_sigma_m=model, model_open=keep), env, factor
+    return replace(meas, sigma_m=sigma, model_sigma_m=model, model_open=keep, env_measured=measured), env, factor
+
+
+def with_declared_environment(meas: Measurements, declared: np.ndarray, setting: str = "auto") -> Measurements:
+    """``meas`` (one row per position and geo-object) with the ``model`` level's σ of the environment the operator
+    declared for each row's geo-object (``declared``: 'open', 'urban' or '' none), where the residuals measured none.
+
+    The declaration stands in for evidence the receiver does not give (a tracker that reports only its satellites):
+    ``open`` — a motorway outside built-up land, as the operator declares it — gives the error model's σ; ``urban``
+    the urban σ (a corrected fix included). Where the residuals measured the environment they decide, as they do
+    everywhere. Never weaker than an explicit ``--environment``: ``urban`` given keeps every row urban; ``open``
+    given already takes the error model, and a declared ``urban`` still widens it.
+    """
+    declared = np.asarray(declared, dtype=object)
+    measured = meas.env_measured if meas.env_measured is not None else np.zeros(declared.shape, bool)
+    free = ~measured & (setting != "urban")
+    as_open = free & (declared == "open") & (setting == "auto")
+    as_urban = free & (declared == "urban")
+    if not (as_open.any() or as_urban.any()):
+        return meas
+    sigma = meas.model_sigma_m if meas.model_sigma_m is not None else meas.sigma_m
+    open_sky = meas.model_open.copy() if meas.model_open is not None else np.zeros(declared.shape, bool)
+    urban_sigma = np.where(meas.mask, np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)), meas.sigma_m)
+    model = np.where(as_open[:, None], meas.sigma_m, np.where(as_urban[:, None], urban_sigma, sigma))
+    open_sky[as_open] = True
+    open_sky[as_urban] = False
+    return replace(meas, model_sigma_m=model, model_open=open_sky)

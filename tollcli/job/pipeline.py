@@ -449,7 +449,7 @@ def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, ep
         epoch_raim = replace(epoch_raim, sources=params.sources)
         geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)  # once for the epoch RAIM and every HAL
         raim = run_raim(meas, epoch_raim, geometry=geometry)
-        pairs = inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry)
+        pairs = inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry, environment=settings.environment)
         cn0 = cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
         kept = epochs[[c for c in KEPT_EPOCH_COLUMNS if c in epochs]]
         auth = None
