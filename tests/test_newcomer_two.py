@@ -259,6 +259,32 @@ def test_receivers_that_report_only_satellites_are_charged_where_the_operator_de
     assert proc.returncode == 2 and "--environment 'sunny'" in proc.stderr.decode()
 
 
+# ------------------------------------------------------------------------------------------------ 8. availability
+def test_the_integrity_audit_states_availability_and_prints_no_rate_of_nothing(tmp_path):
+    """``audit --epochs`` on the Berlin drive's snapshot positions (0 of 1 372 valid) printed "0 undetected (rate
+    0.00e+00)" and called the unavailable epochs "alarm". Now it states the availability first; the epochs without a
+    verdict are ``unavailable``, not alarms; with no positioning failure the rate is null, not 0/0."""
+    epochs, report = tmp_path / "e.csv", tmp_path / "a.json"
+    assert run_cli("integrity", str(shared(*BERLIN)), "--positioning", "snapshot", "-q", "-o", str(epochs)).returncode == 0
+    proc = run_cli("audit", "--epochs", str(epochs), "--truth", str(shared(*BERLIN_TRUTH)), "-o", str(report), "--json")
+    summary = json.loads(proc.stdout)["summary"]
+    assert summary.startswith("1372 positions: 0 valid (0.0% available), 0 misleading")
+    integrity = json.loads(report.read_text())["integrity"]
+    assert integrity["availability"] == 0.0 and integrity["regions"]["alarm"] == 0
+    assert integrity["regions"]["unavailable"] + integrity["regions"]["unavailable_failure"] == 1372
+    # the truth itself as the epochs: no positioning failure, nothing to miss
+    import pandas as pd
+
+    from tollcli.charging.truth_passages import truth_trajectory
+
+    truth = truth_trajectory(str(shared(*BERLIN_TRUTH)))
+    table = truth.assign(time_utc=truth["time_utc"].dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ"), raim_status="valid", hpl_m=10.0, hal_m=50.0, p_md=5e-5)
+    pd.DataFrame(table).to_csv(tmp_path / "perfect.csv", index=False)
+    proc = run_cli("audit", "--epochs", str(tmp_path / "perfect.csv"), "--truth", str(shared(*BERLIN_TRUTH)), "-o", str(report), "--json")
+    assert "no positioning failure to miss" in json.loads(proc.stdout)["summary"]
+    assert json.loads(report.read_text())["integrity"]["undetected_rate"] is None
+
+
 # ------------------------------------------------------------------------------------------------ 12. small ones
 def test_integrity_names_an_unknown_environment(tmp_path):
     proc = run_cli("integrity", str(shared("gpsd", "skytraq.log")), "-o", str(tmp_path / "e.csv"), "--json")

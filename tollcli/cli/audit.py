@@ -132,8 +132,7 @@ def audit(
         integrity = check_against_truth(read_table(epochs), truth_trajectory(truth))
     if not runs:
         report = {"mode": "integrity", "integrity": integrity}
-        summary = (f"{integrity['with_position']} positions: {integrity['positioning_failures']} positioning failures, "
-                   f"{integrity['undetected']} undetected (rate {integrity['undetected_rate']:.2e}, P_MD {integrity['p_md']:g})")  # fmt: skip
+        summary = integrity_words(integrity)
         _emit(report, summary, output, quiet, as_json)
         return
     found = _expand(runs)
@@ -171,6 +170,17 @@ def audit(
         report["integrity"] = integrity
         summary += f"; {integrity['positioning_failures']} positioning failures, {integrity['undetected']} undetected"
     _emit(report, summary, output, quiet, as_json)
+
+
+def integrity_words(integrity: dict) -> str:
+    """The integrity audit in one line: availability first (nothing valid misleads nobody and charges nothing), then
+    the failures and how many the checks missed (no rate without a failure to miss)."""
+    n, valid = integrity["with_position"], integrity["valid"]
+    share = f"{valid / n:.1%}" if n else "—"
+    rate = f"rate {integrity['undetected_rate']:.2e}" if integrity["undetected_rate"] is not None else "no positioning failure to miss"
+    return (f"{n} positions: {valid} valid ({share} available), {integrity['regions']['misleading']} misleading, "
+            f"{integrity['positioning_failures']} positioning failures, {integrity['undetected']} undetected "
+            f"({rate}, P_MD {integrity['p_md']:g})")  # fmt: skip
 
 
 def _emit(report: dict, summary: str, output: str, quiet: bool, as_json: bool = False) -> None:

@@ -7,10 +7,15 @@ truth trajectory (``time_utc``, ``lat_deg``, ``lon_deg``) on time, and counts:
 * ``positioning_failures``: horizontal error > HAL (whatever the RAIM said);
 * ``undetected``: positioning failures the RAIM declared valid — the rate
   ``undetected / positioning_failures`` is what P_MD bounds (per failure, at the
-  worst-case bias; smaller biases are detected less often but cause no failure);
+  worst-case bias; smaller biases are detected less often but cause no failure); without a positioning failure
+  there is nothing to miss: the rate is null, never a 0/0 printed as 0;
+* ``valid`` and ``availability`` (valid / with a position): a method that declares nothing valid misleads nobody
+  and charges nothing — the two figures are read together;
 * Stanford regions over epochs with a position: ``normal`` (error ≤ HPL ≤ HAL,
   valid), ``misleading`` (HPL < error ≤ HAL, valid), ``hazardous`` (error > HAL,
-  valid), ``alarm`` (not valid, error ≤ HAL), ``alarm_failure`` (not valid, error > HAL).
+  valid), ``alarm`` (an alarm — fault_detected, probable_false_alarm —, error ≤ HAL), ``alarm_failure`` (an alarm,
+  error > HAL), ``unavailable`` (no alarm and not valid — unavailable, insufficient, unmonitored: no bound or no
+  check —, error ≤ HAL), ``unavailable_failure`` (the same, error > HAL).
 """
 
 from __future__ import annotations
@@ -23,6 +28,9 @@ from tollcli.geodesy import geodetic2enu
 from tollcli.times import nearest_index
 
 VALID_STATUSES = ("valid", "excluded_valid")
+#: statuses that are an alarm (the check saw a fault, or probably a false one); every other status that is not valid
+#: is a position without a verdict (no bound within the HAL, too few satellites, nothing to check with)
+ALARM_STATUSES = ("fault_detected", "probable_false_alarm")
 
 
 def horizontal_error_m(lat_deg, lon_deg, true_lat_deg, true_lon_deg) -> np.ndarray:
@@ -65,7 +73,10 @@ def check_against_truth(epochs: pd.DataFrame, truth: pd.DataFrame, tolerance_s: 
             raise DataError(f"{name}: missing columns {', '.join(missing)}")
     err, matched = errors_against_truth(epochs, truth, tolerance_s)
     have = matched & np.isfinite(err)
-    valid = epochs["raim_status"].astype(str).isin(VALID_STATUSES).to_numpy() & have
+    status = epochs["raim_status"].astype(str)
+    valid = status.isin(VALID_STATUSES).to_numpy() & have
+    alarm = status.isin(ALARM_STATUSES).to_numpy() & have
+    unavailable = have & ~valid & ~alarm
     hpl = epochs["hpl_m"].to_numpy(float)
     hal = epochs["hal_m"].to_numpy(float)
     with np.errstate(invalid="ignore"):
@@ -74,8 +85,10 @@ def check_against_truth(epochs: pd.DataFrame, truth: pd.DataFrame, tolerance_s: 
             "normal": int(np.sum(valid & (err <= hpl))),
             "misleading": int(np.sum(valid & (err > hpl) & (err <= hal))),
             "hazardous": int(np.sum(valid & (err > hal))),
-            "alarm": int(np.sum(have & ~valid & (err <= hal))),
-            "alarm_failure": int(np.sum(have & ~valid & (err > hal))),
+            "alarm": int(np.sum(alarm & (err <= hal))),
+            "alarm_failure": int(np.sum(alarm & (err > hal))),
+            "unavailable": int(np.sum(unavailable & (err <= hal))),
+            "unavailable_failure": int(np.sum(unavailable & (err > hal))),
         }
     n_fail = int(failure.sum())
     n_undetected = int(np.sum(failure & valid))
@@ -85,9 +98,10 @@ def check_against_truth(epochs: pd.DataFrame, truth: pd.DataFrame, tolerance_s: 
     low, high = wilson(n_undetected, n_fail)
     return {
         "epochs": len(epochs), "matched": int(matched.sum()), "with_position": int(have.sum()),
+        "valid": int(valid.sum()), "availability": float(valid.sum() / have.sum()) if have.any() else None,
         "horizontal_error_m": {"median": _q(err[have], 0.5), "p95": _q(err[have], 0.95), "max": _q(err[have], 1.0)},
         "regions": regions, "positioning_failures": n_fail, "undetected": n_undetected,
-        "undetected_rate": n_undetected / n_fail if n_fail else 0.0, "undetected_rate_ci95": [low, high], "p_md": p_md,
+        "undetected_rate": n_undetected / n_fail if n_fail else None, "undetected_rate_ci95": [low, high], "p_md": p_md,
     }  # fmt: skip
 
 
