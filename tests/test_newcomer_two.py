@@ -285,6 +285,38 @@ def test_the_integrity_audit_states_availability_and_prints_no_rate_of_nothing(t
     assert json.loads(report.read_text())["integrity"]["undetected_rate"] is None
 
 
+# ------------------------------------------------------------------------------------------------ 9. info
+def _info(path, *extra) -> dict:
+    proc = run_cli("info", str(path), "--json", *extra)
+    assert proc.returncode == 0, proc.stderr.decode()
+    return json.loads(proc.stdout)
+
+
+def test_info_says_where_a_log_is_for_every_kind_and_prints_no_sentinel(tmp_path):
+    """``info`` gave a pseudorange log only a row count, printed ``fix quality (GGA): -1: 34`` for a log without GGA,
+    and a u-blox log with RXM-RAWX but no ephemeris failed ``process`` ("give --nav") though it holds the receiver's
+    own 39 NAV-SOL fixes. Now: epochs, span, box and distance for every kind; no sentinel; the fixes read instead."""
+    berlin = _info(shared(*BERLIN))
+    assert berlin["epochs"] == 1372 and berlin["span_s"] == pytest.approx(282.8, abs=0.2) and berlin["clock"].startswith("seconds")
+    assert berlin["box_deg"][1] == pytest.approx(52.504, abs=1e-3) and 5_000 < berlin["distance_m"] < 12_000
+    gsdc = _info(shared("gsdc2021", "Pixel4_derived.csv"))
+    assert gsdc["epochs"] == 7 and gsdc["first_utc"].startswith("2020-05-14") and gsdc["box_deg"]
+    nmea = _info(SAMPLES / "straight-drive.nmea")
+    assert nmea["distance_m"] == pytest.approx(179 * 13.9, rel=0.02) and nmea["box_deg"][1] == pytest.approx(42.698, abs=0.01)
+    magellan = _info(shared("gpsd", "magellan-ec10.log"))  # RMC, no GGA
+    assert "-1" not in magellan["fix_quality"]
+    assert "-1:" not in run_cli("info", str(shared("gpsd", "magellan-ec10.log"))).stdout.decode()
+    m8t = shared("gpsd", "ublox-neo-m8t.log")
+    info = _info(m8t)
+    assert info["epochs"] == 39 and "NAV-SOL" in info["positions"] and "read instead" in info["positions"]
+    assert "/tmp/" not in info["positions"] or str(m8t).startswith("/tmp/")
+    code, err, invoice = _process(m8t, GEO, out=tmp_path / "m8t.json")
+    assert code == 0, err
+    assert invoice["parameters"]["positioning_used"] == "receiver" and "NAV-SOL" in invoice["parameters"]["positioning_note"]
+    proc = run_cli("integrity", str(m8t), "-o", str(tmp_path / "m8t.csv"), "--json")
+    assert proc.returncode == 0 and json.loads(proc.stdout)["epochs"] == 39
+
+
 # ------------------------------------------------------------------------------------------------ 12. small ones
 def test_integrity_names_an_unknown_environment(tmp_path):
     proc = run_cli("integrity", str(shared("gpsd", "skytraq.log")), "-o", str(tmp_path / "e.csv"), "--json")

@@ -13,6 +13,7 @@ from tollcli.cli import options as opt
 def info(
     path: Annotated[str, typer.Argument(metavar="LOG|GEOOBJECTS|INVOICE", help="A receiver log (any kind the tool reads, .gz too, - for stdin), a geo-object file or an invoice.", show_default=False)],
     min_hal: Annotated[float, typer.Option("--min-hal", help="Geo-objects: also give the tolled length covered by geo-objects of at least this HAL, m.", min=0.0)] = 25.0,
+    nav: opt.Nav = None,
     as_json: Annotated[bool, typer.Option("--json", help="Everything as JSON on stdout.")] = False,
     quiet: opt.Quiet = False,
 ) -> None:
@@ -28,7 +29,7 @@ def info(
     """
     from tollcli.job.file_info import file_info
 
-    summary = file_info(path, min_hal)
+    summary = file_info(path, min_hal, opt.nav_files(nav))
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True, default=str))
         return
@@ -50,17 +51,35 @@ def text_lines(s: dict) -> list[str]:
         lines.append("messages: " + ", ".join(f"{k} {v}" for k, v in s["messages"].items()))
     if s.get("problem"):
         lines.append(f"nothing to read: {s['problem']}")
-    elif "epochs" in s:
-        lines.append(f"epochs: {s['epochs']} ({s['epochs_with_position']} with a position), {s['first_utc']} – {s['last_utc']}"
-                     + (f", every {s['interval_s']:g} s ({s['rate_hz']:g} Hz)" if s["interval_s"] else ""))  # fmt: skip
-        lines.append("fix quality (GGA): " + ", ".join(f"{k}: {v}" for k, v in s["fix_quality"].items()))
+        return lines
+    if s["kind"] == "unknown":
+        return lines + [s["needs"]]
+    if "solved_by" in s:
+        lines.append(f"solved by {s['solved_by']}" + (f"; needs {s['needs']}" if s["needs"] else ""))
+    if "epochs" in s:
+        lines += _where(s)
+        if s.get("fix_quality"):
+            lines.append("fix quality (GGA): " + ", ".join(f"{k}: {v}" for k, v in s["fix_quality"].items()))
+    if s.get("positions"):
+        lines.append(s["positions"])
+    if "integrity_evidence_epochs" in s:
         ev = s["integrity_evidence_epochs"]
         lines.append("integrity evidence (epochs): " + ", ".join(f"{k} {v}" for k, v in ev.items())
                      + f"; level under --integrity-sources auto: {s['integrity_level']}")
-        if s["skipped_lines"]:
-            lines.append(f"skipped lines: {s['skipped_lines']} (first: {s['first_problem']})")
-    elif s["kind"] == "unknown":
-        lines.append(s["needs"])
-    else:
-        lines.append(f"solved by {s['solved_by']}" + (f"; needs {s['needs']}" if s["needs"] else ""))
+    if s.get("skipped_lines"):
+        lines.append(f"skipped lines: {s['skipped_lines']} (first: {s['first_problem']})")
     return lines
+
+
+def _where(s: dict) -> list[str]:
+    """Epochs, span, rate, and where the log is: its box and the distance driven."""
+    span = f"{s['first_utc']} – {s['last_utc']}" if s.get("first_utc") else "no time"
+    if s.get("clock", "").startswith("seconds"):
+        span = f"{s['span_s']:g} s from its start (no date: process needs --start-time)"
+    out = [f"epochs: {s['epochs']} ({s['epochs_with_position']} with a position), {span}"
+           + (f", every {s['interval_s']:g} s ({s['rate_hz']:g} Hz)" if s.get("interval_s") else "")]  # fmt: skip
+    if s.get("box_deg"):
+        b = s["box_deg"]
+        out.append(f"where: longitude {b[0]:.5f} – {b[2]:.5f}, latitude {b[1]:.5f} – {b[3]:.5f}; "
+                   f"{s['distance_m'] / 1000:,.2f} km driven")  # fmt: skip
+    return out

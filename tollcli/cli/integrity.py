@@ -118,8 +118,10 @@ def integrity(
                 _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
             else:
                 table = _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment, strict, positioning)
-                used = table["positioning"].iat[0] if "positioning" in table and len(table) else "snapshot"
+                used = table["positioning"].iat[0] if "positioning" in table and len(table) else table.attrs.get("positioning_used", "snapshot")
                 note_why = table.attrs.get("positioning_note")
+                if note_why:
+                    note_why = note_why.replace(run.replay_path(), run.name)
                 counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
                 _tally(table, counts)
                 writer.write(table)
@@ -193,5 +195,10 @@ def _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, str
 
 def _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment="auto", strict=False,
                   positioning="auto") -> pd.DataFrame:  # fmt: skip
-    return next(iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, nav=nav, environment=environment,
-                               positioning=positioning)).table
+    tables = [c.table for c in iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, nav=nav, environment=environment,
+                                              positioning=positioning)]  # fmt: skip
+    if len(tables) == 1:
+        return tables[0]
+    table = pd.concat(tables, ignore_index=True)  # (a u-blox log read through its own solutions: chunks)
+    table.attrs = dict(tables[0].attrs)
+    return table

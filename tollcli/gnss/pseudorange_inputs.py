@@ -19,6 +19,10 @@ from tollcli.gnss.sigma_models import NominalModel
 PSEUDORANGE_FORMATS = ("gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
 
 
+class NoOrbitsError(DataError):
+    """A pseudorange log whose satellites' orbits are neither in it nor given (``--nav``)."""
+
+
 def pseudorange_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: str, sigma_m: float,
                        nominal: NominalModel, strict: bool = False) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
     """WLS epochs (with Doppler velocities where the input has rates) and RAIM measurements of a pseudorange log."""
@@ -89,7 +93,7 @@ def _raw_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: s
         if ephemerides is None:
             ephemerides = sfrbx_ephemerides(ubx)
             if ephemerides.empty:
-                raise DataError(f"{log}: no complete GPS or Galileo ephemeris in the log's RXM-SFRBX navigation data: give --nav NAVFILE")
+                raise NoOrbitsError(f"{log}: no complete GPS or Galileo ephemeris in the log's RXM-SFRBX navigation data: give --nav NAVFILE")
         m = with_broadcast_satellites(rawx_measurements(ubx), ephemerides)
     try:
         epochs, meas = raw_epochs(m, sigma_model, sigma_m, nominal, iono_coeffs=iono)

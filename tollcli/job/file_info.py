@@ -40,7 +40,7 @@ def _is_json_doc(path: str) -> dict | None:
     return doc if isinstance(doc, dict) else None
 
 
-def file_info(path: str, min_hal_m: float = 25.0) -> dict:
+def file_info(path: str, min_hal_m: float = 25.0, nav: str | list[str] | None = None) -> dict:
     """What ``path`` holds, as a JSON-ready dict (see the module's description)."""
     from tollcli.geoobjects.info import geoobject_info
 
@@ -78,7 +78,60 @@ def file_info(path: str, min_hal_m: float = 25.0) -> dict:
             out["solved_by"] = "tollcli (pseudoranges: WLS, then the RAIM on their residuals)"
             out["needs"] = NEEDS.get(kind, "")
             out["integrity_level"] = "residual"
+            with run.named_errors():
+                out.update(_pseudorange_info(replay, kind, nav, out["messages"], run.name))
     return out
+
+
+def _pseudorange_info(path: str, kind: str, nav, messages: dict, name: str) -> dict:
+    """Epochs, span, box and distance of a pseudorange log, from its snapshot positions; where they cannot be solved
+    (no orbits), why — and for a u-blox log that also holds the receiver's own solutions, those (what ``process``
+    charges then)."""
+    from tollcli.errors import UsageError
+    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+    from tollcli.gnss.sigma_models import NominalModel
+
+    try:
+        epochs, _ = pseudorange_epochs(path, kind, nav, "nominal", 5.0, NominalModel())
+    except (DataError, UsageError) as exc:
+        out = {"positions": f"not solved: {str(exc).replace(path, name)}"}
+        if kind == "ubx" and nav is None and receiver_solutions(messages):
+            out.update(_solution_info(path, "ubx-nav"))
+            out["positions"] += f"; the receiver's own solutions ({', '.join(receiver_solutions(messages))}) are read instead"
+        return out
+    t = epochs["time_utc"].dropna()
+    first, last = (t.min(), t.max()) if len(t) else (None, None)
+    steps = np.diff(t.to_numpy("datetime64[ms]").astype(np.int64)) / 1000.0 if len(t) > 1 else np.zeros(0)
+    positive = steps[steps > 0]
+    interval = float(np.median(positive)) if positive.size else None
+    lat, lon = epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float)
+    return {"epochs": len(epochs), "epochs_with_position": int((np.isfinite(lat) & np.isfinite(lon)).sum()),
+            "first_utc": _iso(first), "last_utc": _iso(last),
+            "span_s": round((last - first).total_seconds(), 3) if first is not None else None,
+            "interval_s": round(interval, 3) if interval else None, "rate_hz": round(1.0 / interval, 3) if interval else None,
+            **track_extent(lat, lon), "clock": "seconds from the start (no date)" if kind == "librsf" else "GPS time"}  # fmt: skip
+
+
+#: the u-blox messages that carry the receiver's own position solution
+SOLUTION_MESSAGES = ("NAV-PVT", "NAV-SOL", "NAV-POSLLH", "HNR-PVT")
+
+
+def receiver_solutions(messages: dict) -> list[str]:
+    """The receiver's own solution messages a u-blox log holds (what ``process`` falls back to without orbits)."""
+    return [m for m in SOLUTION_MESSAGES if messages.get(m)]
+
+
+def track_extent(lat_deg: np.ndarray, lon_deg: np.ndarray) -> dict:
+    """The box (lon/lat, degrees) of the finite positions and the distance driven along them (great circle, m)."""
+    from tollcli.geodesy import great_circle_distance_m
+
+    ok = np.isfinite(lat_deg) & np.isfinite(lon_deg)
+    if not ok.any():
+        return {"box_deg": None, "distance_m": 0.0}
+    lat, lon = lat_deg[ok], lon_deg[ok]
+    steps = great_circle_distance_m(lat[:-1], lon[:-1], lat[1:], lon[1:]) if lat.size > 1 else np.zeros(0)
+    return {"box_deg": [round(float(lon.min()), 6), round(float(lat.min()), 6), round(float(lon.max()), 6), round(float(lat.max()), 6)],
+            "distance_m": round(float(np.sum(steps)), 1)}  # fmt: skip
 
 
 def _solution_info(path: str, kind: str) -> dict:
@@ -90,8 +143,19 @@ def _solution_info(path: str, kind: str) -> dict:
     quality: Counter[int] = Counter()
     evidence = dict.fromkeys(("residuals", "receiver_raim", "error_ellipse", "satellites", "hdop"), 0)
     previous = None
+    box = np.array([np.inf, np.inf, -np.inf, -np.inf])
+    distance_m, last_fix = 0.0, None
     for chunk in iter_navigation_tables(path, kind, stats=stats):
         e, s = chunk.epochs, chunk.satellites
+        lat, lon = e["lat_deg"].to_numpy(float), e["lon_deg"].to_numpy(float)
+        ok = np.isfinite(lat) & np.isfinite(lon)
+        if ok.any():
+            lat_ok, lon_ok = lat[ok], lon[ok]
+            if last_fix is not None:
+                lat_ok, lon_ok = np.r_[last_fix[0], lat_ok], np.r_[last_fix[1], lon_ok]
+            distance_m += track_extent(lat_ok, lon_ok)["distance_m"]
+            last_fix = (lat_ok[-1], lon_ok[-1])
+            box = np.array([min(box[0], lon[ok].min()), min(box[1], lat[ok].min()), max(box[2], lon[ok].max()), max(box[3], lat[ok].max())])
         epochs += len(e)
         with_position += int((np.isfinite(e["lat_deg"].to_numpy(float)) & np.isfinite(e["lon_deg"].to_numpy(float))).sum())
         t = e["time_utc"].dropna()
@@ -119,7 +183,8 @@ def _solution_info(path: str, kind: str) -> dict:
         "first_utc": _iso(first), "last_utc": _iso(last),
         "span_s": round((last - first).total_seconds(), 3) if first is not None and last is not None else None,
         "interval_s": rate_s, "rate_hz": round(1.0 / rate_s, 3) if rate_s else None,
-        "fix_quality": {str(k): v for k, v in sorted(quality.items())},
+        "fix_quality": {str(k): v for k, v in sorted(quality.items()) if k >= 0},  # (-1: no GGA said: no quality to count)
+        "box_deg": [round(float(v), 6) for v in box] if np.isfinite(box).all() else None, "distance_m": round(distance_m, 1),
         "integrity_evidence_epochs": evidence, "integrity_level": level,
     }
 

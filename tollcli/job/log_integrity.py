@@ -11,7 +11,7 @@ import pandas as pd
 from tollcli.errors import UsageError
 from tollcli.geodesy import enu_shift2geodetic
 from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
-from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+from tollcli.gnss.pseudorange_inputs import NoOrbitsError, pseudorange_epochs
 from tollcli.integrity.trajectory import with_trajectory
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.integrity.environment import EnvironmentCarry, with_environment
@@ -56,7 +56,20 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
                                       sigma_m, nominal, strict, stats, nav, date, environment, positioning)  # fmt: skip
         return
     if kind not in NAVIGATION_KINDS:
-        epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
+        try:
+            epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
+        except NoOrbitsError as exc:
+            from tollcli.job.file_info import receiver_solutions
+            from tollcli.readers.log_contents import message_counts
+
+            solutions = receiver_solutions(message_counts(log, kind)) if kind == "ubx" and nav is None else []
+            if not solutions:
+                raise
+            note = f"{exc}: the receiver's own solutions ({', '.join(solutions)}) are read instead; --nav gives the orbits"
+            for chunk in iter_integrity(log, "ubx-nav", params, sigma_model, sigma_m, nominal, strict, stats, None, date, environment):
+                chunk.table.attrs.update(positioning_note=note, positioning_used="receiver")
+                yield chunk
+            return
         epochs, meas, _used = with_trajectory(epochs, meas, positioning)
         meas, env_columns = measured_environment(epochs, meas, environment)
         table = with_raim_position(pd.concat([epochs, env_columns, run_raim(meas, params)], axis=1))

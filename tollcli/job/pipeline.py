@@ -27,7 +27,7 @@ from tollcli.enforcement.trip import cn0_summary
 from tollcli.errors import DataError, UsageError
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
-from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+from tollcli.gnss.pseudorange_inputs import NoOrbitsError, pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.gnss.wls import wls_geometry
 from tollcli.integrity.environment import ENVIRONMENTS, EnvironmentCarry
@@ -43,6 +43,8 @@ from tollcli.job.osnma_evidence import OsnmaEvidence, failure_findings, fixes_be
 from tollcli.job.osnma_evidence import inputs_record as osnma_inputs
 from tollcli.io.log_run import LogRun
 from tollcli.job.streaming import TailCharger
+from tollcli.job.file_info import receiver_solutions
+from tollcli.readers.log_contents import message_counts
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_usable
@@ -354,7 +356,18 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
     (``settings.positioning``, :func:`~tollcli.integrity.trajectory.with_trajectory`; ``placed`` receives the positioning
     it used and the note why a trajectory was refused, and ``charger`` counts positions as independent evidence only the trajectory's correlation time apart);
     from there on the chunks take the same path as a navigation log's."""
-    epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
+    try:
+        epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
+    except NoOrbitsError as exc:
+        solutions = receiver_solutions(message_counts(run.replay_path(), kind)) if kind == "ubx" and nav is None else []
+        if not solutions:
+            raise
+        # the pseudoranges cannot be solved without orbits, but the receiver solved them: its own fixes are charged
+        placed["positioning"] = "receiver"
+        placed["note"] = (f"{str(exc).replace(run.replay_path(), run.name)}: the receiver's own solutions ({', '.join(solutions)}, "
+                          f"with its NAV-SAT residuals where it wrote them) were charged instead; --nav gives the orbits")  # fmt: skip
+        yield from _navigation_chunks(run, "ubx-nav", settings, nominal, ReadStats())
+        return
     epochs, meas, positioning = with_trajectory(epochs, meas, settings.positioning)
     if kind in RELATIVE_CLOCK_KINDS:
         epochs = on_the_clock(epochs, run.name, settings)
