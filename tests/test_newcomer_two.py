@@ -317,7 +317,63 @@ def test_info_says_where_a_log_is_for_every_kind_and_prints_no_sentinel(tmp_path
     assert proc.returncode == 0 and json.loads(proc.stdout)["epochs"] == 39
 
 
+# ------------------------------------------------------------------------------------------------ 10. exit codes, batch
+def test_exit_codes_as_documented_and_batch_checks_what_its_logs_share_once(tmp_path):
+    """``batch`` with a missing --geo or --tariff exited 4 (process: 2), --geo naming a folder 1; a tariff typo failed
+    every log of a fleet run one by one. README: 2 is a missing file or a folder where a file was expected."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in ("a", "b"):
+        (logs / f"{name}.nmea").write_bytes((SAMPLES / "straight-drive.nmea").read_bytes())
+    bad = tmp_path / "bad.toml"
+    bad.write_text('currency = "EUR"\n[road_class.motorway]\ncar = "x"\n')
+    for command in (("process", str(logs / "a.nmea")), ("batch", str(logs))):
+        out = ("-o", str(tmp_path / f"{command[0]}.json")) if command[0] == "process" else ("-o", str(tmp_path / "out"))
+        for geo, tariff, code, words in ((str(tmp_path / "missing.geojson"), TARIFF, 2, "no such file"),
+                                         (GEO, str(tmp_path / "missing.toml"), 2, "no such file"),
+                                         (str(tmp_path), TARIFF, 2, "is a directory"),
+                                         (GEO, str(tmp_path), 2, "is a directory"),
+                                         (GEO, str(bad), 1, "car: not a number")):  # fmt: skip
+            proc = run_cli(*command, "--geo", geo, "--tariff", tariff, *out, "-q")
+            err = proc.stderr.decode()
+            assert proc.returncode == code and words in err and err.count("\n") == 1, (command, geo, tariff, err)
+    assert not (tmp_path / "out").exists()  # refused before any log: no output folder, no failed/ per log
+
+
+# ------------------------------------------------------------------------------------------------ 11. tariff keys
+def test_a_vehicle_class_typo_in_a_tariff_is_an_error_naming_its_line(tmp_path):
+    """``vna = 1.40`` was accepted; only a van log failed later, naming neither the line nor the key."""
+    typo = tmp_path / "typo.toml"
+    typo.write_text('currency = "EUR"\n[road_class.motorway]\ncar = 0.95\nvna = 1.40\n')
+    code, err, _ = _process(SAMPLES / "straight-drive.nmea", GEO, tariff=typo, out=tmp_path / "i.json")
+    assert code == 1 and f"{typo}:4: [road_class.motorway] vna: unknown vehicle class (did you mean van?)" in err
+    own = tmp_path / "own.toml"
+    own.write_text('currency = "EUR"\nvehicle_classes = ["car", "bus"]\n[road_class.motorway]\ncar = 0.95\nbus = 1.10\n')
+    code, err, invoice = _process(SAMPLES / "straight-drive.nmea", GEO, "--vehicle-class", "bus", tariff=own, out=tmp_path / "c.json")
+    assert code == 0 and invoice["total"] == "2.20", err
+    own.write_text('currency = "EUR"\nvehicle_classes = ["car"]\n[road_class.motorway]\ncar = 0.95\nvan = 1.10\n')
+    code, err, _ = _process(SAMPLES / "straight-drive.nmea", GEO, tariff=own, out=tmp_path / "d.json")
+    assert code == 1 and ":5: [road_class.motorway] van: unknown vehicle class" in err
+
+
 # ------------------------------------------------------------------------------------------------ 12. small ones
+def test_small_ones(tmp_path):
+    """``--date yesterday`` said "Value error"; batch's help called the urban switch twofold; geoobjects/README.md said
+    the folder was empty; the audit listed a finding twice for two invoices of the same log."""
+    proc = run_cli("process", str(SAMPLES / "straight-drive.nmea"), "--geo", GEO, "--tariff", TARIFF, "--date", "yesterday", "-o",
+                   str(tmp_path / "x.json"))  # fmt: skip
+    assert proc.returncode == 2 and "Value error" not in proc.stderr.decode() and "'yesterday'" in proc.stderr.decode()
+    assert "twofold" not in run_cli("batch", "--help").stdout.decode()
+    assert "Empty until" not in (REPO / "geoobjects" / "README.md").read_text()
+    log = shared("gpsd", "sl869.log")  # a real receiver with a one-epoch position glitch: one finding
+    for k, extra in enumerate(((), ("--n-th", "2"))):
+        assert run_cli("process", str(log), "--geo", GEO, "--tariff", TARIFF, "-o", str(tmp_path / f"{k}.json"), "-q", *extra).returncode == 0
+    report = tmp_path / "risk.json"
+    assert run_cli("audit", str(tmp_path / "0.json"), str(tmp_path / "1.json"), "-q", "-o", str(report)).returncode == 0
+    findings = json.loads(report.read_text())["findings"]
+    assert len(findings) == 1 and findings[0]["kind"] == "position_jump"
+
+
 def test_integrity_names_an_unknown_environment(tmp_path):
     proc = run_cli("integrity", str(shared("gpsd", "skytraq.log")), "-o", str(tmp_path / "e.csv"), "--json")
     summary = json.loads(proc.stdout)

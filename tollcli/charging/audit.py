@@ -297,8 +297,19 @@ def undercharge_cause(invoice: dict, gid: str, passage: pd.Series | None = None)
 
 
 def findings_of(invoices: list[dict]) -> list[dict]:
-    """The tamper/evasion findings the invoices carry, with their vehicle."""
-    return [{"vehicle": inv.get("vehicle", ""), **item} for inv in invoices for item in (inv.get("findings") or {}).get("items", [])]
+    """The tamper/evasion findings the invoices carry, with their vehicle — each once: two invoices of the same log (made
+    with other settings, say) carry the same findings, which are one finding about the vehicle."""
+    import json
+
+    out, seen = [], set()
+    for inv in invoices:
+        for item in (inv.get("findings") or {}).get("items", []):
+            finding = {"vehicle": inv.get("vehicle", ""), **item}
+            key = json.dumps(finding, sort_keys=True, default=str)
+            if key not in seen:
+                seen.add(key)
+                out.append(finding)
+    return out
 
 
 #: the shortest time apart at which two positions' errors count as independent, s: real position errors stay

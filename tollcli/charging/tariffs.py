@@ -29,8 +29,10 @@ the factor is 1.
 Money is :class:`decimal.Decimal` from the file on: TOML numbers are parsed as
 Decimal (``1.20`` stays exactly 1.20), never as binary floats.
 
-A typo must never change a fee silently: an unknown key, day or currency minor unit
-is an error naming the key and its line. A fee keeps every digit the file gives until
+A typo must never change a fee silently: an unknown key, day, vehicle class or currency minor unit
+is an error naming the key and its line. The vehicle classes a fee table may name are the usual ones
+(:data:`KNOWN_VEHICLE_CLASSES`: car, van, truck, bus, …), or exactly those the tariff declares with
+``vehicle_classes = ["car", "camper", …]``. A fee keeps every digit the file gives until
 the one rounding (half-up, to the currency's minor unit); fees are below 10^12.
 """
 
@@ -61,7 +63,12 @@ from tollcli.errors import DataError, UsageError
 
 DAYS = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")
 DAY_NAMES = ("monday", "tuesday", "wednesday", "thursday", "friday", "saturday", "sunday")
-TOP_KEYS = ("currency", "minor_unit", "timezone", "road_class", "geoobject", "band", "vehicle", "table", "length_km")
+TOP_KEYS = ("currency", "minor_unit", "timezone", "road_class", "geoobject", "band", "vehicle", "table", "length_km",
+            "vehicle_classes")
+#: the vehicle classes a flat tariff may price without declaring them (``vehicle_classes = [...]`` declares others):
+#: a key outside them is a typo (``vna = 1.40`` priced no van) and an error naming its line
+KNOWN_VEHICLE_CLASSES = ("car", "van", "truck", "bus", "coach", "motorcycle", "lorry", "hgv", "lgv", "trailer", "caravan",
+                         "minibus", "taxi", "tractor", "class1", "class2", "class3", "class4", "class5")
 BAND_KEYS = ("name", "start", "end", "days", "factor")
 MAX_FACTOR = Decimal(100)
 #: ISO 4217 currencies whose minor unit is not 2 (the others have cents)
@@ -189,7 +196,8 @@ def _minutes(text, where: str) -> int:
     return t.hour * 60 + t.minute
 
 
-def _fee_tables(section, name: str, path: str, minor_unit: int) -> dict[str, dict[str, Decimal]]:
+def _fee_tables(section, name: str, path: str, minor_unit: int, text: str = "",
+                classes: tuple[str, ...] = KNOWN_VEHICLE_CLASSES) -> dict[str, dict[str, Decimal]]:  # fmt: skip
     if section is None:
         return {}
     if not isinstance(section, dict):
@@ -198,9 +206,28 @@ def _fee_tables(section, name: str, path: str, minor_unit: int) -> dict[str, dic
     for key, fees in section.items():
         if not isinstance(fees, dict) or not fees:
             raise DataError(f"{path}: [{name}.{key}] must map vehicle classes to fees")
+        for vc in fees:
+            if str(vc) not in classes:
+                import difflib
+
+                near = difflib.get_close_matches(str(vc), classes, n=1)
+                header = line_of(text, f"{name}.{key}") or line_of(text, f'{name}."{key}"')
+                raise DataError(f"{_where(path, text, str(vc), header)}: [{name}.{key}] {vc}: unknown vehicle class"
+                                + (f" (did you mean {near[0]}?)" if near else "")
+                                + "; the classes are " + ", ".join(classes[:6]) + (", …" if len(classes) > 6 else "")
+                                + " — declare others with vehicle_classes = [...]")  # fmt: skip
         out[str(key)] = {str(vc): at_least_minor_unit(_money(v, f"{path}: [{name}.{key}] {vc}"), minor_unit, f"{path}: [{name}.{key}] {vc}")
                          for vc, v in fees.items()}  # fmt: skip
     return out
+
+
+def _declared_classes(value, path: str, text: str) -> tuple[str, ...]:
+    """The vehicle classes a tariff declares (``vehicle_classes = [...]``), else :data:`KNOWN_VEHICLE_CLASSES`."""
+    if value is None:
+        return KNOWN_VEHICLE_CLASSES
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) and v.strip() for v in value):
+        raise DataError(f"{_where(path, text, 'vehicle_classes')}: vehicle_classes must be a list of class names")
+    return tuple(str(v) for v in value)
 
 
 def _day(value) -> int | None:
@@ -290,13 +317,17 @@ def load_tariff(path: str) -> Tariff:
         ZoneInfo(str(timezone))
     except (ZoneInfoNotFoundError, ValueError):
         raise DataError(f"{path}: unknown timezone {timezone!r}") from None
-    road_class = _fee_tables(doc.get("road_class"), "road_class", path, minor)
-    geoobject = _fee_tables(doc.get("geoobject"), "geoobject", path, minor)
+    classes = _declared_classes(doc.get("vehicle_classes"), path, text)
+    road_class = _fee_tables(doc.get("road_class"), "road_class", path, minor, text, classes)
+    geoobject = _fee_tables(doc.get("geoobject"), "geoobject", path, minor, text, classes)
     bands = _bands(doc.get("band"), path, text)
     if "table" in doc:
         if road_class or geoobject:
             raise DataError(f"{_where(path, text, 'road_class' if road_class else 'geoobject')}: give fees either as "
                             f"[road_class]/[geoobject] tables or as [[table]] rates, not both")  # fmt: skip
+        if "vehicle_classes" in doc:
+            raise DataError(f"{_where(path, text, 'vehicle_classes')}: vehicle_classes belongs to a flat tariff; a tariff of "
+                            f"[[table]] rates declares its classes in [vehicle]")  # fmt: skip
         vehicle = parse_vehicle(doc.get("vehicle"), path, text)
         tables = parse_tables(doc["table"], vehicle, ZoneInfo(str(timezone)), path, text)
         lengths = doc.get("length_km") or {}
@@ -305,7 +336,7 @@ def load_tariff(path: str) -> Tariff:
         length_km = {str(k): _money(v, f"{_where(path, text, str(k), line_of(text, 'length_km'))}: length_km {k}")
                      for k, v in lengths.items()}  # fmt: skip
         return Tariff(currency.upper(), minor, str(timezone), {}, {}, bands, path, tables, vehicle, length_km)
-    for key in ("vehicle", "length_km"):
+    for key in ("vehicle", "length_km"):  # (and vehicle_classes: a flat tariff's; a table's are its [vehicle] attributes)
         if key in doc:
             raise DataError(f"{_where(path, text, key)}: [{key}] belongs to a tariff of [[table]] rates")
     if not road_class and not geoobject:

@@ -121,6 +121,8 @@ def stream_collection(path: str, keep: frozenset[str] | None = None, geometry: b
         fh = open(path, "rb")
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise UsageError(f"{path}: is a directory, expected a geo-object file (GeoJSON)") from None
     except OSError as exc:
         raise DataError(f"{path}: not a GeoJSON file ({exc.strerror})") from None
     decoder = json.JSONDecoder()

@@ -313,6 +313,19 @@ def _fleet_jobs(jobs: list[Job], table: dict, fleet: str) -> list[Job]:
     return out
 
 
+def check_shared_inputs(geo: str, tariff: str, settings: ChargeSettings, vehicles: dict | None = None) -> None:
+    """What every log of a batch shares — geo-objects, tariff, settings — checked once, before any log: a typo in the
+    tariff is one error (exit 1, or 2 for a file that is not there or a folder), not a failure of every log."""
+    from tollcli.charging.recognition import load_geoobjects
+    from tollcli.charging.tariffs import load_tariff
+    from tollcli.job.pipeline import check_settings
+
+    tariff_doc = load_tariff(tariff)
+    check_settings(settings, None if vehicles is not None else tariff_doc)  # (a fleet gives each vehicle its class)
+    geo_objects = load_geoobjects(geo)
+    tariff_doc.check_against(geo_objects.ids, geo_objects.road_class, geo)
+
+
 def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, outdir: str, *, workers: int = 1,
               scheduler: str | None = None, force: bool = False, roads: str | None = None, nav: str | tuple[str, ...] | None = None,
               progress=None, fleet: str | None = None, osnma_merkle: str | None = None,
@@ -323,6 +336,7 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
     it does not list fails (listed in failed/), it is never charged as some default vehicle.
     """
     vehicles = read_fleet(fleet) if fleet is not None else None  # a bad fleet file stops the batch before it starts
+    check_shared_inputs(geo, tariff, settings, vehicles)  # so do the geo-objects, the tariff and the settings: once
     output_folder(outdir)
     shared = [("geoobjects_sha256", file_sha256(geo)), ("tariff_sha256", file_sha256(tariff))]
     if roads is not None:
