@@ -33,7 +33,8 @@ def _motorway(tmp_path, name: str, paired: bool = True):
     ]  # fmt: skip
     roads = tmp_path / f"{name}-roads.geojson"
     roads.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
-    return roads, built_geoobjects(roads, tmp_path / f"{name}.geojson")
+    # (unpaired, each carriageway bounds the other's HAL to 12.5 m: below the design 25 m, built where the operator asks)
+    return roads, built_geoobjects(roads, tmp_path / f"{name}.geojson", *(() if paired else ("--hal-min", "5")))
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +122,8 @@ def test_helsinki_carriageways_are_antiparallel_namesakes(tmp_path):
     """From the real map, primary roads tolled: the pairs found are one-way sections of the same street running
     opposite ways; each pair lists the other; the file is clean."""
     geo = tmp_path / "h.geojson"
-    r = run_cli("geoobjects", "build", str(shared("osm", "helsinki.osm.pbf")), "--tolled", "highway=primary", "-o", str(geo), "-q")
+    r = run_cli("geoobjects", "build", str(shared("osm", "helsinki.osm.pbf")), "--tolled", "highway=primary", "-o", str(geo), "-q",
+                "--hal-min", "5")  # (a city's streets: below the design HAL, where the operator asks)
     assert r.returncode == 0, r.stderr
     props = {f["properties"]["id"]: f["properties"] for f in json.loads(geo.read_text())["features"]}
     paired = {gid: p for gid, p in props.items() if "opposite" in p}

@@ -27,17 +27,18 @@ def test_an_infinite_hal_is_refused(tmp_path):
 
 
 def test_a_toml_date_is_the_date_it_means(tmp_path):
-    """``date = 2026-03-02`` unquoted (a TOML date, as TOML users write it) was a TypeError (exit 5)."""
+    """``date = 2024-05-06`` unquoted (a TOML date, as TOML users write it) was a TypeError (exit 5). (The log's own
+    date: a --date that contradicts it is an error.)"""
     native, quoted = tmp_path / "native.toml", tmp_path / "quoted.toml"
-    native.write_text("date = 2026-03-02\n")
-    quoted.write_text('date = "2026-03-02"\n')
+    native.write_text("date = 2024-05-06\n")
+    quoted.write_text('date = "2024-05-06"\n')
     invoices = []
     for settings in (native, quoted):
         out = tmp_path / f"{settings.stem}.json"
         done = run_cli("process", LOG, "--config", str(settings), "--geo", GEO, "--tariff", str(TARIFF), "-q", "-o", str(out))
         assert done.returncode == 0, done.stderr.decode()
         invoices.append(json.loads(out.read_text()))
-    assert invoices[0]["parameters"]["date"] == invoices[1]["parameters"]["date"] == "2026-03-02"
+    assert invoices[0]["parameters"]["date"] == invoices[1]["parameters"]["date"] == "2024-05-06"
     assert invoices[0]["lines"] == invoices[1]["lines"]
 
 

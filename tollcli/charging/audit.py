@@ -19,6 +19,10 @@ Without truth, a risk report from the invoices alone:
   P_MD ** n_independent, n_independent the fault-detected positions of its evidence at least
   max(T_c, ``ERROR_CORRELATION_S``) apart — consecutive positions share their errors (30 s: real urban errors
   measured 25 s correlated on the Potsdamer Platz drive); per invoice the union bound over its lines.
+
+Why this file is long: the truth audit, the risk report and what both share (pairing lines with passages, the true
+fee, the causes of what was not charged, the findings once each, the clock a relative truth is placed on) read the
+same invoices the same way; split, each half would re-read them.
 """
 
 from __future__ import annotations

@@ -138,7 +138,7 @@ def integrity(
                "environments": {k[1] or "unknown": n for k, n in sorted(counts.items()) if k[0] == "environment"},
                "skipped_lines": counts["skipped", "lines"]}  # fmt: skip
     if kind == "gpsd-json" and not set(sources) & {"grs", "pseudorange"}:  # what gpsd's JSON lost of the receiver's evidence
-        from tollcli.job.pipeline import GPSD_DROPPED
+        from tollcli.job.receiver_notes import GPSD_DROPPED
 
         summary["receiver_notes"] = {"gpsd_json": GPSD_DROPPED}
     if kind not in NAVIGATION_KINDS:

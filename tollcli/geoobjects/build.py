@@ -222,8 +222,11 @@ def build_from_roads(roads: Roads, path: str, design: DesignHal | None = None, c
         skipped += gone
     order = sorted(features, key=lambda i: roads.ids[i])  # by id: the same file whatever order the roads came in
     skipped = sorted(skipped, key=lambda s: s["id"])
-    build = {"design_hal_m": design.describe(), "hal_min_m": hal_min_m, "skipped": skipped,  # for geoobjects info
-             "min_core": seen.describe(), "environment": environments.describe()}
+    build = {"design_hal_m": design.describe(), "hal_min_m": hal_min_m, "skipped": skipped}  # for geoobjects info
+    if seen != SeenBy():
+        build["min_core"] = seen.describe()
+    if environments != DeclaredEnvironments():
+        build["environment"] = environments.describe()
     return {"type": "FeatureCollection", "features": [features[i] for i in order], "tollcli": build}, skipped
 
 

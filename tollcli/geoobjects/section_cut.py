@@ -128,6 +128,8 @@ def skip_reason(line, met_union, others, other_dist, metric, ids, trim_factor, f
 
 #: a road met that runs along a section for this share of its length overlaps it (the same road drawn twice)
 OVERLAP_SHARE = 0.5
+#: ... and for at least this long, m (a stub of a few metres between two junctions overlaps nothing)
+OVERLAP_MIN_M = 10.0
 
 
 def _overlapping(line, metric, met: np.ndarray | None, ids) -> str:
@@ -135,7 +137,7 @@ def _overlapping(line, metric, met: np.ndarray | None, ids) -> str:
     if met is None or not met.size or line.length <= 0:
         return ""
     along = shapely.length(shapely.intersection(line, shapely.buffer(metric[met], 1.0)))
-    hits = [(ids[j], float(a)) for j, a in zip(met.tolist(), along) if a >= OVERLAP_SHARE * line.length]
+    hits = [(ids[j], float(a)) for j, a in zip(met.tolist(), along) if a >= max(OVERLAP_SHARE * line.length, OVERLAP_MIN_M)]
     return ", ".join(f"{name} along {a:.0f} m" for name, a in sorted(hits))
 
 

@@ -1,4 +1,10 @@
-"""The whole charging job as one function: log + geo-objects + tariff → invoice (used by process and verify)."""
+"""The whole charging job as one function: log + geo-objects + tariff → invoice (used by process and verify).
+
+Why this file is long: it is the one place every input kind meets the charge — the settings and their checks, the
+navigation and pseudorange chunk sources (with the fallback to a u-blox receiver's own fixes), the chunk loop and
+what the invoice records of how the log was read; the log's clock (``log_clock.py``) and what the receiver's outputs
+were not (``receiver_notes.py``) live beside it.
+"""
 
 from __future__ import annotations
 
@@ -44,6 +50,8 @@ from tollcli.job.osnma_evidence import inputs_record as osnma_inputs
 from tollcli.io.log_run import LogRun
 from tollcli.job.streaming import TailCharger
 from tollcli.job.file_info import receiver_solutions
+from tollcli.job.log_clock import RELATIVE_CLOCK_KINDS, check_given_date, check_not_future, on_the_clock, start_time_utc
+from tollcli.job.receiver_notes import GPSD_DROPPED, count_ignored, receiver_notes
 from tollcli.readers.log_contents import message_counts
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
@@ -134,7 +142,7 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
             bad(f"{name} (--{name.replace('_', '-')})", getattr(settings, name), "true or false")
     if settings.date is not None and not _is_date(settings.date):
         bad("date (--date)", settings.date, "a date YYYY-MM-DD")
-    if settings.start_time is not None and _start_time(settings.start_time) is None:
+    if settings.start_time is not None and start_time_utc(settings.start_time) is None:
         bad("start_time (--start-time)", settings.start_time, "a date and time with its UTC offset (2019-06-01T08:00:00Z)")
     for name in ("vehicle", "policy"):
         if getattr(settings, name) is not None and not isinstance(getattr(settings, name), str):
@@ -153,17 +161,6 @@ def check_settings(settings: ChargeSettings, tariff=None) -> None:
         why = check_vehicle(attrs or {}, tariff.vehicle, tariff.source) if tariff.tables else ""
         if why:
             bad("vehicle_attrs (--vehicle-attr)", attrs, why)
-
-
-def _start_time(value) -> pd.Timestamp | None:
-    """``--start-time`` as a UTC timestamp (None: not a date and time with its offset)."""
-    if not isinstance(value, str):
-        return None
-    try:
-        t = pd.Timestamp(value)
-    except (TypeError, ValueError):
-        return None
-    return t.tz_convert("UTC") if t.tzinfo is not None and 1980 <= t.year <= 2200 else None
 
 
 def _is_date(value) -> bool:
@@ -339,7 +336,7 @@ def _navigation_chunks(run: LogRun, kind: str, settings: ChargeSettings, nominal
         if chunk.epochs.empty:
             continue
         if epochs_seen == 0 and date is not None and kind != "nmea":
-            _check_given_date(chunk.epochs, run.name, settings.date)
+            check_given_date(chunk.epochs, run.name, settings.date)
         check_not_future(chunk.epochs, run.name)
         epochs_seen += len(chunk.epochs)
         yield chunk.epochs, nmea_measurements(chunk.epochs, chunk.satellites, model, settings.sigma_m, nominal, carry=carry), chunk.satellites
@@ -372,7 +369,7 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
     if kind in RELATIVE_CLOCK_KINDS:
         epochs = on_the_clock(epochs, run.name, settings)
     elif settings.date is not None:
-        _check_given_date(epochs, run.name, settings.date)
+        check_given_date(epochs, run.name, settings.date)
     check_not_future(epochs, run.name)
     placed["positioning"] = positioning
     if "positioning_note" in epochs.attrs:
@@ -382,63 +379,6 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
     for start in range(0, len(epochs), CHUNK_EPOCHS):
         rows = np.arange(start, min(start + CHUNK_EPOCHS, len(epochs)))
         yield epochs.iloc[rows].reset_index(drop=True), meas.take(rows), None
-
-
-#: logs whose times are seconds from the start of the recording: no date, no time of day (readers.librsf)
-RELATIVE_CLOCK_KINDS = ("librsf",)
-
-
-def on_the_clock(epochs: pd.DataFrame, name: str, settings: ChargeSettings) -> pd.DataFrame:
-    """A relative-clock log's epochs placed at ``--start-time`` (its ``time_utc`` start at ``LIBRSF_T0``).
-
-    Without it no invoice can be made: time bands, day types and the period would be priced on an invented clock
-    (1970-01-01, a night). ``--date`` alone gives no time of day, so it is refused for such a log.
-    """
-    from tollcli.readers.librsf import LIBRSF_T0
-
-    start = _start_time(settings.start_time) if settings.start_time is not None else None
-    if start is None:
-        example = f"{settings.date or '2019-06-01'}T08:00:00+02:00"
-        given = f"--date {settings.date} gives no time of day; " if settings.date else ""
-        raise DataError(f"{name}: its times are seconds from the start of the recording, with no date or time of day, "
-                        f"and an invoice is priced on the clock: {given}give --start-time (e.g. {example})")  # fmt: skip
-    if settings.date and settings.date != f"{start:%Y-%m-%d}":
-        raise UsageError(f"--date {settings.date} contradicts --start-time {settings.start_time} (UTC date {start:%Y-%m-%d})")
-    return epochs.assign(time_utc=epochs["time_utc"] + (start - LIBRSF_T0))
-
-
-#: how far after today a log's epochs may be dated (time zones, a receiver's clock a little ahead), days
-FUTURE_SLACK_DAYS = 1
-
-
-def check_not_future(epochs: pd.DataFrame, name: str) -> None:
-    """DataError when an epoch is dated more than a day after today: no receiver logged it then — a GPS week-number
-    rollover guessed wrong (gpsd dates a 2015 log in 2034), or a damaged clock; an invoice on that calendar is wrong."""
-    if "time_utc" not in epochs or not len(epochs):
-        return
-    latest = epochs["time_utc"].max()
-    limit = pd.Timestamp.now(tz="UTC") + pd.Timedelta(days=FUTURE_SLACK_DAYS)
-    if pd.notna(latest) and latest > limit:
-        row = int(np.argmax((epochs["time_utc"] > limit).to_numpy()))
-        line = f":{int(epochs['line'].iat[row])}" if "line" in epochs and pd.notna(epochs["line"].iat[row]) else ""
-        raise DataError(f"{name}{line}: dated {epochs['time_utc'].iat[row]:%Y-%m-%d}, after today ({limit - pd.Timedelta(days=FUTURE_SLACK_DAYS):%Y-%m-%d}): "
-                        f"no receiver logged it then (a GPS week-number rollover guessed wrong, or a damaged clock): "
-                        f"no invoice on that calendar")  # fmt: skip
-
-
-#: what gpsd's JSON does not carry of a receiver's evidence (the invoice's ``receiver_notes``, the integrity summary)
-GPSD_DROPPED = ("gpsd's JSON carries no range residuals here (no prRes), and never the receiver's own RAIM (NMEA GBS) or "
-                "its GRS residuals: the positions were checked only against what is left (GST, the satellites' geometry); "
-                "the receiver's raw log may hold the residual test (u-blox NAV-SAT, NMEA GRS): process it for the "
-                "strongest evidence")  # fmt: skip
-
-
-def _check_given_date(epochs: pd.DataFrame, name: str, date: str) -> None:
-    """DataError when ``--date`` contradicts the date of a log that carries its own (its first dated epoch's)."""
-    dated = epochs["time_utc"].dropna() if "time_utc" in epochs else pd.Series([], dtype=object)
-    if len(dated) and f"{dated.iat[0]:%Y-%m-%d}" != date:
-        raise DataError(f"{name}: --date says {date}, the log's own first date is {dated.iat[0]:%Y-%m-%d}: leave --date out "
-                        f"(it is for logs without dates)")  # fmt: skip
 
 
 def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams, charger: TailCharger,
@@ -476,7 +416,7 @@ def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, ep
                 auth_counts[status] = auth_counts.get(status, 0) + int(n)
         charger.add(kept, raim[list(KEPT_RAIM_COLUMNS)], cn0, pairs)
         if ignored is not None:
-            _count_ignored(raim, epochs, ignored)
+            count_ignored(raim, epochs, ignored)
         if track is not None and "lon_deg" in epochs:
             track.add(epochs["lon_deg"].to_numpy(float), epochs["lat_deg"].to_numpy(float))
         if epoch_table is not None:
@@ -488,34 +428,6 @@ def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, ep
     if epoch_table is not None and table_parts:
         epoch_table.append(pd.concat(table_parts, ignore_index=True))
     return params
-
-
-#: receiver outputs an invoice says were no evidence (``gst_rms_note`` values), and what the invoice calls them
-IGNORED_OUTPUTS = {"contradictory": "gst_contradictory"}
-
-
-def _count_ignored(raim: pd.DataFrame, epochs: pd.DataFrame, ignored: dict) -> None:
-    """Count a chunk's epochs whose receiver output contradicted itself (``ignored``: note → [epochs, first line])."""
-    if "gst_rms_note" not in raim:
-        return
-    notes = raim["gst_rms_note"].astype(str).to_numpy()
-    for note in IGNORED_OUTPUTS:
-        hit = np.flatnonzero(notes == note)
-        if hit.size:
-            line = int(epochs["line"].iat[hit[0]]) if "line" in epochs else -1
-            seen = ignored.setdefault(note, [0, line])
-            seen[0] += int(hit.size)
-
-
-def receiver_notes(ignored: dict) -> dict[str, str]:
-    """The invoice's ``receiver_notes``: each receiver output that was no evidence, what it means, how often, from where."""
-    from tollcli.gnss.receiver_outputs import GST_RMS_NOTE_MEANINGS, GST_TRACE_RATIO_MAX
-
-    out = {}
-    for note, (n, line) in sorted(ignored.items()):
-        where = f", first at line {line}" if line >= 0 else ""
-        out[IGNORED_OUTPUTS[note]] = GST_RMS_NOTE_MEANINGS[note].format(trace=GST_TRACE_RATIO_MAX) + f" ({n} epochs{where})"
-    return out
 
 
 def settings_from_invoice(invoice: dict) -> ChargeSettings:
