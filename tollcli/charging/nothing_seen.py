@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from tollcli.geodesy import great_circle_distance_m
 from tollcli.spatial import wgs84_to
 
 #: the most positions kept to measure the distance (a 10 h log at 1 Hz: one every 36 s or so)
@@ -70,20 +71,13 @@ class TrackExtent:
             # each position clamped into each box: the box's nearest point (in lon/lat), then the great-circle distance
             lon = np.clip(self.lon[:, None], b[None, :, 0], b[None, :, 2])
             lat = np.clip(self.lat[:, None], b[None, :, 1], b[None, :, 3])
-            d = _great_circle_m(self.lon[:, None], self.lat[:, None], lon, lat)
+            d = great_circle_distance_m(self.lat[:, None], self.lon[:, None], lat, lon)
             flat = int(np.nanargmin(d)) if np.isfinite(d).any() else -1
             if flat >= 0 and d.flat[flat] < best_d:
                 best_d, best_k = float(d.flat[flat]), start + flat % len(b)
         return {**out, "network_box_deg": [round(v, 6) for v in network], "boxes_overlap": bool(overlap),
                 "nearest_geoobject": str(geo.ids[best_k]) if best_k >= 0 else None,
                 "nearest_distance_m": round(best_d, 1) if best_k >= 0 else None}  # fmt: skip
-
-
-def _great_circle_m(lon1, lat1, lon2, lat2) -> np.ndarray:
-    """Great-circle distance, m (haversine on a sphere of the Earth's mean radius)."""
-    p1, p2 = np.radians(lat1), np.radians(lat2)
-    a = np.sin((p2 - p1) / 2) ** 2 + np.cos(p1) * np.cos(p2) * np.sin(np.radians(lon2 - lon1) / 2) ** 2
-    return 2 * 6_371_008.8 * np.arcsin(np.sqrt(np.clip(a, 0.0, 1.0)))
 
 
 def nothing_seen_words(report: dict) -> str:

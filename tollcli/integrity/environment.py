@@ -145,12 +145,17 @@ def with_environment(meas: Measurements, time_s: np.ndarray, setting: str = "aut
     open_sky = env == "open"
     if open_sky.all():  # the error model holds throughout: nothing to widen (the arrays stay the very same)
         return replace(meas, model_sigma_m=meas.sigma_m, model_open=open_sky, env_measured=measured), env, factor
-    urban_sigma = np.where(meas.mask, np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)), meas.sigma_m)
+    urban_sigma = _urban_sigma(meas)
     sigma = np.where(urban[:, None], urban_sigma, meas.sigma_m) if urban.any() else meas.sigma_m
     corrected = (env == "") & (meas.corrected_fix if meas.corrected_fix is not None else np.zeros(env.shape, bool))
     keep = open_sky | corrected  # unknown: the urban σ (no residual says open), but for a corrected fix
     model = np.where(keep[:, None], meas.sigma_m, urban_sigma)
     return replace(meas, sigma_m=sigma, model_sigma_m=model, model_open=keep, env_measured=measured), env, factor
+
+
+def _urban_sigma(meas: Measurements) -> np.ndarray:
+    """(E, N) each used measurement's urban σ (never below its own), m."""
+    return np.where(meas.mask, np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)), meas.sigma_m)
 
 
 def with_declared_environment(meas: Measurements, declared: np.ndarray, setting: str = "auto") -> Measurements:
@@ -172,7 +177,7 @@ def with_declared_environment(meas: Measurements, declared: np.ndarray, setting:
         return meas
     sigma = meas.model_sigma_m if meas.model_sigma_m is not None else meas.sigma_m
     open_sky = meas.model_open.copy() if meas.model_open is not None else np.zeros(declared.shape, bool)
-    urban_sigma = np.where(meas.mask, np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)), meas.sigma_m)
+    urban_sigma = _urban_sigma(meas)
     model = np.where(as_open[:, None], meas.sigma_m, np.where(as_urban[:, None], urban_sigma, sigma))
     open_sky[as_open] = True
     open_sky[as_urban] = False

@@ -95,9 +95,10 @@ def _pseudorange_info(path: str, kind: str, nav, messages: dict, name: str) -> d
         epochs, _ = pseudorange_epochs(path, kind, nav, "nominal", 5.0, NominalModel())
     except (DataError, UsageError) as exc:
         out = {"positions": f"not solved: {str(exc).replace(path, name)}"}
-        if kind == "ubx" and nav is None and receiver_solutions(messages):
+        solutions = receiver_solutions(messages) if kind == "ubx" and nav is None else []
+        if solutions:
             out.update(_solution_info(path, "ubx-nav"))
-            out["positions"] += f"; the receiver's own solutions ({', '.join(receiver_solutions(messages))}) are read instead"
+            out["positions"] += f"; the receiver's own solutions ({', '.join(solutions)}) are read instead"
         return out
     t = epochs["time_utc"].dropna()
     first, last = (t.min(), t.max()) if len(t) else (None, None)
@@ -119,6 +120,12 @@ SOLUTION_MESSAGES = ("NAV-PVT", "NAV-SOL", "NAV-POSLLH", "HNR-PVT")
 def receiver_solutions(messages: dict) -> list[str]:
     """The receiver's own solution messages a u-blox log holds (what ``process`` falls back to without orbits)."""
     return [m for m in SOLUTION_MESSAGES if messages.get(m)]
+
+
+def solutions_instead(path: str, kind: str, nav) -> list[str]:
+    """The receiver's own solutions a pseudorange log without orbits is read through instead (a u-blox log without
+    ``--nav`` holding NAV-PVT/NAV-SOL…: ``ubx-nav``); empty when there are none to fall back to."""
+    return receiver_solutions(message_counts(path, kind)) if kind == "ubx" and nav is None else []
 
 
 def track_extent(lat_deg: np.ndarray, lon_deg: np.ndarray) -> dict:

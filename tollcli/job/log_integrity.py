@@ -59,10 +59,9 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
         try:
             epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
         except NoOrbitsError as exc:
-            from tollcli.job.file_info import receiver_solutions
-            from tollcli.readers.log_contents import message_counts
+            from tollcli.job.file_info import solutions_instead
 
-            solutions = receiver_solutions(message_counts(log, kind)) if kind == "ubx" and nav is None else []
+            solutions = solutions_instead(log, kind, nav)
             if not solutions:
                 raise
             note = f"{exc}: the receiver's own solutions ({', '.join(solutions)}) are read instead; --nav gives the orbits"

@@ -49,10 +49,9 @@ from tollcli.job.osnma_evidence import OsnmaEvidence, failure_findings, fixes_be
 from tollcli.job.osnma_evidence import inputs_record as osnma_inputs
 from tollcli.io.log_run import LogRun
 from tollcli.job.streaming import TailCharger
-from tollcli.job.file_info import receiver_solutions
+from tollcli.job.file_info import solutions_instead
 from tollcli.job.log_clock import RELATIVE_CLOCK_KINDS, check_given_date, check_not_future, on_the_clock, start_time_utc
 from tollcli.job.receiver_notes import GPSD_DROPPED, count_ignored, receiver_notes
-from tollcli.readers.log_contents import message_counts
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_usable
@@ -356,7 +355,7 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
     try:
         epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
     except NoOrbitsError as exc:
-        solutions = receiver_solutions(message_counts(run.replay_path(), kind)) if kind == "ubx" and nav is None else []
+        solutions = solutions_instead(run.replay_path(), kind, nav)
         if not solutions:
             raise
         # the pseudoranges cannot be solved without orbits, but the receiver solved them: its own fixes are charged
