@@ -331,6 +331,8 @@ def invoice_csv(invoice: dict) -> str:
     import io
 
     cols = ["vehicle", "log", "geoobject", "name", "road_class", "entry_utc", "exit_utc", "n_valid_independent", "band", "fee", "currency"]
+    if invoice.get("scheme") == "city":  # gantry crossings and zone presences: the fee before the rules, and after them
+        cols = ["vehicle", "log", "kind", "geoobject", "name", "direction", "time_utc", "time_local", "rate", "fee", "charged", "currency"]
     if any("tariff_table" in line for line in invoice["lines"]):  # per-km tables: what each fee was charged for
         cols[-2:-2] = ["tariff_table", "length_km", "rate_per_km", "rate_per_passage"]
     common = {"vehicle": invoice.get("vehicle"), "log": (invoice.get("inputs") or {}).get("log"), "currency": invoice.get("currency")}

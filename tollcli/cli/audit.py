@@ -138,6 +138,9 @@ def audit(
     found = _expand(runs)
     paths = [p for p, _ in found]
     invoices = [inv for _, inv in found]
+    if any(inv.get("scheme") == "city" for inv in invoices):
+        _audit_city(found, truth, geo, tariff, vehicle_class, opt.vehicle_attrs(vehicle_attr), output, quiet, as_json)
+        return
     start_time = start_time_of(invoices, paths)  # a relative-clock truth is placed where the invoices placed the log
     if truth:
         check_same_trip(invoices, paths, truth, start_time)
@@ -170,6 +173,47 @@ def audit(
         report["integrity"] = integrity
         summary += f"; {integrity['positioning_failures']} positioning failures, {integrity['undetected']} undetected"
     _emit(report, summary, output, quiet, as_json)
+
+
+def _audit_city(found: list[tuple[str, dict]], truth, geo, tariff, vehicle_class, attrs, output, quiet, as_json) -> None:
+    """City invoices (gantries, zones) against a truth trajectory: crossings and zone presences, rules, day totals."""
+    from tollcli.charging.city_audit import city_audit
+    from tollcli.charging.city_tariff import load_city_tariff
+    from tollcli.geoobjects.city import load_city_network
+
+    invoices = [inv for _, inv in found]
+    if any(inv.get("scheme") != "city" for inv in invoices):
+        raise UsageError("city invoices (gantries, zones) are audited on their own: do not mix them with section invoices")
+    if not truth or is_id_list(truth):
+        raise UsageError("a city invoice is audited against a truth trajectory (--truth CSV with time_utc, lat_deg, lon_deg)")
+    first_path, first = found[0]
+    inputs = first.get("inputs") or {}
+    try:
+        geo = geo or locate_input(first_path, str(inputs["geoobjects"]), inputs.get("geoobjects_sha256"), "geo-objects")
+        tariff = tariff or locate_input(first_path, str(inputs["tariff"]), inputs.get("tariff_sha256"), "tariff")
+    except KeyError:
+        raise UsageError(f"{first_path}: give --geo and --tariff (the invoice does not name them)") from None
+    net, doc = load_city_network(geo), load_city_tariff(tariff)
+    attrs = {**((first.get("parameters") or {}).get("vehicle_attrs") or {}), **(attrs or {})}
+    vehicle = vehicle_class or first.get("vehicle_class") or "car"
+    report = {"mode": "city_truth", "runs": len(invoices), "tariffs": [tariff],
+              **city_audit(invoices, net, doc, truth_trajectory(truth, start_time_of(invoices, [p for p, _ in found])), vehicle, attrs)}  # fmt: skip
+    summary = (f"{report['runs']} runs: {report['crossings_driven']} crossings driven, {len(report['missed'])} missed, "
+               f"{len(report['false'])} false; {report['zone_presences_driven']} zone presences driven; total invoiced "
+               f"{report['invoiced_total']} of {report['truth_total']} {report['currency']} owed (undercharge "
+               f"{report['undercharge']}, overcharge {report['overcharge']})")  # fmt: skip
+    opt.require_json(output)
+    text = json.dumps(report, indent=2, sort_keys=True, default=str) + "\n"
+    if output == "-" and sys.stdout.isatty():
+        typer.echo(summary)
+    else:
+        write_text_atomic(output, text)
+    if as_json:
+        typer.echo(json.dumps({"output": output, "mode": report["mode"], "summary": summary, "undercharge": report["undercharge"],
+                               "overcharge": report["overcharge"], "missed": len(report["missed"]), "false": len(report["false"])},
+                              sort_keys=True))  # fmt: skip
+    else:
+        note(summary, quiet)
 
 
 def integrity_words(integrity: dict) -> str:

@@ -86,10 +86,31 @@ def _column(table, name: str, **kwargs) -> None:
     table.add_column(name, **kwargs)
 
 
+def city_invoice_tables(invoice: dict):
+    """Rich renderables for a city invoice: the crossings and zone presences, the rules applied, the day totals."""
+    from rich.table import Table
+
+    table = Table(title=f"Invoice {invoice.get('vehicle', '')} ({invoice.get('vehicle_class', '')}), city")
+    for col in ("kind", "geo-object", "direction", "local time", "rate", f"fee {invoice['currency']}", "charged"):
+        _column(table, col, justify="right" if col.startswith(("fee", "charged")) else "left")
+    for line in invoice["lines"]:
+        table.add_row(line["kind"], line["geoobject"], line.get("direction", ""), line["time_local"], line["rate"], line["fee"], line["charged"])
+    for line in invoice.get("not_charged", []):
+        table.add_row(f"[red]{line['kind']}[/red]", line["geoobject"], line.get("direction", ""), line.get("time_utc") or "", "not charged",
+                      "", "", style="dim")  # fmt: skip
+        table.add_row("", f"[dim]why: {line['why']}[/dim]", "", "", "", "", "")
+    for rule in invoice.get("rules", []):
+        table.add_row("[bold]rule[/bold]", rule["said"], "", "", "", "", rule["change"])
+    table.add_row("[bold]TOTAL[/bold]", "", "", "", "", "", f"[bold]{invoice['total']}[/bold]")
+    return [table]
+
+
 def invoice_tables(invoice: dict):
     """Rich renderables for an invoice: the charged passages with the total, and the statuses behind them."""
     from rich.table import Table
 
+    if invoice.get("scheme") == "city":
+        return city_invoice_tables(invoice)
     table = Table(title=f"Invoice {invoice.get('vehicle', '')} ({invoice.get('vehicle_class', '')})")
     per_km = any("tariff_table" in line for line in invoice["lines"])  # per-km tables: the length and rate charged
     extra = ("table", "km", "rate/km") if per_km else ()

@@ -33,6 +33,9 @@ def build(
     trim_factor: Annotated[float, typer.Option("--trim-factor", help="Junction ends are cut by this × HAL.", min=0.0)] = TRIM_FACTOR,
     connect_tol: Annotated[float, typer.Option("--connect-tol", help="Roads closer than this on one level meet (a junction), m.", min=0.0)] = CONNECT_TOL_M,
     as_json: Annotated[bool, typer.Option("--json", help="Summary (counts, coverage, sections below their design HAL, skipped sections and why) as JSON on stdout; needs -o FILE.")] = False,
+    gantries: Annotated[Optional[str], typer.Option("--gantries", help="City charging: virtual gantries from this file — GeoJSON Points on the roads of ROADS (each made a line across its road) or two-point lines across them, or OpenStreetMap nodes tagged barrier=toll_booth / highway=toll_gantry. With --gantries or --zones only gantries and zones are built (docs/city.md).")] = None,
+    zones: Annotated[Optional[str], typer.Option("--zones", help="City charging: charging zones from the Polygons of this GeoJSON file.")] = None,
+    direction: Annotated[str, typer.Option("--direction", help="With --gantries: the direction charged where a point does not say: both, left_to_right (driving a road as it is drawn) or right_to_left.")] = "both",
     quiet: opt.Quiet = False,
 ) -> None:
     """Build geo-objects for a design HAL: along each tolled section, keep the stretches clear of every road it does not
@@ -51,6 +54,9 @@ def build(
         raise UsageError(f"{output}: geo-objects are written as GeoJSON (.geojson)")
     if as_json and output == "-":
         raise UsageError("--json writes the summary on stdout: give -o FILE for the geo-objects")
+    if gantries is not None or zones is not None:
+        _build_city(roads, output, gantries, zones, hal, hal_min, direction, as_json, quiet)
+        return
     with gc_paused():  # millions of dicts and lists, no cycles: the collector would cost more than the build
         _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_tol, as_json, quiet, (n_th, tc, min_core), environment)
 
@@ -101,6 +107,46 @@ def _build(roads, output, tolled, hal, hal_max, hal_min, trim_factor, connect_to
         typer.echo(json.dumps({"input": roads, "output": output, "geoobjects": len(hals), "hal_min_m": min(hals), "hal_max_m": max(hals),
                                "design_hal_m": design.describe(), "frames": frames, "below_design_hal": below, "skipped": skipped},
                               sort_keys=True))  # fmt: skip
+
+
+def _build_city(roads, output, gantries, zones, hal, hal_min, direction, as_json, quiet) -> None:
+    """Gantries across the roads of ROADS and zones from polygons → one GeoJSON of city geo-objects."""
+    from tollcli.geoobjects.check import check_features
+    from tollcli.geoobjects.city import DIRECTIONS
+    from tollcli.geoobjects.gantry_build import build_gantries, build_zones, gantry_sites, road_lines
+    import shapely
+
+    from tollcli.spatial import feature_collection_text
+
+    if direction not in DIRECTIONS:
+        raise UsageError(f"--direction {direction!r}: one of {', '.join(DIRECTIONS)}")
+    design = 50.0
+    for h in hal or []:
+        try:
+            design = float(str(h).split("-")[-1])
+        except ValueError:
+            raise UsageError(f"--hal {h!r}: for gantries a HAL in metres (25) or a range (25-50: its largest)") from None
+    features, skipped = [], []
+    if gantries is not None:
+        ids, lines = road_lines(roads)
+        features, skipped = build_gantries(gantry_sites(gantries), ids, lines, design, 5.0 if hal_min is None else hal_min, direction)
+    if zones is not None:
+        features += build_zones(zones)
+    if not features:
+        raise DataError(f"{gantries or zones}: no gantry could be built ({skipped[0]['id']}: {skipped[0]['reason']})" if skipped
+                        else f"{gantries or zones}: nothing to build")  # fmt: skip
+    refused = check_features(features)
+    if refused:
+        raise DataError(f"{roads}: not writing geo-objects that check and process would refuse: {refused[0]}")
+    for f in features:  # plain GeoJSON, coordinates to 1e-7° (1 cm)
+        f["geometry"] = json.loads(shapely.to_geojson(shapely.set_precision(f["geometry"], 1e-7)))
+    write_text_atomic(output, "".join(feature_collection_text({"type": "FeatureCollection", "features": features})))
+    n_g = sum(f["properties"]["kind"] == "gantry" for f in features)
+    note(f"{gantries or zones}: {n_g} gantries, {len(features) - n_g} zones{f', {len(skipped)} skipped' if skipped else ''}", quiet)
+    for s in skipped:
+        note(f"{gantries}: {s['id']}: skipped: {s['reason']}", quiet)
+    if as_json:
+        typer.echo(json.dumps({"output": output, "gantries": n_g, "zones": len(features) - n_g, "skipped": skipped}, sort_keys=True))
 
 
 def _hashed(pieces, digest):

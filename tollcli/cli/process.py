@@ -59,7 +59,7 @@ def process(
         typer.echo(json.dumps(invoice_summary(invoice, output, stats), sort_keys=True))
     else:
         note(f"{log}: {len(invoice['lines'])} charged, {len(invoice['not_charged'])} seen but not charged{_why_not(invoice)}, "
-             f"total {invoice['total']} {invoice['currency']}{_checks_said(invoice)}{_nothing_seen(invoice)}", quiet)  # fmt: skip
+             f"total {invoice['total']} {invoice['currency']}{_checks_said(invoice)}{_nothing_seen(invoice)}{_rules_said(invoice)}", quiet)  # fmt: skip
     if stats is not None:
         check_partial(stats, charge.max_bad)
 
@@ -72,6 +72,12 @@ def invoice_summary(invoice: dict, output: str, stats=None) -> dict:
             "integrity_sources_used": invoice["parameters"].get("integrity_sources_used"),
             "policy_used": invoice["parameters"].get("policy_used"), "findings": len((invoice.get("findings") or {}).get("items") or []),
             "skipped_lines": int(stats.skipped) if stats is not None else 0}
+
+
+def _rules_said(invoice: dict) -> str:
+    """A city invoice's rules as they applied (single-charge, daily cap, free days …)."""
+    rules = invoice.get("rules") or []
+    return "; " + "; ".join(r["said"] for r in rules) if rules else ""
 
 
 def _nothing_seen(invoice: dict) -> str:

@@ -13,6 +13,7 @@ import numpy as np
 import shapely
 
 from tollcli.spatial import HAL_MAX_M, feature_geometries, feature_geometry, hal_of, metric_crs, project, unclosed_ring
+from tollcli.geoobjects.city import city_feature_problem, kind_of
 
 
 @dataclass
@@ -108,6 +109,12 @@ def check_features(features: list, hal_min_m: float = HAL_MIN_CHECK_M) -> list[F
         ids.append(fid)
         seen.add(fid)
         geom, why = (geoms[i], "") if geoms[i] is not None else feature_geometry(feature)
+        if kind_of(props) != "section":  # a gantry or a zone (geoobjects/city.py): its own checks
+            problem = why or city_feature_problem(props, geom)
+            if problem:
+                findings.append(Finding(fid, problem))
+            polys.append(None)
+            continue
         if geom is None:
             findings.append(Finding(fid, why))
             polys.append(None)

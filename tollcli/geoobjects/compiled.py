@@ -13,6 +13,7 @@ import shapely
 from tollcli.geoobjects.geojson_stream import gc_paused
 from tollcli.geoobjects.index import build_grid
 from tollcli.errors import DataError
+from tollcli.geoobjects.city import kind_of
 from tollcli.spatial import HAL_MAX_M, feature_geometries, feature_geometry, hal_of, project
 
 #: 6: a folder of memory-mapped arrays with a grid index (5 and before: one .npz read whole); 7: the same arrays, made
@@ -24,7 +25,7 @@ STORE_FORMAT = 9
 CHUNK = 8192
 #: the properties the store and ``geoobjects check`` read (the others — the build's report — are not kept)
 USED_PROPERTIES = frozenset(("id", "name", "road_class", "hal_m", "crs_metric", "section_length_m", "length_m", "tunnel", "direction",
-                             "tunnel_m", "gap_m", "axis", "opposite", "environment"))  # fmt: skip
+                             "tunnel_m", "gap_m", "axis", "opposite", "environment", "kind"))  # fmt: skip
 
 
 def compile_file(path: str, columns: dict | None = None) -> tuple[dict[str, np.ndarray], str]:
@@ -55,6 +56,10 @@ def compile_features(features: list, path: str, checked: bool = False, columns: 
     props = [(f.get("properties") if isinstance(f, dict) else None) for f in features]
     props = [p if isinstance(p, dict) else {} for p in props]
     ids = [p.get("id") for p in props]
+    for i, p in enumerate(props):
+        if kind_of(p) != "section":
+            raise DataError(f"{path}: feature {ids[i]} is a {kind_of(p)}: gantries and zones are charged with a city tariff "
+                            f"(scheme = \"city\", docs/city.md)")  # fmt: skip
     for i, fid in enumerate(ids):
         if fid in (None, ""):
             raise DataError(f"{path}: feature #{i} has no id")

@@ -30,7 +30,8 @@ def librsf_epochs(log: LibrsfLog, sigma_model: str = "nominal", sigma_m: float =
     if d.empty:
         raise DataError("no pseudorange3 line: a libRSF ground-truth file is a --truth, not a log")
     t_key = np.round(d["t_s"].to_numpy(float) * 1e3).astype(np.int64)
-    epoch_ms, row = np.unique(t_key, return_inverse=True)
+    epoch_ms = bridged_epochs(np.unique(t_key), np.round(log.odometry["t_s"].to_numpy(float) * 1e3).astype(np.int64))
+    row = np.searchsorted(epoch_ms, t_key)
     order = np.argsort(row, kind="stable")
     d, row = d.iloc[order], row[order]
     n_epochs = epoch_ms.size
@@ -74,6 +75,25 @@ def librsf_epochs(log: LibrsfLog, sigma_model: str = "nominal", sigma_m: float =
                         test_stat_source=np.full(n_epochs, "pseudorange", dtype=object), sat_ecef_m=sat, pr_m=g["pr_m"],
                         clock_index=g["clock_index"])  # fmt: skip
     return epochs, meas
+
+
+def bridged_epochs(epoch_ms: np.ndarray, odometry_ms: np.ndarray) -> np.ndarray:
+    """The pseudorange epochs (ms), and in every gap longer than twice their usual interval (a GNSS outage: a tunnel,
+    jamming, an underpass) the odometry's times at that interval: epochs without a satellite, which the trajectory
+    estimator carries through on the odometry (a snapshot has no position there)."""
+    if epoch_ms.size < 2 or odometry_ms.size == 0:
+        return epoch_ms
+    step = float(np.median(np.diff(epoch_ms)))
+    extra = []
+    for g in np.flatnonzero(np.diff(epoch_ms) > 2 * step):  # (outages are few: a loop over them, not over epochs)
+        lo, hi = epoch_ms[g], epoch_ms[g + 1]
+        inside = odometry_ms[(odometry_ms >= lo + step) & (odometry_ms <= hi - step / 2)]
+        last = lo
+        for t in inside.tolist():
+            if t - last >= step * 0.999:
+                extra.append(t)
+                last = t
+    return np.union1d(epoch_ms, np.asarray(extra, np.int64)) if extra else epoch_ms
 
 
 def _interval_odometry(odometry: pd.DataFrame, epoch_ms: np.ndarray) -> dict[str, np.ndarray]:

@@ -204,6 +204,12 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     inputs where it finds them and records them as the invoice names them). ``geo_sha256``: the geo-object file's
     SHA-256 when the caller has it (a batch hashes it once for all its logs).
     """
+    from tollcli.charging.city_tariff import is_city_tariff
+
+    if is_city_tariff(tariff):  # gantries and zones, the city's rules: job/city_charge.py
+        from tollcli.job.city_charge import charge_city_log
+
+        return charge_city_log(log, geo, tariff, settings, nav, epoch_table, as_recorded)
     try:
         params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde,
                             p_sat=settings.p_sat, p_const=settings.p_const,
