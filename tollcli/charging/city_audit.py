@@ -40,7 +40,7 @@ def truth_charges(net: CityNetwork, tariff: CityTariff, truth: pd.DataFrame, veh
             gid = net.ids[p.obj]
             if net.direction[p.obj] not in ("both", p.direction):
                 continue
-            priced = tariff.crossing_price((p.t_s,), gid, p.direction, vehicle_class)
+            priced = tariff.crossing_price((p.t_s,), gid, p.direction, vehicle_class, attrs)
             if priced is None or priced[1] is None:
                 continue
             out.append(Charge("crossing", gid, dt.datetime.fromtimestamp(p.t_s, dt.UTC), priced[1], priced[0].name, p.direction, True,
@@ -113,3 +113,15 @@ def _unmatched(these: list[Charge], others: list[Charge]) -> list[Charge]:
 def _said(c: Charge) -> dict:
     return {"kind": c.kind, "geoobject": c.obj, "direction": c.direction, "time_utc": c.time_utc.isoformat().replace("+00:00", "Z"),
             "rate": c.rate, "amount": str(c.amount)}  # fmt: skip
+
+
+def driven_city_objects(net: CityNetwork, truth: pd.DataFrame) -> list[str]:
+    """The gantries a truth trajectory crosses (either way) and the zones it enters, sorted (the simulator's truth)."""
+    from tollcli.charging.recognition import utc_seconds
+    from tollcli.spatial import wgs84_to
+
+    truth = truth.dropna(subset=["time_utc"]).sort_values("time_utc", kind="stable")
+    x, y = (np.asarray(v, float) for v in wgs84_to(net.crs).transform(truth["lon_deg"].to_numpy(float), truth["lat_deg"].to_numpy(float)))
+    crossed = {net.ids[k] for k in path_crossings(net, utc_seconds(truth["time_utc"]), x, y)["obj"]}
+    entered = {net.ids[k] for k in np.flatnonzero(net.kinds == "zone") if shapely.contains_xy(net.geoms[k], x, y).any()}
+    return sorted(crossed | entered)

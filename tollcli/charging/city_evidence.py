@@ -94,9 +94,10 @@ def path_crossings(net: CityNetwork, t_s: np.ndarray, x: np.ndarray, y: np.ndarr
     return pd.DataFrame(out, columns=["obj", "t_s", "direction", "gap_s"])
 
 
-def proven_crossings(net: CityNetwork, rows: pd.DataFrame, gap_s: float = CROSSING_GAP_S) -> list[dict]:
+def proven_crossings(net: CityNetwork, rows: pd.DataFrame, gap_s: float = CROSSING_GAP_S, n_th: int = 1, tc_s: float = 5.0) -> list[dict]:
     """The crossings the evidence rows of every gantry prove, in time order: gantry index, time, direction, the time
-    interval the crossing lies in and the evidence positions on each side."""
+    interval the crossing lies in and the evidence positions on each side (``n_th`` > 1: each side's run of evidence
+    must hold ``n_th`` positions ``tc_s`` apart, as a section's passage must)."""
     out = []
     for k, group in rows[rows["evidence"]].groupby("obj", sort=True):
         if net.kinds[k] != "gantry":
@@ -105,6 +106,8 @@ def proven_crossings(net: CityNetwork, rows: pd.DataFrame, gap_s: float = CROSSI
         t, d = g["t_s"].to_numpy(float), g["distance_m"].to_numpy(float)
         side = np.sign(d)
         for i in np.flatnonzero((side[:-1] != side[1:]) & (np.diff(t) <= gap_s) & (np.diff(t) > 0)):
+            if n_th > 1 and min(_independent_run(t, side, i, -1, gap_s, tc_s), _independent_run(t, side, i + 1, 1, gap_s, tc_s)) < n_th:
+                continue
             f = abs(d[i]) / (abs(d[i]) + abs(d[i + 1]))
             before = g.iloc[max(0, i + 1 - EVIDENCE_KEPT) : i + 1]
             after = g.iloc[i + 1 : i + 1 + EVIDENCE_KEPT]
@@ -113,6 +116,16 @@ def proven_crossings(net: CityNetwork, rows: pd.DataFrame, gap_s: float = CROSSI
             out.append({"obj": int(k), "t_s": float(t[i] + f * (t[i + 1] - t[i])), "from_s": float(t[i]), "to_s": float(t[i + 1]),
                         "direction": "left_to_right" if d[i] > 0 else "right_to_left", "before": before, "after": after})  # fmt: skip
     return sorted(out, key=lambda c: (c["t_s"], c["obj"]))
+
+
+def _independent_run(t: np.ndarray, side: np.ndarray, i: int, step: int, gap_s: float, tc_s: float) -> int:
+    """How many positions ``tc_s`` apart the run of same-side evidence from ``i`` (going back, ``step`` −1, or on) holds."""
+    kept, last, j = 0, None, i
+    while 0 <= j < len(t) and side[j] == side[i] and (j == i or abs(t[j] - t[j - step]) <= gap_s):
+        if last is None or abs(t[j] - last) >= tc_s:
+            kept, last = kept + 1, t[j]
+        j += step
+    return kept
 
 
 def unproven_crossings(net: CityNetwork, paths: pd.DataFrame, proven: list[dict], rows: pd.DataFrame,

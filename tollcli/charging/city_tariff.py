@@ -18,7 +18,8 @@ with the Gothenburg, Stockholm and zone examples of ``geoobjects/``. A short one
     start = "07:00"                        # local, inclusive
     end = "08:00"                          # exclusive
     amount = 22                            # or a table by vehicle class: { car = 22, truck = 44 }
-    # optional: gantries = ["G1"], days = ["mon", …], months = [1, …], direction = "left_to_right"
+    # optional: gantries = ["G1"], days = ["mon", …], months = [1, …], direction = "left_to_right",
+    # attributes = { euro_class = ["euro5", "euro6"] } (only vehicles with one of these values)
 
     [single_charge]
     window_min = 60                        # passages within 60 minutes of a window's first: charged once, the highest
@@ -53,7 +54,7 @@ TOP_KEYS = ("scheme", "currency", "minor_unit", "timezone", "vehicle_classes", "
             "zone_charge", "name")  # fmt: skip
 CALENDAR_KEYS = ("free_weekdays", "holidays", "free_days_before_holidays", "free_months", "charged_first_weekdays_of_free_months",
                  "free_dates")  # fmt: skip
-RATE_KEYS = ("start", "end", "amount", "gantries", "days", "months", "direction", "name")
+RATE_KEYS = ("start", "end", "amount", "gantries", "days", "months", "direction", "attributes", "name")
 ZONE_KEYS = ("start", "end", "amount", "zones", "days", "months", "calendar", "attributes", "name")
 
 
@@ -98,7 +99,7 @@ class TimedAmount:
     months: frozenset[int]
     direction: str = ""  # rates: '' (either) or the crossing direction it prices
     calendar: bool = True  # zone charges: whether the calendar's free days apply
-    attributes: dict[str, frozenset[str]] | None = None  # zone charges: only vehicles with one of these values
+    attributes: dict[str, frozenset[str]] | None = None  # only vehicles with one of these values
 
     def holds(self, local: dt.datetime, obj: str, direction: str = "") -> bool:
         minute = local.hour * 60 + local.minute
@@ -132,16 +133,17 @@ class CityTariff:
     def zone(self) -> ZoneInfo:
         return ZoneInfo(self.timezone)
 
-    def rate_for(self, local: dt.datetime, gantry: str, direction: str) -> TimedAmount | None:
-        return next((r for r in self.rates if r.holds(local, gantry, direction)), None)
+    def rate_for(self, local: dt.datetime, gantry: str, direction: str, attrs: dict | None = None) -> TimedAmount | None:
+        """The first rate holding at a local time for a gantry, a direction and the vehicle's attributes."""
+        return next((r for r in self.rates if r.holds(local, gantry, direction) and r.applies_to(attrs or {})), None)
 
-    def crossing_price(self, times_s, gantry: str, direction: str, vehicle_class: str):
+    def crossing_price(self, times_s, gantry: str, direction: str, vehicle_class: str, attrs: dict | None = None):
         """(rate, amount) of a crossing known to lie between the UTC times ``times_s`` (s since 1970: the interpolated
         time and the evidence on either side): the lowest of the rates holding at them — the benefit of the doubt near a
         band's edge; amount None: the class is exempt; None when no rate holds."""
         found = []
         for t in times_s:
-            rate = self.rate_for(dt.datetime.fromtimestamp(t, dt.UTC).astimezone(self.zone), gantry, direction)
+            rate = self.rate_for(dt.datetime.fromtimestamp(t, dt.UTC).astimezone(self.zone), gantry, direction, attrs)
             if rate is not None:
                 found.append(rate)
         if not found:

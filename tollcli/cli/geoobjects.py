@@ -142,7 +142,9 @@ def _build_city(roads, output, gantries, zones, hal, hal_min, direction, as_json
         f["geometry"] = json.loads(shapely.to_geojson(shapely.set_precision(f["geometry"], 1e-7)))
     write_text_atomic(output, "".join(feature_collection_text({"type": "FeatureCollection", "features": features})))
     n_g = sum(f["properties"]["kind"] == "gantry" for f in features)
-    note(f"{gantries or zones}: {n_g} gantries, {len(features) - n_g} zones{f', {len(skipped)} skipped' if skipped else ''}", quiet)
+    n_z = len(features) - n_g
+    note(f"{gantries or zones}: {n_g} gantr{'y' if n_g == 1 else 'ies'}, {n_z} zone{'' if n_z == 1 else 's'}"
+         f"{f', {len(skipped)} skipped' if skipped else ''}", quiet)  # fmt: skip
     for s in skipped:
         note(f"{gantries}: {s['id']}: skipped: {s['reason']}", quiet)
     if as_json:
@@ -216,7 +218,9 @@ def info(
         typer.echo(json.dumps(summary, sort_keys=True))
         return
     h = summary["hal_m"]
-    lines = [f"{path}: {summary['geoobjects']} geo-objects, {summary['sections_skipped']} tolled sections skipped at build",
+    plural = {"gantry": "gantries", "zone": "zones", "section": "sections"}
+    kinds = ", ".join(f"{n} {plural.get(k, k) if n > 1 else k}" for k, n in summary["kinds"].items())
+    lines = [f"{path}: {summary['geoobjects']} geo-objects ({kinds}), {summary['sections_skipped']} tolled sections skipped at build",
              f"HAL: {h['min']:g}–{h['max']:g} m, median {h['median']:g} m; below their design HAL: {len(summary['below_design_hal'])}"]
     for b in summary["hal_histogram"]:
         if b["count"]:
@@ -226,12 +230,12 @@ def info(
     if tolled:
         lines.append(f"covered: {summary['covered_length_m'] / 1000:.3f} of {tolled / 1000:.3f} tolled km ({100 * summary['covered_share']:.1f} %); "
                      f"by HAL ≥ {min_hal:g} m: {summary['covered_at_min_hal_m'] / 1000:.3f} km ({100 * summary['covered_share_at_min_hal']:.1f} %)")  # fmt: skip
-    lines.append("id\thal_m\tdesign_m\tlength_m\tsection_m\tparts\thal_bound\tnearest_road\tnearest_road_m")
+    lines.append("id\tkind\thal_m\tdesign_m\tlength_m\tsection_m\tparts\thal_bound\tnearest_road\tnearest_road_m")
     for r in summary["features"]:
         design = r["design_hal_m"]
         design = (f"{design[0]:g}" if design[0] == design[1] else f"{design[0]:g}-{design[1]:g}") if isinstance(design, list) else ""
         distance = f"{r['nearest_road_m']:g}" if r["nearest_road_m"] is not None else ""
-        lines.append(f"{r['id']}\t{r['hal_m']:g}\t{design}\t{r['length_m']:g}\t{r['section_length_m']:g}\t{r['parts']}\t"
+        lines.append(f"{r['id']}\t{r['kind']}\t{r['hal_m']:g}\t{design}\t{r['length_m']:g}\t{r['section_length_m']:g}\t{r['parts']}\t"
                      f"{r['hal_bound'] or ''}\t{r['nearest_road'] or ''}\t{distance}")
     typer.echo("\n".join(lines))
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tollcli.geoobjects.city import kind_of
+
 
 #: HAL histogram bin edges, m (the papers' 25–50 m range in the middle)
 HAL_BINS_M = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 40.0, 50.0, float("inf"))
@@ -41,7 +43,7 @@ def geoobject_info(path: str, min_hal_m: float = 25.0) -> dict:
     for p in props:
         parts = p.get("parts")
         rows.append({
-            "id": str(p.get("id")), "road_class": p.get("road_class", ""), "hal_m": _number(p.get("hal_m")),
+            "id": str(p.get("id")), "kind": kind_of(p), "road_class": p.get("road_class", ""), "hal_m": _number(p.get("hal_m")),
             "design_hal_m": p.get("design_hal_m"), "length_m": _number(p.get("length_m")),
             "section_length_m": _number(p.get("section_length_m", p.get("length_m"))),
             "parts": len(parts) if isinstance(parts, list) else 1, "hal_bound": p.get("hal_bound"),
@@ -53,6 +55,7 @@ def geoobject_info(path: str, min_hal_m: float = 25.0) -> dict:
     below = [r["id"] for r in rows if isinstance(r["design_hal_m"], list) and r["hal_m"] < float(r["design_hal_m"][0])]
     return {
         "file": path, "geoobjects": len(rows), "sections_skipped": len(skipped),
+        "kinds": {k: sum(r["kind"] == k for r in rows) for k in sorted({r["kind"] for r in rows})},
         "hal_m": {"min": float(np.nanmin(hal)) if len(hal) else None, "median": float(np.nanmedian(hal)) if len(hal) else None,
                   "max": float(np.nanmax(hal)) if len(hal) else None},
         "hal_histogram": [{"from_m": lo, "to_m": (hi if np.isfinite(hi) else None), "count": int(n)}

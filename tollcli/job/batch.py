@@ -316,21 +316,15 @@ def _fleet_jobs(jobs: list[Job], table: dict, fleet: str) -> list[Job]:
 def check_shared_inputs(geo: str, tariff: str, settings: ChargeSettings, vehicles: dict | None = None) -> None:
     """What every log of a batch shares — geo-objects, tariff, settings — checked once, before any log: a typo in the
     tariff is one error (exit 1, or 2 for a file that is not there or a folder), not a failure of every log."""
-    from tollcli.charging.city_tariff import is_city_tariff, load_city_tariff
+    from tollcli.charging.city_tariff import is_city_tariff
     from tollcli.charging.recognition import load_geoobjects
     from tollcli.charging.tariffs import load_tariff
     from tollcli.job.pipeline import check_settings
 
     if is_city_tariff(tariff):
-        from tollcli.geoobjects.city import load_city_network
-        from tollcli.job.city_charge import check_city_settings
+        from tollcli.job.city_days import check_city_inputs
 
-        city = load_city_tariff(tariff)
-        check_settings(settings)
-        if vehicles is None:
-            check_city_settings(settings, city)
-        load_city_network(geo)
-        return
+        return check_city_inputs(geo, tariff, settings, vehicles is not None)
     tariff_doc = load_tariff(tariff)
     check_settings(settings, None if vehicles is not None else tariff_doc)  # (a fleet gives each vehicle its class)
     geo_objects = load_geoobjects(geo)
@@ -393,14 +387,9 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
         pool.shutdown()
     outcomes = join_passages(outcomes, {job.log: job for job in jobs})
     summary = summarise(outcomes)
-    from tollcli.charging.city_tariff import is_city_tariff
+    from tollcli.job.city_days import settle_city_days
 
-    if is_city_tariff(tariff):  # a vehicle's day is one day whatever its logs: the rules across them (job/city_days.py)
-        from tollcli.job.city_days import settle_city_days
-
-        summary["invoice_totals"] = summary["totals"]
-        summary["totals"] = settle_city_days(outcomes, outdir, tariff)
-        summary["city_days"] = "city-days.json"
+    settle_city_days(summary, outcomes, outdir, tariff)  # a city tariff: a vehicle's day is one day whatever its logs
     where = os.path.join(outdir, "summary.json")
     try:
         write_text_atomic(where, json.dumps(summary, indent=1, sort_keys=True) + "\n")

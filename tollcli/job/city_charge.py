@@ -66,10 +66,12 @@ def check_city_settings(settings, tariff: CityTariff) -> None:
 
 
 def charge_city_log(log: str, geo: str, tariff_path: str, settings, nav=None, epoch_table: list | None = None,
-                    as_recorded: dict | None = None) -> tuple[dict, ReadStats | None]:  # fmt: skip
-    """The city invoice for one log (sealed) and the NMEA reader's statistics."""
-    from tollcli.job.pipeline import CHUNK_EPOCHS, _navigation_chunks, _pseudorange_chunks, check_settings  # noqa: F401
+                    as_recorded: dict | None = None, *, reading: dict) -> tuple[dict, ReadStats | None]:  # fmt: skip
+    """The city invoice for one log (sealed) and the NMEA reader's statistics.
 
+    ``reading``: the section job's own steps (``pipeline.py`` passes them, so that a log is read one way whatever it
+    is charged for): ``check_settings``, and the chunk sources ``navigation`` and ``pseudorange``."""
+    check_settings, _navigation_chunks, _pseudorange_chunks = reading["check_settings"], reading["navigation"], reading["pseudorange"]
     tariff = load_city_tariff(tariff_path)
     check_settings(settings)
     check_city_settings(settings, tariff)
@@ -192,7 +194,7 @@ def city_invoice(net: CityNetwork, tariff: CityTariff, rows: pd.DataFrame, paths
     seen but not charged and why, the rules applied and the days' totals."""
     zone = tariff.zone
     attrs = settings.vehicle_attrs or {}
-    crossings = proven_crossings(net, rows) if len(rows) and tariff.rates else []
+    crossings = proven_crossings(net, rows, n_th=settings.n_th, tc_s=tc_s) if len(rows) and tariff.rates else []
     unproven = unproven_crossings(net, paths, crossings, rows) if len(paths) and tariff.rates else []
     stays, unstayed = presences(net, rows, tc_s, settings.n_th) if len(rows) and tariff.zone_charges else ([], [])
     lines, not_charged, charges = [], [], []
@@ -207,9 +209,10 @@ def city_invoice(net: CityNetwork, tariff: CityTariff, rows: pd.DataFrame, paths
         if net.direction[c["obj"]] not in ("both", c["direction"]):
             not_charged.append({**base, "why": f"the direction {c['direction']} is not charged at this gantry (it charges {net.direction[c['obj']]})"})
             continue
-        priced = tariff.crossing_price((c["t_s"], c["from_s"], c["to_s"]), gid, c["direction"], settings.vehicle_class)
+        priced = tariff.crossing_price((c["t_s"], c["from_s"], c["to_s"]), gid, c["direction"], settings.vehicle_class, attrs)
         if priced is None:
-            not_charged.append({**base, "why": "no rate of the tariff holds at this time, gantry and direction"})
+            free = tariff.calendar.free_reason(when.astimezone(zone).date())
+            not_charged.append({**base, "why": "no rate of the tariff holds at this time, gantry and direction" + (f" ({free})" if free else "")})
             continue
         rate, amount = priced
         if amount is None:

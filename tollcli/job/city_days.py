@@ -12,9 +12,28 @@ from tollcli.charging.city_tariff import load_city_tariff
 from tollcli.io.writers import write_text_atomic
 
 
-def settle_city_days(outcomes: list[dict], outdir: str, tariff_path: str) -> dict:
-    """Per vehicle: the rules over all its logs' charges, by local day; returns the totals per currency and writes
-    ``city-days.json`` (vehicle → days, rules applied, total)."""
+def check_city_inputs(geo: str, tariff_path: str, settings, fleet: bool) -> None:
+    """What every log of a city batch shares, checked once: the tariff, the settings (the vehicle class unless a fleet
+    file gives each its own) and the gantries and zones."""
+    from tollcli.geoobjects.city import load_city_network
+    from tollcli.job.city_charge import check_city_settings
+    from tollcli.job.pipeline import check_settings
+
+    tariff = load_city_tariff(tariff_path)
+    check_settings(settings)
+    if not fleet:
+        check_city_settings(settings, tariff)
+    load_city_network(geo)
+
+
+def settle_city_days(summary: dict, outcomes: list[dict], outdir: str, tariff_path: str) -> None:
+    """Under a city tariff (nothing otherwise): per vehicle, the rules over all its logs' charges by local day, written
+    to ``city-days.json`` (vehicle → days, rules applied, total); the summary's ``totals`` become those, the invoices'
+    own sum ``invoice_totals``."""
+    from tollcli.charging.city_tariff import is_city_tariff
+
+    if not is_city_tariff(tariff_path):
+        return
     tariff = load_city_tariff(tariff_path)
     charges: dict[str, list] = {}
     for o in sorted(outcomes, key=lambda o: o["log"]):
@@ -34,4 +53,4 @@ def settle_city_days(outcomes: list[dict], outdir: str, tariff_path: str) -> dic
         total += vehicle_total
     write_text_atomic(os.path.join(outdir, "city-days.json"),
                       json.dumps({"currency": tariff.currency, "vehicles": vehicles}, indent=1, sort_keys=True) + "\n")  # fmt: skip
-    return {tariff.currency: str(total)}
+    summary.update(invoice_totals=summary["totals"], totals={tariff.currency: str(total)}, city_days="city-days.json")

@@ -209,7 +209,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
     if is_city_tariff(tariff):  # gantries and zones, the city's rules: job/city_charge.py
         from tollcli.job.city_charge import charge_city_log
 
-        return charge_city_log(log, geo, tariff, settings, nav, epoch_table, as_recorded)
+        return charge_city_log(log, geo, tariff, settings, nav, epoch_table, as_recorded,
+                               reading={"check_settings": check_settings, "navigation": _navigation_chunks, "pseudorange": _pseudorange_chunks})  # fmt: skip
     try:
         params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde,
                             p_sat=settings.p_sat, p_const=settings.p_const,

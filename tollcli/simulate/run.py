@@ -67,8 +67,17 @@ def write_drive(traj: Trajectory, config: SimConfig, outdir: str, geo: str | Non
     if geo is not None:
         from tollcli.charging.audit import driven_from_truth
         from tollcli.charging.recognition import load_geoobjects
+        from tollcli.geoobjects.city import is_city_file
+        from tollcli.spatial import read_features
 
-        driven = sorted(driven_from_truth(path["truth.csv"], load_geoobjects(geo)))
+        if is_city_file(read_features(geo)):  # gantries crossed and zones entered
+            from tollcli.charging.city_audit import driven_city_objects
+            from tollcli.charging.truth_passages import truth_trajectory
+            from tollcli.geoobjects.city import load_city_network
+
+            driven = driven_city_objects(load_city_network(geo), truth_trajectory(path["truth.csv"]))
+        else:
+            driven = sorted(driven_from_truth(path["truth.csv"], load_geoobjects(geo)))
         write_text_atomic(os.path.join(outdir, "truth-geoobjects.json"), json.dumps(driven, indent=1) + "\n")
         files.append("truth-geoobjects.json")
     n_vis = np.concatenate(visible) if visible else np.zeros(0)
