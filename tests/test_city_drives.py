@@ -196,3 +196,24 @@ def test_gantries_from_openstreetmap_toll_booths(tmp_path):
     assert gantry["properties"]["id"] == "node/2" and gantry["properties"]["road"] == "way/100" and gantry["properties"]["hal_m"] == 50.0
     (east, lat0), (west, lat1) = gantry["geometry"]["coordinates"]
     assert east > 11.96 > west and lat0 == lat1 == 57.702  # across the road, from its right (east, driving north) to its left
+
+
+def test_a_tariff_naming_a_gantry_the_network_lacks_is_refused(tmp_path):
+    text = GOTHENBURG.read_text().replace('start = "07:00"\nend = "08:00"\n', 'start = "07:00"\nend = "08:00"\ngantries = ["G9"]\n', 1)
+    assert 'gantries = ["G9"]' in text
+    (tmp_path / "t.toml").write_text(text)
+    code, err = run_main("process", str(REPO / "samples" / "straight-drive.nmea"), "--geo", str(CITY), "--tariff", str(tmp_path / "t.toml"),
+                         "-o", str(tmp_path / "x.json"))  # fmt: skip
+    assert code == 1 and "rate 07:00–08:00: G9 is not a gantry of" in err and len(err.strip().splitlines()) == 1
+
+
+def test_batch_skips_a_city_log_already_done_and_settles_the_day_the_same(weekday, tmp_path):
+    logs = sorted(str(p / "drive.nmea") for p in weekday.glob("leg*"))[:3]
+    args = ("batch", *logs, "--geo", str(CITY), "--tariff", str(GOTHENBURG), "--vehicle", "ABC123", "-o", str(tmp_path / "out"), "-q", "--json")
+    code, err = run_main(*args)
+    assert code == 0, err
+    first = (tmp_path / "out" / "city-days.json").read_text()
+    code, err = run_main(*args)
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert code == 0 and summary["skipped"] == 3 and summary["done"] == 0
+    assert (tmp_path / "out" / "city-days.json").read_text() == first

@@ -152,6 +152,16 @@ class CityTariff:
         exempt = next(((r, a) for r, a in priced if a is None), None)
         return exempt if exempt is not None else min(priced, key=lambda p: p[1])
 
+    def check_against(self, ids: list[str], kinds, geo: str) -> None:
+        """DataError when a rate names a gantry, or a zone charge a zone, that the geo-object file does not hold (a typo
+        would silently never charge)."""
+        have = {kind: {i for i, k in zip(ids, kinds) if k == kind} for kind in ("gantry", "zone")}
+        for what, items, kind in (("rate", self.rates, "gantry"), ("zone_charge", self.zone_charges, "zone")):
+            for item in items:
+                missing = sorted((item.objects or set()) - have[kind])
+                if missing:
+                    raise DataError(f"{self.source}: {what} {item.name}: {missing[0]} is not a {kind} of {geo}")
+
     def describe(self) -> dict:
         """The tariff's rules as the invoice records them."""
         return {"scheme": "city", "single_charge_window_min": self.single_charge_min,

@@ -220,7 +220,8 @@ def info(
     h = summary["hal_m"]
     plural = {"gantry": "gantries", "zone": "zones", "section": "sections"}
     kinds = ", ".join(f"{n} {plural.get(k, k) if n > 1 else k}" for k, n in summary["kinds"].items())
-    lines = [f"{path}: {summary['geoobjects']} geo-objects ({kinds}), {summary['sections_skipped']} tolled sections skipped at build",
+    kinds = f" ({kinds})" if set(summary["kinds"]) != {"section"} else ""
+    lines = [f"{path}: {summary['geoobjects']} geo-objects{kinds}, {summary['sections_skipped']} tolled sections skipped at build",
              f"HAL: {h['min']:g}–{h['max']:g} m, median {h['median']:g} m; below their design HAL: {len(summary['below_design_hal'])}"]
     for b in summary["hal_histogram"]:
         if b["count"]:
@@ -230,12 +231,13 @@ def info(
     if tolled:
         lines.append(f"covered: {summary['covered_length_m'] / 1000:.3f} of {tolled / 1000:.3f} tolled km ({100 * summary['covered_share']:.1f} %); "
                      f"by HAL ≥ {min_hal:g} m: {summary['covered_at_min_hal_m'] / 1000:.3f} km ({100 * summary['covered_share_at_min_hal']:.1f} %)")  # fmt: skip
-    lines.append("id\tkind\thal_m\tdesign_m\tlength_m\tsection_m\tparts\thal_bound\tnearest_road\tnearest_road_m")
+    city = set(summary["kinds"]) != {"section"}  # a kind column only where there is more than sections (scripts read the table)
+    lines.append("id\t" + ("kind\t" if city else "") + "hal_m\tdesign_m\tlength_m\tsection_m\tparts\thal_bound\tnearest_road\tnearest_road_m")
     for r in summary["features"]:
         design = r["design_hal_m"]
         design = (f"{design[0]:g}" if design[0] == design[1] else f"{design[0]:g}-{design[1]:g}") if isinstance(design, list) else ""
         distance = f"{r['nearest_road_m']:g}" if r["nearest_road_m"] is not None else ""
-        lines.append(f"{r['id']}\t{r['kind']}\t{r['hal_m']:g}\t{design}\t{r['length_m']:g}\t{r['section_length_m']:g}\t{r['parts']}\t"
+        lines.append(f"{r['id']}\t{r['kind'] + chr(9) if city else ''}{r['hal_m']:g}\t{design}\t{r['length_m']:g}\t{r['section_length_m']:g}\t{r['parts']}\t"
                      f"{r['hal_bound'] or ''}\t{r['nearest_road'] or ''}\t{distance}")
     typer.echo("\n".join(lines))
 

@@ -76,6 +76,7 @@ def charge_city_log(log: str, geo: str, tariff_path: str, settings, nav=None, ep
     check_settings(settings)
     check_city_settings(settings, tariff)
     net = load_city_network(geo)
+    tariff.check_against(net.ids, net.kinds, geo)
     try:
         params = RaimParams(mode=settings.raim, p_md=settings.p_md, p_fa=settings.p_fa, fde=settings.fde, p_sat=settings.p_sat,
                             p_const=settings.p_const, sources=LEVELS.get(settings.integrity_sources))  # fmt: skip
@@ -133,7 +134,7 @@ def charge_city_log(log: str, geo: str, tariff_path: str, settings, nav=None, ep
     elif nav is not None:
         inputs.update(nav=[printable_path(p) for p in nav], nav_sha256=[file_sha256(p) for p in nav])
     inputs.update({k: v for k, v in (as_recorded or {}).items() if k in inputs})
-    parameters = {k: v for k, v in asdict(settings).items() if v is not None and k not in ("continued",)}
+    parameters = {k: v for k, v in asdict(settings).items() if k != "continued"}  # (batch compares them to skip a log done)
     parameters.update(integrity_sources_used=level_name(params.sources) or "residual", crossing_gap_s=CROSSING_GAP_S,
                       presence_gap_s=PRESENCE_GAP_S)  # fmt: skip
     if kind not in NAVIGATION_KINDS:
@@ -143,7 +144,11 @@ def charge_city_log(log: str, geo: str, tariff_path: str, settings, nav=None, ep
     if tc_s != settings.tc_s:
         parameters["tc_used_s"] = tc_s
     invoice = city_invoice(net, tariff, table, path_table, settings, tc_s, log_name=os.path.basename(log))
-    invoice.update(inputs=inputs, parameters=parameters,
+    from tollcli import __version__
+
+    if settings.vehicle_attrs:
+        invoice["vehicle_attributes"] = dict(sorted(settings.vehicle_attrs.items()))
+    invoice.update(tool=f"tollcli {__version__}", inputs=inputs, parameters=parameters,
                    vehicle=settings.vehicle or printable_path(os.path.basename(log)), vehicle_class=settings.vehicle_class,
                    period={"start_utc": _iso(period[0]), "end_utc": _iso(period[1])} if period[0] is not None else None)  # fmt: skip
     return seal(invoice), stats

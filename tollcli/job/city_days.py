@@ -23,7 +23,8 @@ def check_city_inputs(geo: str, tariff_path: str, settings, fleet: bool) -> None
     check_settings(settings)
     if not fleet:
         check_city_settings(settings, tariff)
-    load_city_network(geo)
+    net = load_city_network(geo)
+    tariff.check_against(net.ids, net.kinds, geo)
 
 
 def settle_city_days(summary: dict, outcomes: list[dict], outdir: str, tariff_path: str) -> None:
