@@ -362,7 +362,9 @@ def test_concurrent_cold_compiles_never_fail(tmp_path):
     fails, all charge with the same store, no temporary folder is left."""
     geo = _network(tmp_path / "net.geojson", 1500)
     expected = None
-    ctx = multiprocessing.get_context("fork")
+    # forkserver, not fork: a child forked from a test worker that other tests left with threads (pyarrow's pool,
+    # BLAS) can block forever on a lock one of them held at the fork (seen once: one child of six, the map waiting)
+    ctx = multiprocessing.get_context("forkserver")
     with ctx.Pool(6) as pool:
         for round_ in range(10):
             cache_dir = tmp_path / f"cache{round_}"

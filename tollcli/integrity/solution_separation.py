@@ -31,6 +31,17 @@ at a price in HPL — a receiver's single constellation is a weak geometry).
 Verdicts: ``insufficient`` (a subset would have fewer measurements than unknowns), ``unavailable``
 (HPL > HAL or P_NM too large), ``fault_detected`` (a separation above its threshold), ``valid`` (none, and
 HPL ≤ HAL). Everything is vectorised over epochs × subsets; there is no loop over epochs.
+
+**No solve per subset.** A satellite or a pair left out is a low-rank update of the all-in-view solution
+(:func:`_subset_terms`: with M = I − H·A and R = M[S,S], the separation is −A[:,S]·R⁻¹·r[S] and its covariance
+A[:,S]·Σ_S·R⁻ᵀ·A[:,S]ᵀ); only a whole constellation, or a subset that leaves a clock without measurements, is solved.
+The direct solve of every subset (``closed_form=False``) is kept as the reference the property test and
+``benchmarks/raim_throughput.py`` compare with: the same verdicts, HPL within 1e-9 and the separation ratio within 2e-9
+relative wherever every redundancy exceeds 1e-3 (1e-6 and 2e-6 nearer singular: both solutions lose digits there). Ties — two subsets separating equally, as a constellation of two satellites does — go
+to the first subset (a satellite before a constellation, before a pair), not to rounding.
+
+Why this file is long: the fault modes and their integrity equation, the subsets' terms in closed form beside the
+direct solve they are tested against, detection and exclusion are one method sharing its arrays.
 """
 
 from __future__ import annotations
@@ -39,7 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tollcli.gnss.wls import Geometry, wls_geometry
+from tollcli.gnss.wls import REDUNDANCY_EPS, SINGULAR_RCOND, Geometry, wls_geometry
 from tollcli.integrity.raim import (
     FAULT,
     INSUFFICIENT,
@@ -101,16 +112,9 @@ def _solve_hpl(sigma_0: np.ndarray, prior: np.ndarray, threshold: np.ndarray, si
     return np.where(ok, hi, np.nan)
 
 
-def _major_sigma(A: np.ndarray, var: np.ndarray) -> np.ndarray:
-    """Semi-major σ of the east-north part of A·y for independent y of variance ``var`` (A: (..., U, N))."""
-    e, n = A[..., 0, :], A[..., 1, :]
-    see, snn, sen = (e * e * var).sum(-1), (n * n * var).sum(-1), (e * n * var).sum(-1)
-    return np.sqrt(np.maximum(0.5 * (see + snn) + np.sqrt(0.25 * (see - snn) ** 2 + sen**2), 0.0))
-
-
 def solution_separation(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, dy_m: np.ndarray | None,
                         clock_index: np.ndarray | None, geometry: Geometry, p_md: float, p_fa: float,
-                        p_sat: float = P_SAT, p_const: float = P_CONST) -> SeparationResult:  # fmt: skip
+                        p_sat: float = P_SAT, p_const: float = P_CONST, closed_form: bool = True) -> SeparationResult:  # fmt: skip
     """The multiple-hypothesis solution separation of every epoch (see the module docstring).
 
     ``H`` (E, N, U), ``sigma_m``/``mask``/``dy_m`` (E, N): the WLS inputs (``dy_m`` the pre-fit residuals at
@@ -129,13 +133,13 @@ def solution_separation(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, dy
             rows = np.arange(a, min(a + block, n_epochs))
             parts.append(solution_separation(H[rows], sigma_m[rows], mask[rows], None if dy_m is None else dy_m[rows],
                                              None if clock_index is None else clock_index[rows], take_epochs(geometry, rows),
-                                             p_md, p_fa, p_sat, p_const))  # fmt: skip
+                                             p_md, p_fa, p_sat, p_const, closed_form))  # fmt: skip
         return SeparationResult(*(np.concatenate([getattr(p, f) for p in parts]) for f in SeparationResult.__dataclass_fields__))
-    return _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry, p_md, p_fa, p_sat, p_const)
+    return _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry, p_md, p_fa, p_sat, p_const, closed_form)
 
 
 def _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry: Geometry, p_md: float, p_fa: float, p_sat: float,
-                      p_const: float) -> SeparationResult:  # fmt: skip
+                      p_const: float, closed_form: bool = True) -> SeparationResult:  # fmt: skip
     n_epochs, n_slots = mask.shape
     if n_slots == 0 or n_epochs == 0:  # no satellite at all: nothing to separate
         nan, none = np.full(n_epochs, np.nan), np.zeros(n_epochs, np.int64)
@@ -144,55 +148,180 @@ def _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry: Geometry, p
     var = np.where(used, 1.0 / np.where(used, geometry.weight, 1.0), 0.0)
     const = np.zeros(mask.shape, np.int64) if clock_index is None else np.where(used, clock_index, -1)
     n_const = int(const.max(initial=0)) + 1
-    # the subsets: slot j left out (j < N), constellation c left out (N + c), and — where two satellites failing at
-    # once is not negligible against the budget — every pair of slots left out (order 2)
     n_sat = used.sum(axis=1)
     pairs_needed = 0.5 * (n_sat * p_sat) ** 2 > p_md / 4.0
     i, j = np.triu_indices(n_slots, 1) if pairs_needed.any() else (np.zeros(0, np.int64), np.zeros(0, np.int64))
-    pair_drop = np.zeros((i.size, n_slots), bool)
-    pair_drop[np.arange(i.size), i] = pair_drop[np.arange(i.size), j] = True
-    drop = np.concatenate([np.broadcast_to(np.eye(n_slots, dtype=bool), (n_epochs, n_slots, n_slots)),
-                           const[:, None, :] == np.arange(n_const)[None, :, None],
-                           np.broadcast_to(pair_drop, (n_epochs, i.size, n_slots))], axis=1)  # (E, K, N)
     present = np.concatenate([used, np.zeros((n_epochs, n_const), bool), used[:, i] & used[:, j] & pairs_needed[:, None]], axis=1)
     const_used = np.stack([(used & (const == c)).any(axis=1) for c in range(n_const)], axis=1)
     present[:, n_slots : n_slots + n_const] = const_used & (const_used.sum(axis=1, keepdims=True) >= 2)
-    n_k = drop.shape[1]
-    sub_mask = (used[:, None, :] & ~drop).reshape(-1, n_slots)
-    sub = wls_geometry(np.repeat(H, n_k, axis=0), np.repeat(sigma_m, n_k, axis=0), sub_mask)
-    A_k = sub.A.reshape(n_epochs, n_k, *sub.A.shape[1:])
-    solvable = (~sub.singular & (sub.dof >= 0)).reshape(n_epochs, n_k)
-    dA = A_k - geometry.A[:, None]
-    sigma_0 = _major_sigma(geometry.A, var)  # (E,)
-    sigma_k = _major_sigma(A_k, var[:, None, :])  # (E, K)
-    sigma_ss = _major_sigma(dA, var[:, None, :])
+    terms = _subset_terms if closed_form else _subset_terms_direct
+    solvable, cov_ss, cov_k, sep = terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m)
+    sigma_0 = _major_of(_cov_h(geometry.A, var))
+    sigma_k = _major_of(cov_k)
+    sigma_ss = _major_of(cov_ss)
     kind = np.repeat([0, 1, 2], [n_slots, n_const, i.size])  # single satellite, constellation, pair of satellites
     prior = np.array([p_sat, p_const, p_sat**2])[kind][None, :] * present
-    # a mode whose prior is below what the budget leaves each mode needs no monitoring: its prior joins P_NM
     share = p_md / (2.0 * np.maximum(present.sum(axis=1), 1))[:, None]
     monitored = present & (prior > share)
-    # every monitored subset must have a position (an unmonitored one, e.g. a whole constellation left out at the
-    # default --p-const, need not: a constellation of three satellites cannot fix a position alone)
     enough = ~(monitored & ~solvable).any(axis=1) & (geometry.dof >= 1) & ~geometry.singular
     sigma_k = np.where(monitored, sigma_k, 1.0)
     sigma_ss = np.where(monitored, sigma_ss, 0.0)
     n_modes = monitored.sum(axis=1)
     threshold = radius_factor(p_fa / np.maximum(n_modes, 1))[:, None] * sigma_ss
     p_singles = (prior * (kind != 2)).sum(axis=1)
-    # faults no monitored subset leaves out: three satellites at once where pairs are monitored, else two
     p_nm = np.where(pairs_needed, p_singles**3 / 6.0, 0.5 * p_singles**2) + np.where(present & ~monitored, prior, 0.0).sum(axis=1)
     hpl = _solve_hpl(sigma_0, np.where(monitored, prior, 0.0), threshold, sigma_k, np.maximum(p_md - p_nm, 0.0))
     ratio = np.zeros(n_epochs)
     worst = np.full(n_epochs, -1, np.int64)
     if dy_m is not None:
-        sep = np.linalg.norm(np.einsum("ekqn,en->ekq", dA[..., :2, :], np.where(used, dy_m, 0.0)), axis=-1)
+        # a subset that cannot separate (a satellite alone in its constellation: it only fixes its own clock) has σ_ss 0,
+        # computed as ~1e-14 m: its noise over its noise is no ratio
+        separates = sigma_ss > SEPARATION_FLOOR * sigma_0[:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
-            r = np.where(monitored & (threshold > 0), sep / threshold, 0.0)
+            r = np.where(monitored & separates & (threshold > 0), np.linalg.norm(sep, axis=-1) / threshold, 0.0)
         ratio = r.max(axis=1)
-        k = np.argmax(r, axis=1)
+        k = np.argmax(r >= ratio[:, None] * (1.0 - TIE), axis=1)  # the first within TIE of the largest: a satellite before a pair
         worst = np.where((kind[k] == 0) & (ratio > 1.0), k, -1)
     nan = ~enough
     return SeparationResult(np.where(nan, np.nan, hpl), np.where(nan, np.nan, ratio), worst, p_nm, n_modes, enough)
+
+
+#: a subset whose separation's σ is below this share of the all-in-view σ does not separate (it is 0 but for rounding)
+SEPARATION_FLOOR = 1e-9
+#: separations within this relative difference of the largest are ties: the first subset (a satellite before a
+#: constellation, before a pair) is the one excluded
+TIE = 1e-9
+
+
+def _cov_h(A, var):
+    """The horizontal 2×2 covariance of A·y for independent y of variance ``var`` (A: (..., U, N))."""
+    Ah = A[..., :2, :]
+    return np.einsum("...an,...bn->...ab", Ah * var[..., None, :], Ah)
+
+
+def _major_of(C):
+    """Semi-major σ of 2×2 covariances (..., 2, 2)."""
+    see, snn, sen = C[..., 0, 0], C[..., 1, 1], C[..., 0, 1]
+    return np.sqrt(np.maximum(0.5 * (see + snn) + np.sqrt(0.25 * (see - snn) ** 2 + sen**2), 0.0))
+
+
+def _subset_terms_direct(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m):
+    """:func:`_subset_terms` by solving every subset (the reference the closed form is tested and timed against)."""
+    n_epochs, n_slots = used.shape
+    pair_drop = np.zeros((i.size, n_slots), bool)
+    pair_drop[np.arange(i.size), i] = pair_drop[np.arange(i.size), j] = True
+    drop = np.concatenate([np.broadcast_to(np.eye(n_slots, dtype=bool), (n_epochs, n_slots, n_slots)),
+                           const[:, None, :] == np.arange(n_const)[None, :, None],
+                           np.broadcast_to(pair_drop, (n_epochs, i.size, n_slots))], axis=1)  # (E, K, N)
+    n_k = drop.shape[1]
+    sub = wls_geometry(np.repeat(H, n_k, axis=0), np.repeat(sigma_m, n_k, axis=0), (used[:, None, :] & ~drop).reshape(-1, n_slots))
+    A_k = sub.A.reshape(n_epochs, n_k, *sub.A.shape[1:])
+    solvable = (~sub.singular & (sub.dof >= 0)).reshape(n_epochs, n_k)
+    dA = A_k - geometry.A[:, None]
+    r = np.where(used, np.nan_to_num(dy_m), 0.0) if dy_m is not None else np.zeros(used.shape)
+    sep = np.einsum("ekqn,en->ekq", dA[..., :2, :], r)
+    return solvable, _cov_h(dA, var[:, None, :]), _cov_h(A_k, var[:, None, :]), sep
+
+
+def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m):
+    """Per epoch and subset (slots, constellations, pairs): solvable, the separation's horizontal covariance, the subset
+    solution's horizontal covariance and the separation (east, north) — a satellite or a pair left out by the low-rank
+    update of the all-in-view solution (no solve per subset), a constellation (and a subset the update cannot take:
+    one leaving a clock without measurements) by solving it.
+
+    Leaving out S, with M = I − H·A, r = M·y the all-in-view residuals and R = M[S,S]:
+    A_S − A = −A[:,S]·R⁻¹·M[S,:], the separation −A[:,S]·R⁻¹·r[S], its covariance A[:,S]·Σ_S·R⁻ᵀ·A[:,S]ᵀ (MΣ is
+    symmetric) and the subset's P + that; det(G_S) = det(G)·det(R) decides its singularity as a solve would."""
+    n_epochs, n_slots = used.shape
+    A = geometry.A
+    Ah = A[:, :2, :]  # (E, 2, N)
+    Hm = np.where(used[..., None], H, 0.0)
+    M = np.eye(n_slots)[None] - Hm @ A  # (E, N, N)
+    y = np.where(used, np.nan_to_num(dy_m), 0.0) if dy_m is not None else np.zeros(used.shape)
+    r = np.einsum("emn,en->em", M, y)  # the post-fit residuals (y pre-fit, or post-fit already: M·r = r)
+    cov0 = _cov_h(A, var)
+    # the normal matrix as wls_geometry scales it: its determinant and diagonal decide a subset's singularity
+    weight = geometry.weight
+    G = np.einsum("enu,en,env->euv", Hm, weight, Hm)
+    active = np.abs(Hm).sum(axis=1) > 0
+    idx = np.arange(G.shape[-1])
+    G[:, idx, idx] += ~active
+    diag = np.einsum("eii->ei", G)
+    det_g = np.linalg.det(G)
+    clock_cols = H.shape[-1] - 3
+    clock_count = np.stack([(used & (const == c)).sum(axis=1) for c in range(max(n_const, 1))], axis=1)  # (E, C)
+    n_k = n_slots + n_const + i.size
+    solvable = np.zeros((n_epochs, n_k), bool)
+    cov_ss = np.zeros((n_epochs, n_k, 2, 2))
+    cov_k = np.zeros((n_epochs, n_k, 2, 2))
+    sep = np.zeros((n_epochs, n_k, 2))
+    h2w = Hm**2 * weight[..., None]  # (E, N, U): each measurement's share of G's diagonal
+
+    def scaled_det_ok(det_r, removed_diag):
+        d = diag[..., None, :] - removed_diag if removed_diag.ndim == 3 else diag - removed_diag
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scaled = det_g[..., None] * det_r / np.prod(np.where(d > 0, d, np.nan), axis=-1)
+        return (d > 0).all(axis=-1) & (scaled > SINGULAR_RCOND)
+
+    # --- single satellites
+    m = np.einsum("enn->en", M)  # (E, N) the redundancies
+    lone = used & (np.take_along_axis(clock_count, np.maximum(const, 0), axis=1) <= 1) & (clock_cols > 0)
+    update = used & ~lone & (m > REDUNDANCY_EPS)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_m = np.where(update, 1.0 / np.where(update, m, 1.0), 0.0)
+    a = Ah.transpose(0, 2, 1)  # (E, N, 2)
+    cs = np.einsum("ena,enb->enab", a, a) * (var * inv_m)[..., None, None]
+    cov_ss[:, :n_slots] = cs
+    cov_k[:, :n_slots] = cov0[:, None] + cs
+    sep[:, :n_slots] = -a * (r * inv_m)[..., None]
+    solvable[:, :n_slots] = update & scaled_det_ok(m, h2w) & (geometry.dof[:, None] >= 1) & ~geometry.singular[:, None]
+    # --- pairs
+    if i.size:
+        ui, uj = used[:, i], used[:, j]
+        R = np.stack([np.stack([M[:, i, i], M[:, i, j]], -1), np.stack([M[:, j, i], M[:, j, j]], -1)], -2)  # (E, P, 2, 2)
+        det_r = R[..., 0, 0] * R[..., 1, 1] - R[..., 0, 1] * R[..., 1, 0]
+        both_lone = lone[:, i] | lone[:, j] | (const[:, i] == const[:, j]) & (np.take_along_axis(clock_count, np.maximum(const[:, i], 0), axis=1) <= 2) & (clock_cols > 0)
+        ok = ui & uj & ~both_lone & (np.abs(det_r) > REDUNDANCY_EPS**2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv_det = np.where(ok, 1.0 / np.where(ok, det_r, 1.0), 0.0)
+        Rinv = np.stack([np.stack([R[..., 1, 1], -R[..., 0, 1]], -1), np.stack([-R[..., 1, 0], R[..., 0, 0]], -1)], -2) * inv_det[..., None, None]
+        AS = np.stack([a[:, i], a[:, j]], -1)  # (E, P, 2(axes), 2(members))
+        vS = np.stack([var[:, i], var[:, j]], -1)  # (E, P, 2)
+        cs = np.einsum("epam,epm,epnm,epbn->epab", AS, vS, Rinv, AS)  # A_S Σ_S R⁻ᵀ A_Sᵀ
+        rS = np.stack([r[:, i], r[:, j]], -1)
+        sp = -np.einsum("epam,epmn,epn->epa", AS, Rinv, rS)
+        lo = n_slots + n_const
+        cov_ss[:, lo:] = np.where(ok[..., None, None], cs, 0.0)
+        cov_k[:, lo:] = cov0[:, None] + cov_ss[:, lo:]
+        sep[:, lo:] = np.where(ok[..., None], sp, 0.0)
+        removed = h2w[:, i] + h2w[:, j]
+        solvable[:, lo:] = ok & scaled_det_ok(det_r, removed) & (geometry.dof[:, None] >= 2) & ~geometry.singular[:, None]
+        redo_pairs = np.flatnonzero((ui & uj & ~ok).any(axis=0))
+    else:
+        redo_pairs = np.zeros(0, np.int64)
+    # --- by solving: every constellation, the lone satellites, the pairs the update cannot take
+    drops = []
+    for c in range(n_const):
+        drops.append((n_slots + c, used & (const == c), np.ones(n_epochs, bool)))
+    for s in np.flatnonzero((used & ~update).any(axis=0)):
+        d = np.zeros(used.shape, bool)
+        d[:, s] = True
+        drops.append((s, d, used[:, s] & ~update[:, s]))
+    for p in redo_pairs:
+        d = np.zeros(used.shape, bool)
+        d[:, i[p]] = d[:, j[p]] = True
+        drops.append((n_slots + n_const + p, d, used[:, i[p]] & used[:, j[p]] & ~ok[:, p]))
+    for k, d, rows in drops:
+        rows = np.flatnonzero(rows)
+        if not rows.size:
+            continue
+        sub = wls_geometry(H[rows], sigma_m[rows], used[rows] & ~d[rows])
+        dA = sub.A - A[rows]
+        solvable[rows, k] = ~sub.singular & (sub.dof >= 0)
+        cov_ss[rows, k] = _cov_h(dA, var[rows])
+        cov_k[rows, k] = _cov_h(sub.A, var[rows])
+        sep[rows, k] = np.einsum("ean,en->ea", dA[:, :2, :], r[rows])
+    return solvable, cov_ss, cov_k, sep
 
 
 def clock_columns(H: np.ndarray, mask: np.ndarray) -> np.ndarray:
