@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from tollcli.charging.recognition import thin_independent
 from tollcli.geoobjects.city import CityNetwork, side_distance_m
 
 #: the longest time between the evidence positions on the two sides of a gantry that still proves one crossing, s
@@ -169,7 +170,8 @@ def presences(net: CityNetwork, rows: pd.DataFrame, tc_s: float, n_th: int, gap_
         for lo, hi in runs:
             stay = inside.iloc[lo:hi]
             ev = stay[stay["evidence"]]
-            kept = _thinned(ev["t_s"].to_numpy(float), tc_s)
+            t_ev = ev["t_s"].to_numpy(float)
+            kept = np.flatnonzero(thin_independent(t_ev, np.zeros(t_ev.size, np.int64), np.ones(t_ev.size, bool), tc_s))
             if len(kept) >= n_th:
                 proven.append({"obj": int(k), "from_s": float(stay["t_s"].iat[0]), "to_s": float(stay["t_s"].iat[-1]),
                                "evidence": ev.iloc[kept]})  # fmt: skip
@@ -188,13 +190,3 @@ def _runs(t: np.ndarray, gap_s: float) -> list[tuple[int, int]]:
     starts = np.r_[0, cuts]
     ends = np.r_[cuts, len(t)]
     return list(zip(starts.tolist(), ends.tolist()))
-
-
-def _thinned(t: np.ndarray, tc_s: float) -> list[int]:
-    """Greedy from the first: the positions at least ``tc_s`` apart (independent samples)."""
-    kept, last = [], -np.inf
-    for i, ti in enumerate(t):
-        if ti - last >= tc_s:
-            kept.append(i)
-            last = ti
-    return kept

@@ -46,8 +46,8 @@ from dataclasses import dataclass
 from decimal import Decimal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
-from tollcli.charging.money import at_least_minor_unit, money, where
-from tollcli.charging.tariffs import DAYS, KNOWN_VEHICLE_CLASSES, _day, _minutes
+from tollcli.charging.money import at_least_minor_unit, line_of, money, where
+from tollcli.charging.tariffs import DAYS, KNOWN_VEHICLE_CLASSES, _day, _minutes, nth_table_line
 from tollcli.errors import DataError, UsageError
 
 TOP_KEYS = ("scheme", "currency", "minor_unit", "timezone", "vehicle_classes", "calendar", "rate", "single_charge", "daily_cap",
@@ -223,15 +223,9 @@ def load_city_tariff(path: str) -> CityTariff:
         _known(cap, ("amount",), path, text, "[daily_cap]")
         if "amount" not in cap:
             raise DataError(f"{where(path, text, 'daily_cap')}: [daily_cap] needs an amount")
-        cap = at_least_minor_unit(money(cap["amount"], where(path, text, "amount", where_line(text, "daily_cap"))), minor, path)
+        cap = at_least_minor_unit(money(cap["amount"], where(path, text, "amount", line_of(text, "daily_cap"))), minor, path)
     return CityTariff(currency, minor, str(tz), classes, _calendar(doc.get("calendar"), path, text), rates, zones, window, cap, path,
                       str(doc.get("name", "")))  # fmt: skip
-
-
-def where_line(text: str, key: str) -> int:
-    from tollcli.charging.money import line_of
-
-    return line_of(text, key)
 
 
 def _known(table, keys, path, text, what) -> None:
@@ -250,15 +244,8 @@ def _tables(items, name, path) -> list:
     return items
 
 
-def _header_line(text: str, name: str, index: int) -> int:
-    import re
-
-    headers = [n for n, line in enumerate(text.splitlines(), 1) if re.match(rf"^\s*\[\[\s*{name}\s*\]\]", line)]
-    return headers[index] if index < len(headers) else 0
-
-
 def _timed(item: dict, index: int, name: str, keys, path, text, minor, classes) -> TimedAmount:
-    header = _header_line(text, name, index)
+    header = nth_table_line(text, name, index)
     here = f"{path}:{header}: {name} {index + 1}" if header else f"{path}: {name} {index + 1}"
     for key in item:
         if key not in keys:

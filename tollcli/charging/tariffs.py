@@ -282,7 +282,12 @@ def _bands(items, path: str, text: str = "") -> tuple[Band, ...]:
 
 def _nth_band_line(text: str, index: int) -> int:
     """The line of the ``index``-th ``[[band]]`` header (0 when not found)."""
-    headers = [n for n, line in enumerate(text.splitlines(), 1) if re.match(r"^\s*\[\[\s*band\s*\]\]", line)]
+    return nth_table_line(text, "band", index)
+
+
+def nth_table_line(text: str, name: str, index: int) -> int:
+    """The line of the ``index``-th ``[[name]]`` header of a TOML text (0 when not found)."""
+    headers = [n for n, line in enumerate(text.splitlines(), 1) if re.match(rf"^\s*\[\[\s*{re.escape(name)}\s*\]\]", line)]
     return headers[index] if index < len(headers) else 0
 
 

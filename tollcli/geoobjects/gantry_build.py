@@ -125,7 +125,7 @@ def build_gantries(sites: list[dict], road_ids: list[str], roads_wgs84: list, ha
                 skipped.append({"id": gid, "reason": "the line crosses no road"})
                 continue
             k = int(min(crossing, key=lambda j: roads[j].distance(line.interpolate(0.5, normalized=True))))
-        hal, bound = _gantry_hal(line, k, roads, road_ids, hal_m)
+        hal, bound = _gantry_hal(line, k, roads, tree, road_ids, hal_m)
         if hal < hal_min_m:
             skipped.append({"id": gid, "reason": f"road {bound} crosses the gantry line's extension {2 * hal + CLEARANCE_M:.1f} m from its end: "
                                                  f"HAL {hal:.1f} m is below {hal_min_m:g} m"})  # fmt: skip
@@ -142,7 +142,7 @@ def build_gantries(sites: list[dict], road_ids: list[str], roads_wgs84: list, ha
     return features, skipped
 
 
-def _gantry_hal(line, road: int, roads, road_ids: list[str], hal_m: float) -> tuple[float, str]:
+def _gantry_hal(line, road: int, roads, tree, road_ids: list[str], hal_m: float) -> tuple[float, str]:
     """The largest HAL ≤ ``hal_m`` that keeps every other road crossing the line's extension at least 2 × HAL (and
     :data:`CLEARANCE_M`) from the line's ends — the evidence area reaches HAL past them, a position valid at that HAL is
     within HAL of the truth — and the road that bounds it ('' when none does)."""
@@ -152,7 +152,6 @@ def _gantry_hal(line, road: int, roads, road_ids: list[str], hal_m: float) -> tu
     reach = 2 * hal_m + CLEARANCE_M
     extended = shapely.LineString([(x0 - ux * reach, y0 - uy * reach), (x1 + ux * reach, y1 + uy * reach)])
     best, bound = hal_m, ""
-    tree = shapely.STRtree(roads)
     for j in tree.query(extended, predicate="intersects"):
         if j == road or road_ids[j] == road_ids[road]:
             continue
