@@ -1,7 +1,9 @@
-"""Build of the optional compiled kernels of the bulk NMEA reader, and the man pages' place (the rest is in pyproject.toml).
+"""Build of the optional compiled kernels (the bulk NMEA reader's, the trajectory filter's pass), and the man pages'
+place (the rest is in pyproject.toml).
 
 ``optional=True``: where no C compiler is found the install goes on without them and
-the reader uses the numpy versions of the same kernels (same tables, slower).
+the package uses the Python versions of the same kernels (same results, slower). The trajectory kernel is built
+with ``-ffp-contract=off``: no fused multiply-add, so that its sums and products round as the Python twin's do.
 The man pages go to ``<prefix>/share/man/man1`` (a virtual environment's own ``share/man``: on MANPATH, ``man tollcli``
 finds them).
 """
@@ -18,6 +20,12 @@ setup(
             ["tollcli/readers/nmea/_bulk_kernels.c"],
             extra_compile_args=["-O3"],
             optional=True,
-        )
+        ),
+        Extension(
+            "tollcli.integrity._trajectory_kernel",
+            ["tollcli/integrity/_trajectory_kernel.c"],
+            extra_compile_args=["-O3", "-ffp-contract=off", "-fno-fast-math"],
+            optional=True,
+        ),
     ]
 )

@@ -1,19 +1,25 @@
 """What the trajectory estimator (``--positioning smoothed``) costs, against reading the same log and solving its
 snapshot positions, in the same run.
 
-    python benchmarks/trajectory_cost.py [--log FILE] [--rounds 3]
+    python benchmarks/trajectory_cost.py [--log FILE ...] [--rounds 5] [--twin-epochs 300]
 
-Default log: the real Berlin drive (``../shared/data/smartloc``, 1 372 epochs with odometry). Prints, per round, the
-seconds of the snapshot WLS (reader + solver, ``pseudorange_epochs``) and of the estimator on its output, the ratio
-estimator / snapshot, and the estimator's epochs per second and epoch-steps per second (it makes
-7 passes over the log: a forward pass to scale the noise, forward and backward, then two rounds of noise from the
-residuals with both again).
+Default logs: the real Berlin drive (``../shared/data/smartloc``, 1 372 epochs with odometry) and a simulated city
+drive of 10 000 epochs (``tollcli simulate --nlos --odometry --duration 2000 --rate 5 --seed 11``, the one
+``integrity_truth.py`` writes into ``benchmarks/integrity_truth/sim/city-clean``; written there if missing). Prints, per
+log, the median over the rounds of the snapshot WLS (reader + solver, ``pseudorange_epochs``) and of the estimator on
+its output, their ratio, and the estimator's epochs per second (it makes 7 passes over the log: a forward pass to
+scale the noise, forward and backward, then two rounds of noise from the residuals with both again; the two passes
+of a pair run on two threads). Then the same for the pure-Python twin of the compiled kernel (what an install without
+a C compiler runs) on the log's first ``--twin-epochs`` epochs, with the compiled kernel on the same epochs beside it.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
+import statistics
+import subprocess
 import sys
 import time
 
@@ -22,30 +28,63 @@ sys.path.insert(0, ROOT)
 
 from tollcli.gnss.pseudorange_inputs import pseudorange_epochs  # noqa: E402
 from tollcli.gnss.sigma_models import NominalModel  # noqa: E402
+from tollcli.integrity import trajectory_filter  # noqa: E402
 from tollcli.integrity.trajectory import estimate_trajectory  # noqa: E402
 from tollcli.integrity.trajectory_inputs import trajectory_inputs  # noqa: E402
 
 BERLIN = os.path.join(ROOT, "..", "shared", "data", "smartloc", "Berlin_Potsdamer_Platz_Input.txt")
-PASSES = 7
+SIMULATED = os.path.join(ROOT, "benchmarks", "integrity_truth", "sim", "city-clean")
+
+
+def simulated_drive() -> str:
+    """The 10 000-epoch simulated city drive with odometry, written once."""
+    log = os.path.join(SIMULATED, "drive-librsf.txt")
+    if not os.path.exists(log):
+        subprocess.run([sys.executable, "-m", "tollcli", "simulate", "--nlos", "--odometry", "--duration", "2000", "--rate", "5",
+                        "--seed", "11", "-o", SIMULATED, "-q"], check=True)  # fmt: skip
+    return log
+
+
+def _stretch(inp, n):
+    return dataclasses.replace(inp, **{f.name: getattr(inp, f.name)[:n] for f in dataclasses.fields(inp)
+                                       if f.name not in ("origin_ecef_m", "ecef2enu")})  # fmt: skip
+
+
+def _timed(fn, rounds):
+    times = []
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), out
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--log", default=BERLIN)
+    parser.add_argument("--log", nargs="*", default=None, help="libRSF logs (default: Berlin and the simulated drive)")
     parser.add_argument("--kind", default="librsf")
-    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--twin-epochs", type=int, default=300)
     args = parser.parse_args()
-    if not os.path.exists(args.log):
-        sys.exit(f"{args.log}: not present")
-    for k in range(args.rounds):
-        t0 = time.perf_counter()
-        epochs, meas = pseudorange_epochs(args.log, args.kind, None, "nominal", 5.0, NominalModel())
-        t1 = time.perf_counter()
-        traj = estimate_trajectory(trajectory_inputs(epochs, meas), "smoothed")
-        t2 = time.perf_counter()
+    logs = args.log if args.log else [p for p in (BERLIN, simulated_drive()) if os.path.exists(p)]
+    compiled = trajectory_filter._kernel() is not None
+    print(f"compiled kernel: {'yes' if compiled else 'NOT BUILT (the Python twin runs)'}; median of {args.rounds} rounds")
+    for log in logs:
+        t_snap, (epochs, meas) = _timed(lambda: pseudorange_epochs(log, args.kind, None, "nominal", 5.0, NominalModel()), args.rounds)
+        t_est, traj = _timed(lambda: estimate_trajectory(trajectory_inputs(epochs, meas), "smoothed"), args.rounds)
         n = len(epochs)
-        print(f"round {k}: {n} epochs; snapshot {t1 - t0:.2f} s, estimator {t2 - t1:.2f} s: ratio {(t2 - t1) / (t1 - t0):.1f}; "
-              f"{n / (t2 - t1):,.0f} epochs/s, {PASSES * n / (t2 - t1):,.0f} epoch-steps/s (odometry: {traj.odometry})")  # fmt: skip
+        print(f"{os.path.basename(os.path.dirname(log)) if 'sim' in log else os.path.basename(log)}: {n} epochs; "
+              f"snapshot {t_snap:.3f} s, estimator {t_est:.3f} s: ratio {t_est / t_snap:.2f}; {n / t_est:,.0f} epochs/s "
+              f"(odometry: {traj.odometry})")  # fmt: skip
+        if compiled and args.twin_epochs:
+            short = _stretch(trajectory_inputs(epochs, meas), min(args.twin_epochs, n))
+            t_fast, _ = _timed(lambda: estimate_trajectory(short, "smoothed"), args.rounds)
+            os.environ["TOLLCLI_KERNELS"] = "numpy"
+            t_twin, _ = _timed(lambda: estimate_trajectory(short, "smoothed"), 1)
+            del os.environ["TOLLCLI_KERNELS"]
+            m = short.t_s.size
+            print(f"  first {m} epochs: compiled {m / t_fast:,.0f} epochs/s, Python twin {m / t_twin:,.0f} epochs/s "
+                  f"(×{t_twin / t_fast:.0f})")  # fmt: skip
     return 0
 
 

@@ -26,7 +26,7 @@ ROOMS = {
     "report": 6,  # tollcli/report/: plots and HTML
     "cli": 7,  # tollcli/cli/ and tollcli/__main__
 }
-FLOOR_MODULES = {"tollcli", "tollcli.errors", "tollcli.times", "tollcli.cache", "tollcli.geodesy", "tollcli.spatial",
+FLOOR_MODULES = {"tollcli", "tollcli.errors", "tollcli.times", "tollcli.cache", "tollcli.geodesy", "tollcli.spatial", "tollcli.kernels",
                  "tollcli.stats"}  # fmt: skip
 PACKAGE_ROOMS = {"io": "floor", "readers": "readers", "geoobjects": "geoobjects", "gnss": "gnss", "integrity": "integrity", "charging": "charging",
                  "enforcement": "enforcement", "job": "job", "simulate": "simulate", "report": "report", "cli": "cli"}  # fmt: skip

@@ -38,11 +38,11 @@ def test_every_module_is_named_in_the_layout_and_every_named_module_exists():
     unnamed = sorted(str(p.relative_to(REPO)) for p in modules if f"`{p.name}`" not in layout and f"{p.name}`" not in layout
                      and f"`{p.parent.name}/{p.name}`" not in layout)  # fmt: skip
     assert not unnamed, f"not named in docs/architecture.md's layout: {unnamed}"
-    names = {p.name for p in modules} | {"_bulk_kernels.c"}
+    names = {p.name for p in modules} | {p.name for p in package.rglob("*.c")}
     for named in set(re.findall(r"`(?:[\w/]+/)?(\w+\.(?:py|c))`", layout)) - {"test_layering.py", "layering.py"}:
         assert named in names, f"docs/architecture.md names {named}, which is not in the package"
     for init in package.rglob("__init__.py"):
-        held = {p.name for p in init.parent.rglob("*.py")} | {"_bulk_kernels.c"}
+        held = {p.name for p in init.parent.rglob("*.py")} | {p.name for p in init.parent.rglob("*.c")}
         for named in set(re.findall(r"``?(\w+\.py)``?", init.read_text(encoding="utf-8"))):
             assert named in held or named.startswith("test_"), f"{init.relative_to(REPO)} names {named}, which it does not hold"
 

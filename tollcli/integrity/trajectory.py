@@ -25,8 +25,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
-from tollcli.integrity.trajectory_filter import MOTION_STATES, FilterPass, MotionNoise, run_pass
+from tollcli.integrity.trajectory_filter import MOTION_STATES, FilterPass, MotionNoise, combine, run_both, run_pass
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 from tollcli.integrity.trajectory_noise import (
     RHO_CUT,
@@ -87,20 +88,21 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
     kept = forward.weight >= 0.5
     if kept.any():
         sigma2 = sigma2 * max(1.0, float(np.median(forward.z[kept] ** 2)) / CHI2_1_MEDIAN)
-        forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise)
-    backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise)
+        forward, backward = run_both(inp, sigma2, start_f, start_b, odometry, noise)
+    else:
+        backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise)
     table, factor, rho = np.full(1, np.nan), 1.0, np.ones(1)
     bins, n_bins, _by = noise_bins(inp.cn0_dbhz, inp.elev_deg, inp.mask)
+    sv_code = pd.factorize(inp.sv.ravel(), sort=True)[0].reshape(inp.sv.shape)  # labels as numbers, in their order
     for round_ in range(NOISE_ROUNDS):
         x, _p = _combined(forward, backward)  # the noise measured at the smoothed trajectory, whichever positioning
         res = postfit_residuals(inp, x, m)
         table = sigma_by_bin(res, bins, n_bins, inp.mask)
         kept = inp.mask & (np.minimum(forward.weight, backward.weight) >= 0.5)
-        factor, rho = correlation_inflation(np.clip(res / table[bins], -5.0, 5.0), inp.sv, kept)  # the kept, not the outliers
+        factor, rho = correlation_inflation(np.clip(res / table[bins], -5.0, 5.0), sv_code, kept)  # the kept, not the outliers
         white2 = np.where(inp.mask, table[bins] ** 2, FALLBACK_SIGMA_M**2)
         sigma2 = white2 * max(factor, 1.0)
-        forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise, white2)
-        backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise, white2)
+        forward, backward = run_both(inp, sigma2, start_f, start_b, odometry, noise, white2)
     x, p = _combined(forward, backward)
     major = sigma_major_m(p[:, :2, :2])
     hpl = K_FUSED * major
@@ -148,7 +150,7 @@ def fault_test(forward: FilterPass, backward: FilterPass | None) -> tuple[np.nda
     return t + (d_psi / spread_psi) ** 2, np.full(t.size, 3)
 
 
-#: how long before and after an epoch where a pass lost the vehicle (:func:`tollcli.integrity.trajectory_filter._widened`)
+#: how long before and after an epoch where a pass lost the vehicle (:mod:`tollcli.integrity.trajectory_filter`)
 #: its positions are suspect (s): a pass drifts out for a while before it loses the vehicle (≈ 20 s on the simulated
 #: drives with a 0.05 rad/s gyro fault), and the other pass may be inside the same fault
 LOST_WINDOW_S = 30.0
@@ -173,7 +175,8 @@ def sigma_major_m(cov_en_m2: np.ndarray) -> np.ndarray:
 
 def _combined(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndarray, np.ndarray]:
     """The forward posterior, or with a backward pass the covariance intersection of the forward posterior and the
-    backward prior at every epoch (ω on a grid of 19, the one with the least horizontal variance). A clock group a
+    backward prior at every epoch (ω on a grid of 19, the first with the least horizontal variance: compiled,
+    :func:`tollcli.integrity.trajectory_filter.combine`). A clock group a
     pass has not started by an epoch gives no information there (its variance set to :data:`UNKNOWN_M2`, its
     correlations to zero): only the other pass's value of it counts."""
     if backward is None:
@@ -184,23 +187,15 @@ def _combined(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndar
     if forward.odometry:  # headings compared on the same turn
         xb = xb.copy()
         xb[:, 3] = xf[:, 3] + (xb[:, 3] - xf[:, 3] + np.pi) % (2 * np.pi) - np.pi
-    info_f, info_b = np.linalg.inv(pf), np.linalg.inv(pb)
-    best_tr = np.full(xf.shape[0], np.inf)
-    best_p = np.empty_like(pf)
-    best_w = np.empty(xf.shape[0])
-    for omega in np.linspace(0.05, 0.95, 19):
-        p = np.linalg.inv(omega * info_f + (1 - omega) * info_b)
-        tr = p[:, 0, 0] + p[:, 1, 1]
-        better = tr < best_tr
-        best_tr[better], best_p[better], best_w[better] = tr[better], p[better], omega
-    w = best_w[:, None]
-    xf, xb = np.nan_to_num(xf), np.nan_to_num(xb)
-    x = np.einsum("eij,ej->ei", best_p, w * np.einsum("eij,ej->ei", info_f, xf) + (1 - w) * np.einsum("eij,ej->ei", info_b, xb))
-    return x, best_p
+    return combine(np.nan_to_num(xf), pf, np.nan_to_num(xb), pb, OMEGAS)
 
 
 #: the variance (m²) of a clock a pass has not started: no information
 UNKNOWN_M2 = 1e12
+
+
+#: the weights ω of covariance intersection tried (:func:`_combined`)
+OMEGAS = np.linspace(0.05, 0.95, 19)
 
 
 def _unknown_clocks(p: np.ndarray, started: np.ndarray, m: int) -> np.ndarray:
@@ -256,9 +251,12 @@ def _fitted_start(inp: TrajectoryInputs, window: np.ndarray) -> tuple[float, np.
     w = np.nan_to_num(inp.yaw_rate_radps[span[1:]])
     turn = np.concatenate([[0.0], np.cumsum(-w * dt)])  # heading change since span[0] (clockwise positive)
     psi0 = np.radians(np.arange(0.0, 360.0, 2.0))[:, None]
-    psi = psi0 + turn[None, :-1]
-    de = np.concatenate([np.zeros((psi0.size, 1)), np.cumsum(v * dt * np.sin(psi), axis=1)], axis=1)
-    dn = np.concatenate([np.zeros((psi0.size, 1)), np.cumsum(v * dt * np.cos(psi), axis=1)], axis=1)
+    # the arc east and north for every start heading ψ₀: sin(ψ₀ + turn) = sin ψ₀ cos turn + cos ψ₀ sin turn, so each
+    # is two running sums turned by ψ₀
+    along_cos = np.concatenate([[0.0], np.cumsum(v * dt * np.cos(turn[:-1]))])
+    along_sin = np.concatenate([[0.0], np.cumsum(v * dt * np.sin(turn[:-1]))])
+    de = np.sin(psi0) * along_cos + np.cos(psi0) * along_sin
+    dn = np.cos(psi0) * along_cos - np.sin(psi0) * along_sin
     at = window - lo
     fe, fn = inp.fix_enu_m[window, 0], inp.fix_enu_m[window, 1]
     off_e = np.median(fe[None, :] - de[:, at], axis=1)

@@ -11,6 +11,7 @@ epoch table gives the times and, where the log has odometry (libRSF ``odom3``), 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pandas as pd
@@ -41,9 +42,22 @@ class TrajectoryInputs:
     forward_m: np.ndarray  # (E,) distance driven forward over that interval, in the frame of its start heading (NaN: none)
     left_m: np.ndarray  # (E,) and to the left
 
-    @property
+    @cached_property
     def n_clocks(self) -> int:
         return int(self.clock_index[self.mask].max(initial=0)) + 1
+
+    @cached_property
+    def kernel_arrays(self) -> tuple:
+        """The arrays the compiled pass reads, made once (C-contiguous; the mask as bytes, the clock groups as int64
+        with 0 in empty slots): t, satellites, pseudoranges, mask, clocks, speed, yaw rate, forward, left, origin,
+        rotation."""
+        def c64(a):
+            return np.ascontiguousarray(a, np.float64)
+
+        clock = np.ascontiguousarray(np.where(self.mask, self.clock_index, 0), np.int64)
+        return (c64(self.t_s), c64(self.sat_ecef_m), c64(self.pr_m), np.ascontiguousarray(self.mask, np.uint8), clock,
+                c64(self.speed_mps), c64(self.yaw_rate_radps), c64(self.forward_m), c64(self.left_m),
+                c64(self.origin_ecef_m), c64(self.ecef2enu))  # fmt: skip
 
     @property
     def has_odometry(self) -> bool:

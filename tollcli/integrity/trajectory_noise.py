@@ -14,10 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from tollcli.geodesy import OMEGA_EARTH_RADPS
+from tollcli.integrity.trajectory_filter import residuals
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 
-C_MPS = 299_792_458.0
 #: C/N0 bin edges (dB-Hz)
 CN0_BINS_DBHZ = np.array([25.0, 30.0, 35.0, 40.0, 45.0])
 #: elevation bin edges (deg), where C/N0 tells nothing
@@ -34,16 +33,9 @@ MAX_LAG = 400
 
 def postfit_residuals(inp: TrajectoryInputs, x: np.ndarray, motion_states: int) -> np.ndarray:
     """Pseudorange minus the range from the trajectory ``x`` (E, S: ENU position first, clocks from
-    ``motion_states``) minus the constellation's clock (E, N; NaN in empty slots)."""
-    pos = inp.origin_ecef_m + x[:, :3] @ inp.ecef2enu  # (E, 3) ECEF
-    sat = inp.sat_ecef_m
-    rough = np.sqrt(((sat - pos[:, None, :]) ** 2).sum(axis=-1))
-    theta = OMEGA_EARTH_RADPS * rough / C_MPS
-    c, s = np.cos(theta), np.sin(theta)
-    rotated = np.stack([c * sat[..., 0] + s * sat[..., 1], -s * sat[..., 0] + c * sat[..., 1], sat[..., 2]], axis=-1)
-    rng = np.sqrt(((rotated - pos[:, None, :]) ** 2).sum(axis=-1))
-    clock = np.take_along_axis(x[:, motion_states:], np.maximum(inp.clock_index, 0), axis=1)
-    return np.where(inp.mask, inp.pr_m - rng - clock, np.nan)
+    ``motion_states``) minus the constellation's clock (E, N; NaN in empty slots): the ranges as the filter's pass
+    takes them (:func:`tollcli.integrity.trajectory_filter.residuals`)."""
+    return residuals(inp, x)
 
 
 def cn0_bins(cn0_dbhz: np.ndarray) -> np.ndarray:
@@ -85,7 +77,7 @@ def sigma_by_cn0(residual_m: np.ndarray, cn0_dbhz: np.ndarray, mask: np.ndarray)
 def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tuple[float, np.ndarray]:
     """The variance factor 1 + 2 Σ ρ(lag) of normalised residuals ``z`` (E, N) and ρ itself (lags in epochs).
 
-    Each measurement label's series (its median removed) is one time series; their products at every lag are summed
+    Each measurement label's (``sv``: strings, or numbers in the strings' order) series (its median removed) is one time series; their products at every lag are summed
     over all series (FFT, zero where a series has no value)."""
     n_epochs = z.shape[0]
     ok = mask & np.isfinite(z)
@@ -99,7 +91,7 @@ def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tu
     counts[inverse, rows] = 1.0
     med = np.array([np.median(series[i, counts[i] > 0]) for i in range(labels.size)])  # one per satellite
     series = np.where(counts > 0, series - med[:, None], 0.0)
-    size = 1 << int(np.ceil(np.log2(2 * n_epochs)))
+    size = 1 << int(np.ceil(np.log2(n_epochs + MAX_LAG + 1)))  # zeros enough that no lag counted wraps round
     spec = np.fft.rfft(series, size, axis=1)
     acf = np.fft.irfft((spec * spec.conj()).sum(axis=0), size)[: min(MAX_LAG + 1, n_epochs)]
     if not acf[0] > 0:
