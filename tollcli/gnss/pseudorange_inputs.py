@@ -93,7 +93,7 @@ def _raw_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: s
         if ephemerides is None:
             ephemerides = sfrbx_ephemerides(ubx)
             if ephemerides.empty:
-                raise NoOrbitsError(f"{log}: no complete GPS or Galileo ephemeris in the log's RXM-SFRBX navigation data: give --nav NAVFILE")
+                raise NoOrbitsError(f"{log}: no complete GPS, Galileo, BeiDou or GLONASS ephemeris in the log's RXM-SFRBX navigation data: give --nav NAVFILE")
         m = with_broadcast_satellites(rawx_measurements(ubx), ephemerides)
     try:
         epochs, meas = raw_epochs(m, sigma_model, sigma_m, nominal, iono_coeffs=iono)

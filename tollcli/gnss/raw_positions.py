@@ -5,7 +5,7 @@ The input is one row per satellite-signal and epoch (:func:`tollcli.gnss.android
 :func:`tollcli.gnss.ubx_measurements.rawx_measurements`) with ``epoch_key``, ``t_rx_gps_s``, ``sv``,
 ``constellation``, ``signal``, ``carrier_hz``, ``pr_m``, ``pr_sigma_m``, ``prr_mps``, ``prr_sigma_mps``,
 ``cn0_dbhz``, ``pr_valid``. Satellites come either from broadcast ephemerides
-(:func:`with_broadcast_satellites`: GPS and Galileo, Klobuchar + Saastamoinen modelled here, one
+(:func:`with_broadcast_satellites`: GPS, Galileo, BeiDou and GLONASS, Klobuchar + Saastamoinen modelled here, one
 receiver clock per constellation and signal, since inter-signal biases are unknown) or from the
 file's own columns (:func:`with_device_gnss_satellites`: Google's satellite states and delays with the
 inter-signal bias removed, so one clock serves all).
@@ -38,6 +38,11 @@ from tollcli.readers.gps_time import gps_millis_to_utc
 
 L1_HZ = 1_575_420_000.0
 SAT_COLUMNS = ("sat_x_m", "sat_y_m", "sat_z_m", "sat_vx_mps", "sat_vy_mps", "sat_vz_mps", "sat_clock_m", "sat_drift_mps")
+#: the constellations whose broadcast orbits are computed here (:mod:`tollcli.gnss.satellite_states`)
+BROADCAST_CONSTELLATIONS = ("GPS", "Galileo", "BeiDou", "GLONASS")
+#: BeiDou signals usable with the D1 message's clock (B3I's), and the group delay each subtracts (TGD1: B1I, TGD2:
+#: B2I); B1C and B2a are left out: their group delays are broadcast in B-CNAV1/2, not decoded here
+BEIDOU_GROUP_DELAY = {"B3I": None, "B1I": "tgd1_s", "B2I": "tgd2_s"}
 #: a rate σ where the input gives none (m/s; a phone's typical PseudorangeRateUncertainty)
 DEFAULT_PRR_SIGMA_MPS = 0.2
 
@@ -46,9 +51,16 @@ def with_broadcast_satellites(m: pd.DataFrame, ephemerides: pd.DataFrame) -> pd.
     """``m`` with the satellite columns from broadcast ephemerides (NaN where none is known); records without a
     receiver time (clock fields missing or damaged) are left out: they belong to no epoch."""
     m = m[np.isfinite(m["t_rx_gps_s"].to_numpy(float))].reset_index(drop=True)
-    use = m["pr_valid"].to_numpy(bool) & np.isin(m["constellation"].to_numpy(object), ["GPS", "Galileo"])
+    constellation, signal = m["constellation"].to_numpy(object), m["signal"].to_numpy(object)
+    use = m["pr_valid"].to_numpy(bool) & np.isin(constellation, BROADCAST_CONSTELLATIONS)
+    beidou = constellation == "BeiDou"
+    use &= ~beidou | np.isin(signal, tuple(BEIDOU_GROUP_DELAY))  # B1C, B2a: their delays are not in D1
     states = satellite_states(ephemerides, m["sv"].to_numpy(str), m["t_rx_gps_s"].to_numpy(float),
                               np.where(use, m["pr_m"].to_numpy(float), 2.2e7))  # fmt: skip
+    for name, column in BEIDOU_GROUP_DELAY.items():  # the broadcast clock is B3I's
+        if column is not None:
+            rows = beidou & (signal == name)
+            states["clock_s"][rows] -= np.nan_to_num(states.get(column, np.zeros(len(m)))[rows])
     have = use & states["have"]
     for k, name in enumerate(SAT_COLUMNS[:3]):
         m[name] = np.where(have, states["pos_m"][:, k], np.nan)

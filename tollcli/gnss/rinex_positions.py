@@ -1,14 +1,15 @@
-"""RINEX 3 observation + navigation files → WLS positions and RAIM measurements (GPS, Galileo).
+"""RINEX 3 observation + navigation files → WLS positions and RAIM measurements (GPS, Galileo, GLONASS, BeiDou).
 
-* Observations (:mod:`tollcli.readers.rinex`): code pseudorange on L1/E1 (``C1C``, else ``C1X``/``C1P``
-  for Galileo/GPS) and its C/N0 (``S1…``); receiver time from the file (GPS time).
+* Observations (:mod:`tollcli.readers.rinex`): one code pseudorange per system (L1/E1/G1 ``C1C``…, BeiDou B1I
+  ``C2I``/``C1I``, else B3I ``C6I``, else B2I ``C7I``) and its C/N0 (``S…``); receiver time from the file (GPS time).
+  A BeiDou B1I or B2I code takes its group delay against B3I (TGD1, TGD2), to which the broadcast clock refers.
 * Orbits and clocks: the broadcast ephemeris of each satellite nearest in time
   (:mod:`tollcli.gnss.satellite_states`) at the transmission time
   t_tx = t_rx − pr/c − dt_sv, iterated.
 * Corrections inside the WLS: satellite clock (+ c·dt_sv, with relativity and
   group delay), Klobuchar ionosphere from the navigation header (GPSA/GPSB),
-  Saastamoinen troposphere; Sagnac in the geometry. One receiver clock per
-  constellation (the GPS–Galileo time offset stays an unknown).
+  Saastamoinen troposphere (the ionosphere scaled by (f_L1/f)² to each carrier); Sagnac in the geometry. One
+  receiver clock per constellation (the offsets between the systems' times stay unknowns).
 """
 
 from __future__ import annotations
@@ -21,10 +22,29 @@ from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
 from tollcli.gnss.measurements import Measurements, pad, slots
 from tollcli.gnss.orbits import WEEK_S
 from tollcli.gnss.pseudorange_wls import C_MPS, final_geometry, solve_positions
-from tollcli.gnss.satellite_states import load_navigation, navigation_files, satellite_states
+from tollcli.gnss.satellite_states import load_navigation, navigation_files, nearest_ephemerides, satellite_states
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.gps_time import gps_millis_to_utc, gps_seconds
-from tollcli.readers.rinex import load_rinex, observations
+from tollcli.readers.rinex import NAMES, load_rinex, observations
+
+#: the systems, in the order their receiver clocks are numbered
+SYSTEMS = ("G", "E", "R", "C")
+L1_HZ = 1_575_420_000.0
+#: carrier (Hz) of each code read (:data:`tollcli.readers.rinex.CODES`); GLONASS G1 adds its channel × 562.5 kHz
+CARRIERS_HZ = {"C": {"C2I": 1_561_098_000.0, "C1I": 1_561_098_000.0, "C2": 1_561_098_000.0, "C6I": 1_268_520_000.0,
+                     "C7I": 1_207_140_000.0}}  # fmt: skip
+
+
+def carrier_hz(system: np.ndarray, code: np.ndarray, glonass_channel: np.ndarray | None) -> np.ndarray:
+    """The carrier frequency (Hz) of each observation (for the ionosphere's 1/f² scaling): L1/E1 unless BeiDou's
+    band or GLONASS's channel (from the navigation file's frequency number; 1602 MHz where it gives none)."""
+    out = np.full(system.shape, L1_HZ)
+    for c, table in CARRIERS_HZ.items():
+        for name, hz in table.items():
+            out[(system == c) & (code == name)] = hz
+    channel = np.zeros(system.shape) if glonass_channel is None else np.nan_to_num(np.asarray(glonass_channel, float))
+    out = np.where(system == "R", 1_602_000_000.0 + channel * 562_500.0, out)
+    return out
 
 
 def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m: float = 5.0,
@@ -41,6 +61,11 @@ def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m:
     pr = rows["pr_m"].to_numpy(float)
     states = satellite_states(ephemerides, sv, t_rx, pr)
     pos, clock, usable = states["pos_m"], states["clock_s"], states["have"]
+    code = rows["code"].to_numpy(object)
+    system = sv.astype("<U1")
+    b1i, b2i = (system == "C") & np.isin(code, ("C2I", "C1I", "C2")), (system == "C") & (code == "C7I")
+    clock = clock - np.where(b1i, np.nan_to_num(states["tgd1_s"]), 0.0) - np.where(b2i, np.nan_to_num(states["tgd2_s"]), 0.0)
+    carrier = carrier_hz(system, code, nearest_ephemerides(ephemerides, sv, t_rx)[0]["FreqNum"] if "FreqNum" in ephemerides else None)
     if not usable.any():  # a navigation file of another day: say so, not "every epoch insufficient"
         raise DataError(f"{obs_path}: no observation has a satellite orbit in {', '.join(navigation_files(nav_path))} ({orbit_coverage(ephemerides, t_rx)}); "
                         "a navigation file for the day of the observations gives the orbits")  # fmt: skip
@@ -54,20 +79,24 @@ def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m:
     sat = np.stack([pad(pos[keep, k], row, slot, shape, 0.0) for k in range(3)], -1)
     pr_corr = pad(pr[keep] + C_MPS * clock[keep], row, slot, shape, 0.0)
     labels = pad(sv[keep].astype(object), row, slot, shape, "")
-    letters = pad(np.array([s[0] for s in sv[keep]], dtype=object), row, slot, shape, "")
+    letters = pad(system[keep].astype(object), row, slot, shape, "")
+    iono_scale = pad((L1_HZ / carrier[keep]) ** 2, row, slot, shape, 1.0)
     cn0 = pad(rows["cn0_dbhz"].to_numpy(float)[keep], row, slot, shape, np.nan)
     tow = np.mod(gps_seconds(epoch_times), WEEK_S)[:, None]
 
     def correction(lat, lon, h, elev, azim):
         delay = saastamoinen_delay_m(lat[:, None], h[:, None], elev)
         if coeffs is not None and len(coeffs) == 8:
-            delay = delay + klobuchar_delay_m(lat[:, None], lon[:, None], elev, azim, tow, coeffs[:4], coeffs[4:])
+            delay = delay + iono_scale * klobuchar_delay_m(lat[:, None], lon[:, None], elev, azim, tow, coeffs[:4], coeffs[4:])
         return delay
 
-    clock_index = np.where(letters == "E", 1, 0)  # one receiver clock per constellation
+    present = [c for c in SYSTEMS if (letters == c).any()]  # one receiver clock per constellation, in SYSTEMS' order
+    clock_index = np.zeros(shape, np.int64)
+    for k, c in enumerate(present):
+        clock_index[letters == c] = k
     x = solve_positions(sat, pr_corr, mask, np.where(mask, sigma_m, np.nan), correction, clock_index)
     g = final_geometry(sat, pr_corr, mask, x, correction, clock_index)
-    const = np.where(letters == "E", "Galileo", "GPS")
+    const = np.vectorize(lambda c: NAMES.get(c, "GPS"), otypes=[object])(letters) if letters.size else letters
     sigma = np.where(mask, sigma_for(sigma_model, elev_deg=g["elev_deg"], cn0_dbhz=cn0, constellation=const,
                                      lat_deg=g["lat_deg"][:, None], lon_deg=g["lon_deg"][:, None],
                                      sigma_const_m=sigma_m, nominal=nominal), np.nan)  # fmt: skip

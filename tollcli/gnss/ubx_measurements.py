@@ -1,5 +1,6 @@
 """u-blox ``RXM-RAWX`` rows → the raw-measurement table of :mod:`tollcli.gnss.raw_positions`, and
-``RXM-SFRBX`` navigation data (GPS LNAV subframes, Galileo I/NAV page pairs) → an ephemeris table.
+``RXM-SFRBX`` navigation data (GPS LNAV subframes, Galileo I/NAV page pairs, BeiDou D1 subframes, GLONASS strings)
+→ an ephemeris table.
 
 RAWX gives the pseudorange directly (m, receiver time ``week``·604 800 + ``rcvTow`` in the GPS scale
 of the receiver's clock); the Doppler D (Hz) becomes the pseudorange rate −D·λ; the standard
@@ -24,8 +25,12 @@ SIGNALS = {(0, 0): ("L1", 1575.42e6), (0, 3): ("L2", 1227.60e6), (0, 4): ("L2", 
            (0, 7): ("L5", 1176.45e6), (1, 0): ("L1", 1575.42e6), (2, 0): ("E1", 1575.42e6), (2, 1): ("E1", 1575.42e6),
            (2, 3): ("E5a", 1176.45e6), (2, 4): ("E5a", 1176.45e6), (2, 5): ("E5b", 1207.14e6), (2, 6): ("E5b", 1207.14e6),
            (3, 0): ("B1I", 1561.098e6), (3, 1): ("B1I", 1561.098e6), (3, 2): ("B2I", 1207.14e6), (3, 3): ("B2I", 1207.14e6),
-           (3, 7): ("B2a", 1176.45e6), (5, 0): ("L1", 1575.42e6), (5, 1): ("L1", 1575.42e6), (5, 4): ("L2", 1227.60e6),
+           (3, 7): ("B2a", 1176.45e6), (3, 8): ("B2a", 1176.45e6), (3, 4): ("B3I", 1268.52e6), (3, 10): ("B3I", 1268.52e6),
+           (3, 5): ("B1C", 1575.42e6), (3, 6): ("B1C", 1575.42e6), (2, 8): ("E6", 1278.75e6), (2, 9): ("E6", 1278.75e6),
+           (5, 0): ("L1", 1575.42e6), (5, 1): ("L1", 1575.42e6), (5, 4): ("L2", 1227.60e6),
            (5, 5): ("L2", 1227.60e6), (6, 0): ("G1", 1602.0e6), (6, 2): ("G2", 1246.0e6)}  # fmt: skip
+#: BeiDou signals whose navigation message is D1 or D2 (B1I, B2I, B3I: u-blox sigId 0–4, 10)
+BEIDOU_D_SIGNALS = (0, 1, 2, 3, 4, 10)
 
 
 def rawx_measurements(ubx: UbxRead) -> pd.DataFrame:
@@ -69,17 +74,26 @@ def rawx_measurements(ubx: UbxRead) -> pd.DataFrame:
 
 
 def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.DataFrame:
-    """GPS LNAV and Galileo I/NAV ephemerides decoded from the log's RXM-SFRBX (an empty table when there are none).
+    """GPS LNAV, Galileo I/NAV, BeiDou D1 and GLONASS ephemerides decoded from the log's RXM-SFRBX (an empty table
+    when there are none).
 
     GPS L1 C/A subframes (``gnssId`` 0, ``sigId`` 0, ten words) carry a 10-bit week resolved near
     ``gps_week_hint`` (default: the RAWX week, else the first NAV-PVT's date, else today); Galileo E1-B/E5b-I page
-    pairs (``gnssId`` 2, ``sigId`` 1 or 5, eight words or more) carry their own 12-bit GST week."""
+    pairs (``gnssId`` 2, ``sigId`` 1 or 5, eight words or more) carry their own 12-bit GST week; BeiDou D1
+    subframes (``gnssId`` 3, B1I/B2I/B3I) their 13-bit BDT week; GLONASS strings (``gnssId`` 6) a time of day, placed
+    on the day of the string's receive time (the latest RAWX or NAV-PVT before it in the log)."""
+    from tollcli.gnss import beidou_d1, glonass_strings
+    from tollcli.readers.gps_time import leap_seconds_at_gps
+
     sf = ubx.sfrbx
     gps = sf[(sf["gnssId"] == 0) & (sf["sigId"] == 0) & (sf["words"].map(len) == 10)]  # L1 C/A: LNAV
     gps = gps.assign(sv=sv_labels(np.full(len(gps), "GPS", dtype=object), gps["svId"].to_numpy()))
     gal = sf[(sf["gnssId"] == 2) & sf["sigId"].isin([1, 5]) & (sf["words"].map(len) >= 8)]  # E1-B, E5b-I: I/NAV
     gal = gal.assign(sv=sv_labels(np.full(len(gal), "Galileo", dtype=object), gal["svId"].to_numpy()))
     galileo = inav_words.ephemerides(gal[["sv", "words"]].reset_index(drop=True))
+    beidou = beidou_d1.ephemerides(sf[(sf["gnssId"] == 3) & sf["sigId"].isin(BEIDOU_D_SIGNALS)].reset_index(drop=True))
+    glo = sf[(sf["gnssId"] == 6) & (sf["words"].map(len) >= 4)].reset_index(drop=True)
+    glonass = glonass_strings.ephemerides(glo, receive_times_gps_s(ubx, glo["message"].to_numpy()), leap_seconds_at_gps)
     if gps_week_hint is None:
         weeks = ubx.rawx["week"].to_numpy(float) if len(ubx.rawx) else np.array([])
         if weeks.size:
@@ -88,10 +102,44 @@ def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.Da
             gps_week_hint = float(np.median(galileo["toe_s"].to_numpy(float)) // WEEK_S)
         else:
             gps_week_hint = _pvt_week(ubx.pvt)
-    table = lnav_subframes.ephemerides(gps[["sv", "words"]].reset_index(drop=True), gps_week_hint)
-    if galileo.empty:
-        return table
-    return galileo if table.empty else pd.concat([table, galileo], ignore_index=True)
+    tables = [lnav_subframes.ephemerides(gps[["sv", "words"]].reset_index(drop=True), gps_week_hint), galileo, beidou, glonass]
+    tables = [t for t in tables if len(t)]
+    if not tables:
+        return lnav_subframes.ephemerides(gps[["sv", "words"]].reset_index(drop=True), gps_week_hint)
+    return tables[0] if len(tables) == 1 else pd.concat(tables, ignore_index=True)
+
+
+def receive_times_gps_s(ubx: UbxRead, message: np.ndarray) -> np.ndarray:
+    """The receive time (GPS seconds) of messages at positions ``message`` in the log: that of the latest RAWX
+    (its week and receive time of week), else NAV-PVT (its UTC date and time) at or before it, else the first one
+    after it; NaN when the log has neither."""
+    from tollcli.readers.gps_time import gps_seconds, leap_seconds_at_gps
+
+    at, when = [], []
+    if len(ubx.rawx):
+        first = ubx.rawx.drop_duplicates("message")
+        at.append(first["message"].to_numpy(np.int64))
+        when.append(first["week"].to_numpy(float) * WEEK_S + first["rcvTow"].to_numpy(float))
+    if len(ubx.pvt):
+        p = ubx.pvt
+        utc = pd.to_datetime(dict(year=p["year"], month=p["month"], day=p["day"], hour=p["hour"], minute=p["minute"],
+                                  second=p["second"]), errors="coerce").to_numpy("datetime64[ns]")  # fmt: skip
+        seconds = gps_seconds(utc)
+        seconds = np.where(np.isnat(utc), np.nan, seconds)
+        at.append(p["message"].to_numpy(np.int64))
+        when.append(seconds + leap_seconds_at_gps(seconds))
+    message = np.asarray(message, np.int64)
+    if not at:
+        return np.full(message.size, np.nan)
+    at, when = np.concatenate(at), np.concatenate(when)
+    ok = np.isfinite(when)
+    at, when = at[ok], when[ok]
+    if at.size == 0:
+        return np.full(message.size, np.nan)
+    order = np.argsort(at, kind="stable")
+    at, when = at[order], when[order]
+    i = np.searchsorted(at, message, side="right") - 1
+    return when[np.clip(i, 0, at.size - 1)]
 
 
 def _pvt_week(pvt: pd.DataFrame) -> float:

@@ -291,6 +291,13 @@ static void widen(double *p, int ns, int odometry) {
     p[4 * ns + 4] += odometry ? 0.01 * 0.01 : 10.0 * 10.0;
 }
 
+/* release the buffers an entry point took, and give its result: None where it got that far (ok), else NULL */
+static PyObject *finish(Py_buffer *b, int n, int ok) {
+    for (int i = 0; i < n; i++) if (b[i].obj) PyBuffer_Release(&b[i]);
+    if (!ok) return NULL;
+    Py_RETURN_NONE;
+}
+
 static int check(Py_buffer *b, Py_ssize_t items, Py_ssize_t itemsize, const char *name) {
     if (b->len != items * itemsize) {
         PyErr_Format(PyExc_ValueError, "%s: %zd bytes, %zd expected", name, b->len, items * itemsize);
@@ -416,7 +423,6 @@ static PyObject *residuals(PyObject *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*iiddw*", &b[0], &b[1], &b[2], &b[3], &b[4], &b[5], &b[6], &S, &slots,
                           &c.omega, &c.c_mps, &b[7]))
         return NULL;
-    PyObject *result = NULL;
     Py_ssize_t N = slots, E = N > 0 ? b[7].len / 8 / N : 0;
     if (S < M || S > MAX_STATES || N < 0 || !check(&b[0], E * S, 8, "x") || !check(&b[1], E * N * 3, 8, "sat") ||
         !check(&b[2], E * N, 8, "pr") || !check(&b[3], E * N, 1, "mask") || !check(&b[4], E * N, 8, "clock") ||
@@ -451,11 +457,9 @@ static PyObject *residuals(PyObject *self, PyObject *args) {
     Py_END_ALLOW_THREADS
     free(used);
     free(mem);
-    result = Py_None;
-    Py_INCREF(result);
+    return finish(b, 8, 1);
 done:
-    for (int i = 0; i < 8; i++) if (b[i].obj) PyBuffer_Release(&b[i]);
-    return result;
+    return finish(b, 8, 0);
 }
 
 /* the horizontal variance (east + north) of A⁻¹, A (n×n) with its states in `order` (the horizontal two last):
@@ -478,12 +482,11 @@ static PyObject *combine(PyObject *self, PyObject *args) {
     Py_buffer b[8];
     memset(b, 0, sizeof(b));
     if (!PyArg_ParseTuple(args, "y*y*y*y*y*w*w*w*", &b[0], &b[1], &b[2], &b[3], &b[4], &b[5], &b[6], &b[7])) return NULL;
-    PyObject *result = NULL;
     Py_ssize_t E = b[7].len / 8, K = b[4].len / 8;
     int S = E ? (int)(b[0].len / 8 / E) : 0;
+    if (E == 0) return finish(b, 8, 1);
     if (S < 2 || S > MAX_STATES) {
-        if (E) PyErr_SetString(PyExc_ValueError, "combine: states out of range");
-        else { result = Py_None; Py_INCREF(result); }
+        PyErr_SetString(PyExc_ValueError, "combine: states out of range");
         goto done;
     }
     if (!check(&b[0], E * S, 8, "xf") || !check(&b[1], E * S * S, 8, "pf") || !check(&b[2], E * S, 8, "xb") ||
@@ -561,11 +564,9 @@ static PyObject *combine(PyObject *self, PyObject *args) {
     }
     Py_END_ALLOW_THREADS
     free(mem);
-    result = Py_None;
-    Py_INCREF(result);
+    return finish(b, 8, 1);
 done:
-    for (int i = 0; i < 8; i++) if (b[i].obj) PyBuffer_Release(&b[i]);
-    return result;
+    return finish(b, 8, 0);
 }
 
 static PyMethodDef methods[] = {

@@ -31,3 +31,13 @@ def gps_millis_to_utc(millis: np.ndarray) -> np.ndarray:
 def gps_seconds(times: np.ndarray) -> np.ndarray:
     """datetime64 (GPS time scale) → seconds since 1980-01-06."""
     return (np.asarray(times, dtype="datetime64[ns]") - _GPS_EPOCH_NS).astype(np.int64) / 1e9
+
+
+def leap_seconds_at_gps(gps_s: np.ndarray) -> np.ndarray:
+    """GPS − UTC (s) at GPS seconds since 1980-01-06 (each leap second counts from its GPS instant on)."""
+    gps_s = np.asarray(gps_s, float)
+    leap = np.zeros(gps_s.shape)
+    for date, seconds in LEAP_SECONDS:
+        at = (np.datetime64(date, "s") - np.datetime64("1980-01-06T00:00:00", "s")).astype(np.int64) + seconds
+        leap = np.where(gps_s >= at, float(seconds), leap)
+    return leap

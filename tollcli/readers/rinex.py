@@ -1,8 +1,9 @@
-"""RINEX 3 observation and navigation files (georinex), read into tables.
+"""RINEX 3 (and 2) observation and navigation files (georinex), read into tables.
 
-* :func:`load_rinex`: a file as georinex's dataset (GPS and Galileo), with clear errors.
-* :func:`observations`: one row per (epoch, satellite) with the L1/E1 code
-  pseudorange (``C1C``, else ``C1X``/``C1P``…) and its C/N0; receiver time in GPS time.
+* :func:`load_rinex`: a file as georinex's dataset (GPS, Galileo, GLONASS, BeiDou), with clear errors.
+* :func:`observations`: one row per (epoch, satellite) with one code pseudorange per system — GPS L1 C/A, Galileo
+  E1, GLONASS G1 C/A, BeiDou B1I (else B3I, else B2I) — its observation code and its C/N0; receiver time in GPS
+  time.
 
 Positions and RAIM measurements are made from them in :mod:`tollcli.gnss.rinex_positions`.
 """
@@ -16,14 +17,16 @@ import pandas as pd
 
 from tollcli.errors import DataError, UsageError
 
-#: the L1/E1 code observations read, in order of preference: RINEX 3 names, then RINEX 2 (C1 the C/A code, P1 the P
-#: code); the C/N0 is the S observation of the same band and attribute (S1C, S1 …)
-CODES = {"G": ("C1C", "C1P", "C1W", "C1", "P1"), "E": ("C1C", "C1X", "C1B", "C1")}
-NAMES = {"G": "GPS", "E": "Galileo"}
+#: the code observations read, in order of preference: RINEX 3 names, then RINEX 2 (C1 the C/A code, P1 the P
+#: code); the C/N0 is the S observation of the same band and attribute (S1C, S1 …). BeiDou B1I is C2I from RINEX
+#: 3.02 on, C1I before; B3I is C6I, B2I C7I
+CODES = {"G": ("C1C", "C1P", "C1W", "C1", "P1"), "E": ("C1C", "C1X", "C1B", "C1"), "R": ("C1C", "C1P", "C1"),
+         "C": ("C2I", "C1I", "C6I", "C7I", "C2")}  # fmt: skip
+NAMES = {"G": "GPS", "E": "Galileo", "R": "GLONASS", "C": "BeiDou"}
 
 
 def load_rinex(path: str, what: str):
-    """georinex's dataset of a RINEX ``what`` ("observation" or "navigation") file, GPS and Galileo only."""
+    """georinex's dataset of a RINEX ``what`` ("observation" or "navigation") file: GPS, Galileo, GLONASS, BeiDou."""
     try:
         import georinex
     except ImportError:  # pragma: no cover - a dependency of the package
@@ -32,7 +35,7 @@ def load_rinex(path: str, what: str):
         with warnings.catch_warnings():  # georinex's own xarray deprecations are not the user's business
             warnings.simplefilter("ignore", FutureWarning)
             warnings.simplefilter("ignore", DeprecationWarning)
-            return georinex.load(path, use={"G", "E"})
+            return georinex.load(path, use=set(NAMES))
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
     except Exception as exc:  # georinex raises many kinds on bad files
@@ -40,7 +43,7 @@ def load_rinex(path: str, what: str):
 
 
 def observations(obs) -> pd.DataFrame:
-    """One row per (epoch, satellite) with a pseudorange: time, sv, pr_m, cn0_dbhz."""
+    """One row per (epoch, satellite) with a pseudorange: time, sv, pr_m, cn0_dbhz, code (the observation read)."""
     frames = []
     for system, codes in CODES.items():
         svs = [s for s in obs.sv.values if str(s).startswith(system)]
@@ -51,10 +54,10 @@ def observations(obs) -> pd.DataFrame:
         snr_name = "S" + code[1:]
         snr = obs[snr_name].sel(sv=svs).to_pandas() if snr_name in obs else pr * np.nan
         table = pd.DataFrame({"pr_m": pr.stack(future_stack=True), "cn0_dbhz": snr.stack(future_stack=True)}).reset_index()
-        frames.append(table.rename(columns={table.columns[0]: "time", table.columns[1]: "sv"}))
+        frames.append(table.rename(columns={table.columns[0]: "time", table.columns[1]: "sv"}).assign(code=code))
     if not frames:
-        raise DataError("no GPS or Galileo L1/E1 code observations (RINEX 3: C1C/C1X/C1P/C1W/C1B; RINEX 2: C1/P1) in the "
-                        "observation file")  # fmt: skip
+        raise DataError("no GPS, Galileo, GLONASS or BeiDou code observations (RINEX 3: C1C/C1X/C1P/C1W/C1B, BeiDou "
+                        "C2I/C1I/C6I/C7I; RINEX 2: C1/P1) in the observation file")  # fmt: skip
     rows = pd.concat(frames, ignore_index=True)
     rows["time"] = rows["time"].astype("datetime64[ns]")  # one unit whatever the RINEX version (georinex: ns for 2, µs for 3)
     return rows[np.isfinite(rows["pr_m"])].sort_values(["time", "sv"], kind="stable").reset_index(drop=True)
