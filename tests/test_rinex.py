@@ -138,16 +138,17 @@ def test_cli_rinex(tmp_path):
     assert proc.returncode == 1 and b"Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
 
 
-def test_a_navigation_file_without_gps_or_galileo_is_a_data_error_not_an_internal_one():
-    """A BeiDou- or GLONASS-only RINEX navigation file reads as an empty dataset (GPS and Galileo are read): a clear
-    DataError, where it was ``KeyError: ['sqrtA']``."""
+def test_a_navigation_file_without_an_orbit_is_a_data_error_not_an_internal_one():
+    """A RINEX navigation dataset whose records carry no orbit (neither Keplerian elements nor a GLONASS state
+    vector: an SBAS-only file, say) is a clear DataError, where it was ``KeyError: ['sqrtA']``. (BeiDou and GLONASS
+    files are read: tests/test_glonass_beidou.py.)"""
     import xarray as xr
 
     from tollcli.errors import DataError
 
     from tollcli.gnss.satellite_states import rinex_ephemeris_table
 
-    with pytest.raises(DataError, match="no GPS or Galileo ephemerides"):
+    with pytest.raises(DataError, match="no GPS, Galileo, BeiDou or GLONASS ephemerides"):
         rinex_ephemeris_table(xr.Dataset({"SVclockBias": (("time", "sv"), [[1e-4]])},
                                          coords={"time": [np.datetime64("2021-04-29T00:00")], "sv": ["C01"]}))
 

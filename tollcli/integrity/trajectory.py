@@ -48,6 +48,9 @@ NOISE_ROUNDS = 2
 HEADING_WINDOW = 300
 #: the gyro bias's σ at the start (rad/s): a consumer MEMS gyro's turn-on bias, up to ~0.3 °/s
 GYRO_BIAS0_RADPS = 0.005
+#: the receiver clock drift's σ at the start (m/s): a receiver's TCXO may be 1 ppm off (300 m/s; a u-blox walk's is
+#: −60 m/s) — with 10 m/s the first epochs' clocks ran off their prior and a pass started "lost"
+DRIFT0_MPS = 300.0
 #: the σ of a measurement the error model gives none (m)
 FALLBACK_SIGMA_M = 30.0
 #: the median of χ²₁
@@ -219,7 +222,7 @@ def _starts(inp: TrajectoryInputs, odometry: bool, m: int):
         raise ValueError("no snapshot fix to start the trajectory from")
     p0 = np.zeros((n_states, n_states))
     p0[[0, 1, 2], [0, 1, 2]] = 30.0**2
-    p0[m - 1, m - 1] = 10.0**2  # drift
+    p0[m - 1, m - 1] = DRIFT0_MPS**2  # drift
     p0[np.arange(m, n_states), np.arange(m, n_states)] = 100.0**2
     starts = []
     for window in (fixed[:HEADING_WINDOW], fixed[-HEADING_WINDOW:][::-1]):
