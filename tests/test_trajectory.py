@@ -208,30 +208,35 @@ def test_odometry_the_fixes_contradict_is_found():
     assert bad[(t > 85) & (t <= 135)].all() and not bad[(t < 30) | (t > 190)].any()
 
 
-def test_a_receiver_clock_drifting_60_mps_does_not_start_a_pass_lost():
+@pytest.fixture(scope="module")
+def walk():
+    """rtklibexplorer's u-blox walk solved once: its epoch table and measurements."""
+    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+    from tollcli.gnss.sigma_models import NominalModel
+
+    return pseudorange_epochs(str(shared("rtklibexplorer", "gnss_1730.ubx")), "ubx", None, "nominal", 5.0, NominalModel())
+
+
+def test_a_receiver_clock_drifting_60_mps_does_not_start_a_pass_lost(walk):
     """rtklibexplorer's u-blox walk (open sky, its TCXO drifting −60 m/s): smoothed, every epoch valid. With the
     drift's start σ at 10 m/s the backward pass's first clocks ran off their prior, the pass "lost the vehicle" at
     its second epoch and the 30 s around it (123 epochs) were fault_detected; a 1 ppm TCXO (300 m/s) is allowed
     for now."""
-    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
-    from tollcli.gnss.sigma_models import NominalModel
     from tollcli.integrity.trajectory import with_trajectory
 
-    epochs, meas = pseudorange_epochs(str(shared("rtklibexplorer", "gnss_1730.ubx")), "ubx", None, "nominal", 5.0, NominalModel())
+    epochs, meas = walk
     assert np.nanmedian(epochs["clock_drift_mps"]) < -50.0  # the receiver's own Doppler says so
     placed, meas, used = with_trajectory(epochs, meas, "smoothed")
     assert used == "smoothed" and not meas.trajectory_lost.any()
     assert np.nanmax(meas.trajectory_hpl_m) < 20.0
 
 
-def test_the_walks_bounds_hold_against_its_rtk_reference():
+def test_the_walks_bounds_hold_against_its_rtk_reference(walk):
     """rtklibexplorer's triple-band u-blox walk against the receiver's own RTK solution (``gnss_1730_sf.pos``): the
     snapshot and the smoothed positions lie 8–9 m from it — RTKLIB's own single-point solution of the log too: the
     ionosphere at solar maximum, common to every satellite, which no residual shows — and every epoch's HPL still
     covers its error. (The Doppler in the filter tightened the smoothed HPL to 3.8 m here: not adopted.)"""
     from tollcli.geodesy import enu_rotation, geodetic2ecef
-    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
-    from tollcli.gnss.sigma_models import NominalModel
     from tollcli.integrity.raim import RaimParams
     from tollcli.integrity.run import run_raim
     from tollcli.integrity.trajectory import with_trajectory
@@ -239,7 +244,7 @@ def test_the_walks_bounds_hold_against_its_rtk_reference():
     pos = pd.read_csv(shared("rtklibexplorer", "gnss_1730_sf.pos"), comment="%", sep=r"\s+", header=None)
     truth = pd.DataFrame({"lat": pos[2].to_numpy(), "lon": pos[3].to_numpy(), "h": pos[4].to_numpy()},
                          index=pd.to_datetime(pos[0] + " " + pos[1]))  # GPS time  # fmt: skip
-    epochs, meas = pseudorange_epochs(str(shared("rtklibexplorer", "gnss_1730.ubx")), "ubx", None, "nominal", 5.0, NominalModel())
+    epochs, meas = walk
     when = pd.to_datetime(epochs["time_utc"]).dt.tz_localize(None) + pd.Timedelta(seconds=18)
     ref = truth.reindex(when, method="nearest", tolerance=pd.Timedelta("0.1s"))
     assert ref["lat"].notna().all()
