@@ -45,7 +45,7 @@ def require_json(output: str) -> str:
         raise UsageError(f"{output}: this command writes JSON: name the file .json (or - for stdout)")
     return output
 InputFormat = Annotated[Literal[INPUT_KINDS], typer.Option("--input-format", help="Input: auto, nmea, ubx-nav (u-blox NAV-PVT/SOL/POSLLH, NAV-SAT/SVINFO with prRes, NAV-DOP, NAV-PL, HNR-PVT), gpsd-json (gpspipe -w, gpsdecode: TPV, SKY, GST), rtklib-pos (RTKLIB .pos solutions: Q, sdn/sde/sdne), gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX), librsf (libRSF text: smartLoc pseudorange3/odom3).")]
-Nav = Annotated[Optional[list[str]], typer.Option("--nav", help="Navigation file, RINEX 2 or 3 (GPS, Galileo): the orbits for rinex and gnsslogger input; replaces the file's own satellites for device-gnss and ubx. Repeatable: several files are read as one (a day's GPS and Galileo files, consecutive days).")]
+Nav = Annotated[Optional[list[str]], typer.Option("--nav", help="Navigation file, RINEX 2 or 3 (GPS, Galileo, BeiDou, GLONASS): the orbits for rinex and gnsslogger input; replaces the file's own satellites for device-gnss and ubx. Repeatable: several files are read as one (a day's files of each system, consecutive days).")]
 
 
 def nav_files(nav) -> str | tuple[str, ...] | None:
