@@ -61,3 +61,20 @@ def test_model_choice():
         sm.sigma_for("input", **kwargs)
     with pytest.raises(ValueError):
         sm.sigma_for("magic", **kwargs)
+
+
+def test_glonass_and_beidou_take_their_own_clock_and_ephemeris_sigma():
+    """Known answer: at the same elevation, C/N0 and signal, σ² of a GLONASS (BeiDou) pseudorange exceeds a GPS one's
+    by 2.8² − 0.85² (1.4² − 0.85²) m² — the broadcast orbits' and clocks' measured RMS (2 m, 1 m against GPS's
+    0.6 m) over-bounded by the same 1.4× as GPS's 0.85 m; GPS and Galileo are as before."""
+    from tollcli.gnss.sigma_models import NominalModel
+
+    elev = np.array([15.0, 40.0, 75.0])
+    names = np.array(["GPS", "GLONASS", "BeiDou"], dtype=object)
+    model = NominalModel()
+    sigma = {n: model.sigma_m(elev, np.full(3, 40.0), np.full(3, n, dtype=object), 45.0, 10.0) for n in names}
+    assert np.allclose(sigma["GLONASS"] ** 2 - sigma["GPS"] ** 2, 2.8**2 - 0.85**2)
+    assert np.allclose(sigma["BeiDou"] ** 2 - sigma["GPS"] ** 2, 1.4**2 - 0.85**2)
+    plain = NominalModel(clk_eph_by_constellation={})
+    assert np.array_equal(plain.sigma_m(elev, np.full(3, 40.0), np.full(3, "GPS", dtype=object), 45.0, 10.0), sigma["GPS"])
+    assert np.allclose(plain.sigma_m(elev, np.full(3, 40.0), np.full(3, "GLONASS", dtype=object), 45.0, 10.0), sigma["GPS"])

@@ -6,7 +6,9 @@ Three choices (``--sigma-model``):
 * ``input``: the σ the log reports per measurement (e.g. GSDC ``rawPrUncM``);
 * ``nominal``: the thesis's overbounding model,
   σ² = σ_clk&eph² + σ_iono² + σ_tropo² + σ_noise² + σ_mp², with
-  - clock & ephemeris 0.85 m (modernised GPS / Galileo, the thesis's simulations);
+  - clock & ephemeris 0.85 m (modernised GPS / Galileo, the thesis's simulations); GLONASS 2.8 m and BeiDou 1.4 m,
+    the same 1.4× over the broadcast orbits' and clocks' measured global RMS (Montenbruck, Steigenberger & Hauschild
+    2018, Adv. Space Res. 61(12): 0.6 m GPS, 2 m GLONASS, 1 m BeiDou-2) as 0.85 m is over GPS's;
   - ionosphere, single frequency: F·τ_v, τ_v = 9 / 4.5 / 6 m by geomagnetic latitude
     (≤ 20°, 20–55°, > 55°); ``sbas``: F·0.46 m; ``iono-free``: 0, with noise and
     multipath of the two bands scaled by k_A² = 5.11, k_B² = 1.59 (L1/E1 + L5/E5a);
@@ -49,6 +51,10 @@ DEFAULT_SIGNALS = {
     "GPS": "bpsk1_wide", "GLONASS": "bpsk1_wide", "Galileo": "boc11", "BeiDou": "bpsk1_wide",
     "QZSS": "bpsk1_wide", "NavIC": "bpsk1_wide", "SBAS": "bpsk1_wide", "unknown": "bpsk1_wide",
 }  # fmt: skip
+
+
+#: clock & ephemeris σ (m) where it is not :attr:`NominalModel.clk_eph_m`
+CLK_EPH_M = {"GLONASS": 2.8, "BeiDou": 1.4}
 
 
 def _psd(kind: str, f: np.ndarray, rate: int) -> np.ndarray:
@@ -133,6 +139,8 @@ class NominalModel:
     """The thesis's nominal model, with its choices as fields."""
 
     clk_eph_m: float = 0.85
+    #: the clock & ephemeris σ (m) of the constellations whose broadcast orbits and clocks are worse than GPS's
+    clk_eph_by_constellation: dict[str, float] = field(default_factory=lambda: dict(CLK_EPH_M))
     iono: str = "single"  # single | sbas | iono-free
     default_cn0_dbhz: float = 30.0
     signals: dict[str, str] = field(default_factory=lambda: dict(DEFAULT_SIGNALS))
@@ -162,6 +170,9 @@ class NominalModel:
             local_var = sigma_noise_dll_m(c, signal) ** 2 + MULTIPATH_M[signal] ** 2
             if self.iono == "iono-free":  # second band BPSK(10) (L5/E5a) at the same C/N0
                 local_var = KA2_L1L5 * local_var + KB2_L1L5 * (sigma_noise_dll_m(c, "bpsk10") ** 2 + MULTIPATH_M["bpsk10"] ** 2)
+            clk = self.clk_eph_by_constellation.get(str(name))
+            if clk is not None:  # its own clock & ephemeris σ in place of the common one
+                local_var = local_var + (clk**2 - self.clk_eph_m**2)
             local[sel] = local_var
         return np.sqrt(var + local)
 
