@@ -16,8 +16,9 @@ from tollcli.gnss.wls import Geometry
 from tollcli.integrity.sources import k_h
 
 #: σ (m) of the worst satellite a receiver can use under the nominal model (5° elevation, low latitude, single
-#: frequency): with no satellites reported, HDOP · this bounds σ_major (``tests/test_model_level.py`` derives it)
-NOMINAL_WORST_SIGMA_M = 27.5
+#: frequency, a GLONASS satellite: its clock & ephemeris σ is the largest): with no satellites reported, HDOP · this
+#: bounds σ_major (``tests/test_model_level.py`` derives it)
+NOMINAL_WORST_SIGMA_M = 27.6
 
 
 def sigma_major_m(geometry: Geometry, sigma_m: np.ndarray) -> np.ndarray:
