@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from tollcli.gnss.lnav_subframes import PI_GPS
+from tollcli.gnss.lnav_subframes import PI_GPS, read_bits
 from tollcli.gnss.orbits import WEEK_S
 
 #: BDT week 0 is GPS week 1356 (2006-01-01); BDT = GPST − 14 s
@@ -69,8 +69,7 @@ def _joined(bits: np.ndarray, parts, signed: bool) -> np.ndarray:
     value = np.zeros(len(bits), np.int64)
     total = 0
     for start, n in parts:
-        chunk = bits[:, start : start + n].astype(np.int64) @ (np.int64(1) << np.arange(n - 1, -1, -1, dtype=np.int64))
-        value = (value << n) | chunk
+        value = (value << n) | read_bits(bits, start, n, False)
         total += n
     if signed:
         value = np.where(value >= (1 << (total - 1)), value - (1 << total), value)

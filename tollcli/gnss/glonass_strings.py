@@ -21,6 +21,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from tollcli.gnss.lnav_subframes import read_bits
+
 #: the 8 Hamming check masks over the string's first 11 bytes (ICD §4.7, as RTKLIB's test_glostr)
 _HAMMING = np.array([
     [0x55, 0x55, 0x5A, 0xAA, 0xAA, 0xAA, 0xB5, 0x55, 0x6A, 0xD8, 0x08],
@@ -61,10 +63,10 @@ def hamming_ok(data: np.ndarray) -> np.ndarray:
 
 
 def _field(bits: np.ndarray, start: int, n: int, sign_magnitude: bool) -> np.ndarray:
-    if sign_magnitude:
-        value = bits[:, start + 1 : start + n].astype(np.int64) @ (np.int64(1) << np.arange(n - 2, -1, -1, dtype=np.int64))
+    if sign_magnitude:  # the first bit is the sign, the rest the magnitude
+        value = read_bits(bits, start + 1, n - 1, False)
         return np.where(bits[:, start] == 1, -value, value)
-    return bits[:, start : start + n].astype(np.int64) @ (np.int64(1) << np.arange(n - 1, -1, -1, dtype=np.int64))
+    return read_bits(bits, start, n, False)
 
 
 def decode_strings(words: np.ndarray) -> pd.DataFrame:

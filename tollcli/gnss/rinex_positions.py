@@ -22,7 +22,7 @@ from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
 from tollcli.gnss.measurements import Measurements, pad, slots
 from tollcli.gnss.orbits import WEEK_S
 from tollcli.gnss.pseudorange_wls import C_MPS, final_geometry, solve_positions
-from tollcli.gnss.satellite_states import load_navigation, navigation_files, nearest_ephemerides, satellite_states
+from tollcli.gnss.satellite_states import load_navigation, navigation_files, satellite_states
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.gps_time import gps_millis_to_utc, gps_seconds
 from tollcli.readers.rinex import NAMES, load_rinex, observations
@@ -65,7 +65,7 @@ def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m:
     system = sv.astype("<U1")
     b1i, b2i = (system == "C") & np.isin(code, ("C2I", "C1I", "C2")), (system == "C") & (code == "C7I")
     clock = clock - np.where(b1i, np.nan_to_num(states["tgd1_s"]), 0.0) - np.where(b2i, np.nan_to_num(states["tgd2_s"]), 0.0)
-    carrier = carrier_hz(system, code, nearest_ephemerides(ephemerides, sv, t_rx)[0]["FreqNum"] if "FreqNum" in ephemerides else None)
+    carrier = carrier_hz(system, code, states["freq_num"])
     if not usable.any():  # a navigation file of another day: say so, not "every epoch insufficient"
         raise DataError(f"{obs_path}: no observation has a satellite orbit in {', '.join(navigation_files(nav_path))} ({orbit_coverage(ephemerides, t_rx)}); "
                         "a navigation file for the day of the observations gives the orbits")  # fmt: skip
@@ -96,7 +96,9 @@ def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m:
         clock_index[letters == c] = k
     x = solve_positions(sat, pr_corr, mask, np.where(mask, sigma_m, np.nan), correction, clock_index)
     g = final_geometry(sat, pr_corr, mask, x, correction, clock_index)
-    const = np.vectorize(lambda c: NAMES.get(c, "GPS"), otypes=[object])(letters) if letters.size else letters
+    const = np.full(shape, "GPS", dtype=object)
+    for letter, name in NAMES.items():
+        const[letters == letter] = name
     sigma = np.where(mask, sigma_for(sigma_model, elev_deg=g["elev_deg"], cn0_dbhz=cn0, constellation=const,
                                      lat_deg=g["lat_deg"][:, None], lon_deg=g["lon_deg"][:, None],
                                      sigma_const_m=sigma_m, nominal=nominal), np.nan)  # fmt: skip

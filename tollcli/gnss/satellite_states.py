@@ -19,7 +19,7 @@ from tollcli.errors import DataError
 from tollcli.gnss.glonass_orbits import GLONASS_FIELDS, glonass_position_clock
 from tollcli.gnss.glonass_orbits import MAX_AGE_S as GLONASS_MAX_AGE_S
 from tollcli.gnss.orbits import EPHEMERIS_FIELDS, WEEK_S, kepler_position_clock
-from tollcli.gnss.beidou_d1 import BDT_GPS_S, BDT_WEEK_OFFSET
+from tollcli.gnss.beidou_d1 import BDT_GPS_S, BDT_WEEK_OFFSET, is_geostationary
 from tollcli.readers.gps_time import gps_seconds, leap_seconds_at_gps
 
 C_MPS = 299_792_458.0
@@ -114,8 +114,6 @@ def nearest_ephemerides(table: pd.DataFrame, sv: np.ndarray, t_s: np.ndarray) ->
 
 def _position_clock(eph: dict[str, np.ndarray], t_s: np.ndarray, system: np.ndarray, prn: np.ndarray):
     """Position and clock at ``t_s`` of each query, by its system (``system``: the labels' first letters)."""
-    from tollcli.gnss.beidou_d1 import is_geostationary
-
     pos, clock = kepler_position_clock(eph, t_s, system == "E", system == "C", is_geostationary(prn))
     glonass = system == "R"
     if glonass.any():
@@ -131,7 +129,8 @@ def satellite_states(table: pd.DataFrame, sv: np.ndarray, t_rx_s: np.ndarray, pr
 
     Returns ``pos_m`` (n, 3), ``vel_mps`` (n, 3), ``clock_s`` (n,) (relativity and group delay included),
     ``drift_sps`` (n,), ``t_tx_s`` (n,), ``have`` (n,) — false where no usable ephemeris is known — and the BeiDou
-    ephemeris's group delays ``tgd1_s``/``tgd2_s`` (B1I and B2I against B3I, to which its clock refers; NaN else).
+    ephemeris's group delays ``tgd1_s``/``tgd2_s`` (B1I and B2I against B3I, to which its clock refers; NaN else)
+    and a GLONASS ephemeris's frequency number ``freq_num`` (NaN else).
     """
     sv = np.asarray(sv, dtype=str)
     t_rx_s, pr_m = np.asarray(t_rx_s, float), np.asarray(pr_m, float)
@@ -150,4 +149,4 @@ def satellite_states(table: pd.DataFrame, sv: np.ndarray, t_rx_s: np.ndarray, pr
     drift = (clock_ahead - clock_behind) / (2 * DIFF_S)
     have = have & np.isfinite(pos).all(axis=1) & np.isfinite(clock)
     return {"pos_m": pos, "vel_mps": vel, "clock_s": clock, "drift_sps": drift, "t_tx_s": t_tx, "have": have,
-            "tgd1_s": eph["TGD1"], "tgd2_s": eph["TGD2"]}
+            "tgd1_s": eph["TGD1"], "tgd2_s": eph["TGD2"], "freq_num": eph["FreqNum"]}

@@ -102,11 +102,11 @@ def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.Da
             gps_week_hint = float(np.median(galileo["toe_s"].to_numpy(float)) // WEEK_S)
         else:
             gps_week_hint = _pvt_week(ubx.pvt)
-    tables = [lnav_subframes.ephemerides(gps[["sv", "words"]].reset_index(drop=True), gps_week_hint), galileo, beidou, glonass]
-    tables = [t for t in tables if len(t)]
-    if not tables:
-        return lnav_subframes.ephemerides(gps[["sv", "words"]].reset_index(drop=True), gps_week_hint)
-    return tables[0] if len(tables) == 1 else pd.concat(tables, ignore_index=True)
+    lnav = lnav_subframes.ephemerides(gps[["sv", "words"]].reset_index(drop=True), gps_week_hint)
+    tables = [t for t in (lnav, galileo, beidou, glonass) if len(t)]
+    if len(tables) <= 1:
+        return tables[0] if tables else lnav
+    return pd.concat(tables, ignore_index=True)
 
 
 def receive_times_gps_s(ubx: UbxRead, message: np.ndarray) -> np.ndarray:
