@@ -68,3 +68,21 @@ def test_a_fault_is_found_on_the_faulty_satellite():
     res = solution_separation(H, sigma, mask, np.nan_to_num(r), clock_columns(H, mask), geometry, 5e-5, 5e-3)
     found = res.max_ratio > 1.0
     assert found.mean() > 0.8 and (res.worst_slot[found] == 5).mean() > 0.9
+
+
+def test_the_protection_level_is_the_least_within_the_budget():
+    """The solver's L spends the integrity budget: the risk at L is within it, and at L less one part in 10⁹ it is
+    not (the bisection ends within 2⁻⁴⁸ of its start)."""
+    from tollcli.integrity.solution_separation import _risk, _solve_hpl, radius_factor
+
+    rng = np.random.default_rng(3)
+    n_epochs, n_modes = 3000, 30
+    sigma_0 = rng.uniform(0.5, 20.0, n_epochs)
+    sigma_k = sigma_0[:, None] * rng.uniform(1.0, 3.0, (n_epochs, n_modes))
+    prior = np.where(rng.random((n_epochs, n_modes)) < 0.8, 10.0 ** rng.uniform(-7, -4.5, (n_epochs, n_modes)), 0.0)
+    threshold = radius_factor(1e-3) * sigma_k * rng.uniform(0.1, 1.0, (n_epochs, n_modes))
+    budget = np.full(n_epochs, 1e-4)
+    hpl = _solve_hpl(sigma_0, prior, threshold, sigma_k, budget)
+    assert np.isfinite(hpl).all()
+    assert (_risk(hpl, sigma_0, prior, threshold, sigma_k) <= budget).all()
+    assert (_risk(hpl * (1 - 1e-9), sigma_0, prior, threshold, sigma_k) > budget).all()

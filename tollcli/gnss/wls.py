@@ -57,12 +57,15 @@ def observation_matrix(elev_deg: np.ndarray, azim_deg: np.ndarray, clock_index: 
     return np.concatenate([los, clocks], axis=-1)
 
 
-def _inverse_psd(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def inverse_psd(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Batched inverse of symmetric positive semi-definite (E, U, U); flags singular ones.
 
     The matrix is scaled to unit diagonal first (a correlation matrix, whose
     determinant lies in [0, 1]); a determinant below ``SINGULAR_RCOND`` marks the
     geometry singular (its inverse is returned as zeros).
+
+    (A normal matrix of [east, north, up, clocks…] rows has a diagonal clock block, whose Schur complement
+    :func:`clock_group_terms` forms: the solution separation's constellation subsets are solved through it.)
     """
     diag = np.einsum("eii->ei", G)
     scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
@@ -75,6 +78,74 @@ def _inverse_psd(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return inv, singular
 
 
+@dataclass
+class ClockGroups:
+    """Per epoch, the measurements of each clock group (constellation) summed (:func:`clock_group_terms`)."""
+
+    weight: np.ndarray  # (E, G, N) each group's measurements' weights, 0 elsewhere
+    total: np.ndarray  # (E, G) Σ w: the normal matrix's clock diagonal
+    centred: np.ndarray  # (E, N, 3) each measurement's [−e, −n, −u] row less its group's weighted mean h̄
+    scatter: np.ndarray  # (E, G, 3, 3) Σ w·(h − h̄)(h − h̄)ᵀ: summed over groups, the clock block's Schur complement
+    squares: np.ndarray  # (E, G, 3) Σ w·h²: the position diagonal's share
+    nonzero: np.ndarray  # (E, G, 3) some measurement of the group has that position entry
+
+
+def clock_group_terms(Hm: np.ndarray, weight: np.ndarray, group: np.ndarray, n_groups: int) -> ClockGroups:
+    """:class:`ClockGroups` of rows ``Hm`` (E, N, ≥3) with ``weight`` (E, N; 0 unused), ``group`` (E, N) each
+    measurement's clock group (−1 none). The Schur complement S = P − B·D⁻¹·Bᵀ of a normal matrix's diagonal clock
+    block is the sum of the groups' scatters: formed so, without the cancellation of the difference; the position
+    block of the normal matrix's inverse is S⁻¹ (:func:`adjugate_inverse`), a measurement n's position gain
+    S⁻¹·w_n·(h_n − h̄ of its group)."""
+    n_epochs, n_slots = weight.shape
+    member = np.zeros((n_epochs, n_groups, n_slots))
+    e, n = np.nonzero((group >= 0) & (weight > 0))
+    member[e, group[e, n], n] = weight[e, n]
+    total = member.sum(axis=2)
+    h = Hm[..., :3]
+    mean = (member @ h) / np.where(total > 0, total, 1.0)[..., None]  # (E, G, 3)
+    d = h - np.take_along_axis(mean, np.maximum(group, 0)[..., None], axis=1)
+    outer = (d[..., :, None] * d[..., None, :]).reshape(n_epochs, n_slots, 9)
+    return ClockGroups(member, total, d, (member @ outer).reshape(n_epochs, n_groups, 3, 3), member @ (h * h),
+                       (member > 0).astype(float) @ np.abs(h) > 0)  # fmt: skip
+
+
+def clock_groups(Hm: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
+    """Each used measurement's clock column (E, N; −1 unused) where every one has exactly one clock entry, a 1 (the
+    form :func:`observation_matrix` writes); None otherwise."""
+    if Hm.shape[-1] <= 3:
+        return None
+    clocks = Hm[..., 3:]
+    used = weight > 0
+    ones = clocks == 1.0
+    if not (np.all((ones | (clocks == 0.0)) | ~used[..., None]) and np.all(ones.sum(axis=-1)[used] == 1)):
+        return None
+    return np.where(used, np.argmax(ones, axis=-1), -1)
+
+
+def adjugate_inverse(s: np.ndarray, position_diag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The inverse of symmetric 3×3 matrices ``s`` (E, 3, 3) by their adjugate, and whether the normal matrix they are
+    the Schur complement of is singular: its unit-diagonal determinant det(S) / (P₀₀·P₁₁·P₂₂) (``position_diag`` (E, 3)
+    the normal matrix's position diagonal) below ``SINGULAR_RCOND`` (the inverse is then zeros)."""
+    adj = np.empty_like(s)
+    adj[:, 0, 0] = s[:, 1, 1] * s[:, 2, 2] - s[:, 1, 2] * s[:, 2, 1]
+    adj[:, 0, 1] = s[:, 0, 2] * s[:, 2, 1] - s[:, 0, 1] * s[:, 2, 2]
+    adj[:, 0, 2] = s[:, 0, 1] * s[:, 1, 2] - s[:, 0, 2] * s[:, 1, 1]
+    adj[:, 1, 0] = s[:, 1, 2] * s[:, 2, 0] - s[:, 1, 0] * s[:, 2, 2]
+    adj[:, 1, 1] = s[:, 0, 0] * s[:, 2, 2] - s[:, 0, 2] * s[:, 2, 0]
+    adj[:, 1, 2] = s[:, 0, 2] * s[:, 1, 0] - s[:, 0, 0] * s[:, 1, 2]
+    adj[:, 2, 0] = s[:, 1, 0] * s[:, 2, 1] - s[:, 1, 1] * s[:, 2, 0]
+    adj[:, 2, 1] = s[:, 0, 1] * s[:, 2, 0] - s[:, 0, 0] * s[:, 2, 1]
+    adj[:, 2, 2] = s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] * s[:, 1, 0]
+    det_s = s[:, 0, 0] * adj[:, 0, 0] + s[:, 0, 1] * adj[:, 1, 0] + s[:, 0, 2] * adj[:, 2, 0]
+    product = position_diag[:, 0] * position_diag[:, 1] * position_diag[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scaled_det = det_s / np.where(product > 0, product, 1.0)
+    singular = (position_diag <= 0).any(axis=1) | ~(scaled_det > SINGULAR_RCOND)
+    s_inv = adj / np.where(singular, 1.0, det_s)[:, None, None]
+    s_inv[singular] = 0.0
+    return s_inv, singular
+
+
 def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geometry:
     """WLS gain, redundancy, slopes and degrees of freedom for every epoch."""
     mask = mask & np.isfinite(sigma_m) & (sigma_m > 0)
@@ -85,7 +156,7 @@ def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geomet
     G = HwT @ Hm
     idx = np.arange(G.shape[-1])
     G[:, idx, idx] += ~active  # an inactive unknown is decoupled, not singular
-    Ginv, singular = _inverse_psd(G)
+    Ginv, singular = inverse_psd(G)
     A = Ginv @ HwT
     leverage = (Hm * A.transpose(0, 2, 1)).sum(axis=-1)
     redundancy = np.where(mask, 1.0 - leverage, 0.0)

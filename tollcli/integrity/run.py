@@ -40,6 +40,8 @@ from tollcli.integrity.raim import (
     status_names,
 )
 from tollcli.integrity.solution_separation import (
+    SeparationResult,
+    epoch_separation,
     separation_detection,
     separation_exclusion,
 )
@@ -63,10 +65,12 @@ RAIM_COLUMNS = (
 _STATUS_OR_NONE = np.array(STATUSES + ("",), dtype=object)  # index -1: no verdict
 
 
-def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geometry | None = None) -> pd.DataFrame:
+def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geometry | None = None,
+             separation: SeparationResult | None = None) -> pd.DataFrame:  # fmt: skip
     """One row of RAIM results per epoch of ``meas`` (``hal_m``: scalar or per epoch).
 
-    ``geometry``: ``wls_geometry`` of ``meas`` when already computed (it does not depend on the HAL). Epochs the
+    ``geometry``: ``wls_geometry`` of ``meas`` when already computed (it does not depend on the HAL);
+    ``separation``: :func:`raim_separation` of ``meas`` when already computed (nor does it). Epochs the
     trajectory estimator placed are judged by its bound and fault test instead (:mod:`tollcli.integrity.trajectory_verdicts`).
     """
     if meas.trajectory_hpl_m is not None:
@@ -87,7 +91,7 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     ratio = np.full(n_epochs, np.nan)
     if params.mode == "ss":
         detection, ratio = separation_detection(meas.H, meas.sigma_m, meas.mask, np.where(per_satellite[:, None], residual, np.nan),
-                                            geometry, t, params, hal_m)  # fmt: skip
+                                                geometry, t, params, hal_m, separation)  # fmt: skip
         if params.fde:
             excluded_sv, shift = separation_exclusion(meas, geometry, residual, detection, ratio, params)
     else:
@@ -139,6 +143,17 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
             "separation_ratio": ratio,
         }
     )
+
+
+def raim_separation(meas: Measurements, params: RaimParams, geometry: Geometry) -> SeparationResult | None:
+    """The solution separation :func:`run_raim` computes for ``meas`` (None: not the ``ss`` mode, or positions the
+    trajectory estimator placed). It depends on neither the HAL nor exclusion: computed once for a chunk of a log, it
+    serves the epochs' RAIM and every (epoch, geo-object) pair's (:func:`tollcli.charging.recognition.inside_pairs`)."""
+    if params.mode != "ss" or meas.trajectory_hpl_m is not None:
+        return None
+    residual, _ = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
+    per_satellite = np.isfinite(wsse(residual, geometry))
+    return epoch_separation(meas.H, meas.sigma_m, meas.mask, np.where(per_satellite[:, None], residual, np.nan), geometry, params)
 
 
 def _names(verdict: np.ndarray):

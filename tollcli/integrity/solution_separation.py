@@ -34,7 +34,11 @@ HPL ≤ HAL). Everything is vectorised over epochs × subsets; there is no loop 
 
 **No solve per subset.** A satellite or a pair left out is a low-rank update of the all-in-view solution
 (:func:`_subset_terms`: with M = I − H·A and R = M[S,S], the separation is −A[:,S]·R⁻¹·r[S] and its covariance
-A[:,S]·Σ_S·R⁻ᵀ·A[:,S]ᵀ); only a whole constellation, or a subset that leaves a clock without measurements, is solved.
+A[:,S]·Σ_S·R⁻ᵀ·A[:,S]ᵀ). A whole constellation (and a satellite alone in its constellation: the same subset) takes
+its clock with it; its subset is solved from the constellations' own sums — the Schur complement of the clock block
+summed over the others, a 3×3 inverse (:func:`_constellation_terms`). Only a satellite the others barely check
+(redundancy ≤ 1e-9), or a pair the update cannot take, is solved. Per (epoch, geo-object) pair the separation is not solved again: it does not depend on
+the HAL (:func:`take_separation`).
 The direct solve of every subset (``closed_form=False``) is kept as the reference the property test and
 ``benchmarks/raim_throughput.py`` compare with: the same verdicts, HPL within 1e-9 and the separation ratio within 2e-9
 relative wherever every redundancy exceeds 1e-3 (1e-6 and 2e-6 nearer singular: both solutions lose digits there). Ties — two subsets separating equally, as a constellation of two satellites does — go
@@ -50,7 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tollcli.gnss.wls import REDUNDANCY_EPS, SINGULAR_RCOND, Geometry, wls_geometry
+from tollcli.gnss.wls import REDUNDANCY_EPS, SINGULAR_RCOND, Geometry, adjugate_inverse, clock_group_terms, clock_groups, wls_geometry
 from tollcli.integrity.raim import (
     FAULT,
     INSUFFICIENT,
@@ -299,14 +303,22 @@ def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m):
         redo_pairs = np.flatnonzero((ui & uj & ~ok).any(axis=0))
     else:
         redo_pairs = np.zeros(0, np.int64)
-    # --- by solving: every constellation, the lone satellites, the pairs the update cannot take
+    # --- whole constellations, from their own normal matrices; a lone satellite's subset is its constellation's
     drops = []
-    for c in range(n_const):
-        drops.append((n_slots + c, used & (const == c), np.ones(n_epochs, bool)))
-    for s in np.flatnonzero((used & ~update).any(axis=0)):
+    if _constellation_terms(Hm, weight, used, const, n_const, Ah, var, r, n_slots, solvable, cov_ss, cov_k, sep):
+        if lone.any():
+            e, s = np.nonzero(lone)
+            k = n_slots + const[e, s]
+            solvable[e, s], cov_ss[e, s], cov_k[e, s], sep[e, s] = solvable[e, k], cov_ss[e, k], cov_k[e, k], sep[e, k]
+        solve = used & ~update & ~lone
+    else:  # clocks not one-hot: every constellation and lone satellite solved
+        drops = [(n_slots + c, used & (const == c), np.ones(n_epochs, bool)) for c in range(n_const)]
+        solve = used & ~update
+    # --- by solving: the satellites the others barely check, the pairs the update cannot take
+    for s in np.flatnonzero(solve.any(axis=0)):
         d = np.zeros(used.shape, bool)
         d[:, s] = True
-        drops.append((s, d, used[:, s] & ~update[:, s]))
+        drops.append((s, d, solve[:, s]))
     for p in redo_pairs:
         d = np.zeros(used.shape, bool)
         d[:, i[p]] = d[:, j[p]] = True
@@ -324,6 +336,42 @@ def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m):
     return solvable, cov_ss, cov_k, sep
 
 
+def _constellation_terms(Hm, weight, used, const, n_const, Ah, var, r, n_slots, solvable, cov_ss, cov_k, sep) -> bool:
+    """The terms of every constellation's subset (into the arrays, at ``n_slots + c``), as :func:`wls_geometry` would
+    solve it, from the constellations' own sums (:func:`clock_group_terms`): without c, the Schur complement of the
+    normal matrix's clock block is S = Σ_{c'≠c} S_c' and a kept measurement's horizontal gain is
+    A[:2, n] = S⁻¹[:2]·w_n·(h_n − h̄_c(n)) — a 3×3 inverse per epoch and subset, not a U×U one and the N-wide
+    products. False (nothing written) where H's clocks are not one-hot: the caller solves."""
+    n_epochs = Hm.shape[0]
+    if n_const == 0 or n_epochs == 0:
+        return True
+    w = np.where(used, weight, 0.0)
+    group = np.where(used, const, -1)
+    if clock_groups(Hm, w) is None or n_const > Hm.shape[-1] - 3:
+        return False
+    g = clock_group_terms(Hm, w, group, n_const)
+    weighted = g.centred * w[..., None]  # (E, N, 3)
+    n_used = used.sum(axis=1)
+    has = g.total > 0  # (E, C) clocks with measurements
+    idx = np.arange(3)
+    for c in range(n_const):  # a few constellations
+        others = np.arange(n_const) != c
+        S = g.scatter[:, others].sum(axis=1)
+        active = g.nonzero[:, others].any(axis=1)  # (E, 3) the position unknowns the subset still has
+        S[:, idx, idx] += ~active  # an inactive unknown is decoupled, not singular (as wls_geometry)
+        s_inv, singular = adjugate_inverse(S, g.squares[:, others].sum(axis=1) + ~active)
+        keep = (group != c)[..., None]
+        A_h = s_inv[:, :2, :] @ np.where(keep, weighted, 0.0).transpose(0, 2, 1)  # (E, 2, N) the subset's gain
+        dA = A_h - Ah
+        k = n_slots + c
+        n_unknowns = active.sum(axis=1) + has[:, others].sum(axis=1)
+        solvable[:, k] = ~singular & (n_used - (group == c).sum(axis=1) - n_unknowns >= 0)
+        cov_ss[:, k] = _cov_h(dA, var)
+        cov_k[:, k] = _cov_h(A_h, var)
+        sep[:, k] = np.einsum("ean,en->ea", dA, r)
+    return True
+
+
 def clock_columns(H: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Each measurement's receiver-clock (constellation) column index, from H's one-hot clock columns."""
     if H.shape[-1] <= 3:
@@ -331,8 +379,30 @@ def clock_columns(H: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return np.argmax(H[..., 3:], axis=-1).astype(np.int64)
 
 
+def _have_residuals(mask: np.ndarray, residual_m: np.ndarray, geometry: Geometry) -> np.ndarray:
+    """(E,) epochs with a residual for every used measurement."""
+    used = mask & (geometry.weight > 0)
+    return ~(used & ~np.isfinite(residual_m)).any(axis=1) & (geometry.n_meas > 0)
+
+
+def epoch_separation(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, residual_m: np.ndarray, geometry: Geometry,
+                     params) -> SeparationResult:  # fmt: skip
+    """:func:`solution_separation` of every epoch as :func:`separation_detection` takes it (``residual_m``: the
+    all-in-view post-fit residuals, NaN where there are none: the protection level alone)."""
+    have = _have_residuals(mask, residual_m, geometry)
+    r = np.where(mask & have[:, None], np.nan_to_num(residual_m), 0.0)
+    return solution_separation(H, sigma_m, mask, r, clock_columns(H, mask), geometry, params.p_md, params.p_fa,
+                               params.p_sat, params.p_const)  # fmt: skip
+
+
+def take_separation(result: SeparationResult, rows: np.ndarray) -> SeparationResult:
+    """The separation of epochs ``rows`` (repeats allowed: one per epoch and geo-object)."""
+    return SeparationResult(*(getattr(result, f)[rows] for f in SeparationResult.__dataclass_fields__))
+
+
 def separation_detection(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, residual_m: np.ndarray,
-                         geometry: Geometry, test_stat: np.ndarray, params, hal_m) -> tuple[Detection, np.ndarray]:  # fmt: skip
+                         geometry: Geometry, test_stat: np.ndarray, params, hal_m,
+                         separation: SeparationResult | None = None) -> tuple[Detection, np.ndarray]:  # fmt: skip
     """The RAIM verdict of every epoch by solution separation (``params.mode == "ss"``), as a :class:`Detection`.
 
     Returns the detection (``test_stat`` the χ² statistic t as given, ``threshold`` and ``lambda_det`` NaN: the
@@ -342,15 +412,14 @@ def separation_detection(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, r
 
     ``residual_m``: the all-in-view post-fit residuals (the separations are (Aₖ − A₀)·r: the same as from the
     pre-fit ones, since every Aₖ·H = I); NaN rows: no residuals, the epoch is ``unmonitored`` with its HPL.
+    ``separation``: :func:`epoch_separation` of these epochs when the caller has it (it depends on neither the HAL nor
+    exclusion: one per log chunk serves the epochs and every (epoch, geo-object) pair).
     """
     n = mask.shape[0]
     hal = np.broadcast_to(np.asarray(params.hal_m if hal_m is None else hal_m, dtype=float), (n,)).copy()
-    used = mask & (geometry.weight > 0)
-    have = ~(used & ~np.isfinite(residual_m)).any(axis=1) & (geometry.n_meas > 0)  # every used residual
+    have = _have_residuals(mask, residual_m, geometry)
     chi2_only = ~have & np.isfinite(test_stat)  # a statistic without residuals (GST RMS): the χ² test at p_fa
-    r = np.where(mask & have[:, None], np.nan_to_num(residual_m), 0.0)
-    ss = solution_separation(H, sigma_m, mask, r, clock_columns(H, mask), geometry, params.p_md, params.p_fa,
-                             params.p_sat, params.p_const)  # fmt: skip
+    ss = separation if separation is not None else epoch_separation(H, sigma_m, mask, residual_m, geometry, params)
     insufficient = (geometry.dof < 1) | geometry.singular | (geometry.n_meas == 0)
     status = np.full(n, VALID, dtype=np.int8)
     ratio = np.where(have, ss.max_ratio, np.nan)
