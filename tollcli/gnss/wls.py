@@ -57,7 +57,7 @@ def observation_matrix(elev_deg: np.ndarray, azim_deg: np.ndarray, clock_index: 
     return np.concatenate([los, clocks], axis=-1)
 
 
-def inverse_psd(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _inverse_psd(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Batched inverse of symmetric positive semi-definite (E, U, U); flags singular ones.
 
     The matrix is scaled to unit diagonal first (a correlation matrix, whose
@@ -82,7 +82,6 @@ def inverse_psd(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class ClockGroups:
     """Per epoch, the measurements of each clock group (constellation) summed (:func:`clock_group_terms`)."""
 
-    weight: np.ndarray  # (E, G, N) each group's measurements' weights, 0 elsewhere
     total: np.ndarray  # (E, G) Σ w: the normal matrix's clock diagonal
     centred: np.ndarray  # (E, N, 3) each measurement's [−e, −n, −u] row less its group's weighted mean h̄
     scatter: np.ndarray  # (E, G, 3, 3) Σ w·(h − h̄)(h − h̄)ᵀ: summed over groups, the clock block's Schur complement
@@ -105,7 +104,7 @@ def clock_group_terms(Hm: np.ndarray, weight: np.ndarray, group: np.ndarray, n_g
     mean = (member @ h) / np.where(total > 0, total, 1.0)[..., None]  # (E, G, 3)
     d = h - np.take_along_axis(mean, np.maximum(group, 0)[..., None], axis=1)
     outer = (d[..., :, None] * d[..., None, :]).reshape(n_epochs, n_slots, 9)
-    return ClockGroups(member, total, d, (member @ outer).reshape(n_epochs, n_groups, 3, 3), member @ (h * h),
+    return ClockGroups(total, d, (member @ outer).reshape(n_epochs, n_groups, 3, 3), member @ (h * h),
                        (member > 0).astype(float) @ np.abs(h) > 0)  # fmt: skip
 
 
@@ -156,7 +155,7 @@ def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geomet
     G = HwT @ Hm
     idx = np.arange(G.shape[-1])
     G[:, idx, idx] += ~active  # an inactive unknown is decoupled, not singular
-    Ginv, singular = inverse_psd(G)
+    Ginv, singular = _inverse_psd(G)
     A = Ginv @ HwT
     leverage = (Hm * A.transpose(0, 2, 1)).sum(axis=-1)
     redundancy = np.where(mask, 1.0 - leverage, 0.0)
