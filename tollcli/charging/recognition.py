@@ -27,8 +27,7 @@ from tollcli.errors import DataError
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.wls import Geometry, take_epochs
 from tollcli.integrity.raim import RaimParams
-from tollcli.integrity.run import run_raim
-from tollcli.integrity.solution_separation import SeparationResult, take_separation
+from tollcli.integrity.run import HalFreeTerms, run_raim
 
 VALID_STATUSES = ("valid", "excluded_valid")
 #: a position inside whose vouched position (the RAIM's own solution, after any exclusion) lies outside the geo-object:
@@ -116,14 +115,14 @@ OPTIONAL_PAIR_COLUMNS = ("direction", "hpl_m", "separation_ratio", "part")
 
 def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, params: RaimParams, row_offset: int = 0,
                  geometry: Geometry | None = None, environment: str = "auto",
-                 separation: SeparationResult | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+                 hal_free: HalFreeTerms | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """Every (epoch, geo-object) with the position inside, and the RAIM verdict under that geo-object's HAL.
 
     ``raim_valid``: RAIM-valid and, after an exclusion, the shifted position still inside.
     ``row_offset`` is added to the epoch rows (for a chunk of a longer log). ``geometry``:
-    the WLS geometry of ``meas`` when the caller has it (the same for every HAL); ``separation``: its solution
-    separation (:func:`~tollcli.integrity.run.raim_separation` with ``params``' probabilities: the same for every
-    HAL too). Where a geo-object declares the
+    the WLS geometry of ``meas`` when the caller has it (the same for every HAL); ``hal_free``: its solution
+    separation and model HPL (:func:`~tollcli.integrity.run.hal_free_terms` with ``params``' probabilities: the
+    same for every HAL too). Where a geo-object declares the
     environment its road runs in (``geo.environment``), the ``model`` level takes that environment's σ for the
     positions inside it that no residual measured (``environment``: the ``--environment`` given, which a declaration
     never weakens: :func:`~tollcli.integrity.environment.with_declared_environment`).
@@ -135,13 +134,14 @@ def inside_pairs(epochs: pd.DataFrame, meas: Measurements, geo: GeoObjects, para
                 "separation_ratio": np.zeros(0),
                 "test_stat_source": np.zeros(0, object), "integrity_source": np.zeros(0, object),
                 "raim_valid": np.zeros(0, bool), "direction": np.zeros(0, object), "part": np.zeros(0, np.int64)}  # fmt: skip
-    inside = meas.take(rows)
+    taken = inside = meas.take(rows)
     if geo.environment is not None:
         from tollcli.integrity.environment import with_declared_environment
 
         inside = with_declared_environment(inside, geo.environment[obj], environment)
+    terms = hal_free.take(rows, model=inside is taken) if hal_free is not None else None  # a declared σ: its own model HPL
     raim = run_raim(inside, params, hal_m=geo.hal_m[obj], geometry=take_epochs(geometry, rows) if geometry is not None else None,
-                    separation=take_separation(separation, rows) if separation is not None else None)  # fmt: skip
+                    hal_free=terms)  # fmt: skip
     status = raim["raim_status"].to_numpy(dtype=object)
     # the position the RAIM vouches for: its own weighted solution, after any exclusion
     de = raim["fde_shift_e_m"].to_numpy() + raim["wls_shift_e_m"].to_numpy()

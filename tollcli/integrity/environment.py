@@ -66,10 +66,10 @@ def robust_statistics(meas: Measurements) -> tuple[np.ndarray, np.ndarray]:
     street canyon) do. Epochs with k < 2 count nothing (k 0)."""
     from tollcli.gnss.wls import REDUNDANCY_EPS
 
-    geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
     n = meas.mask.shape[0]
-    if meas.dy_m is None and meas.residual_m is None:
+    if meas.dy_m is None and meas.residual_m is None:  # no residuals: nothing to measure (and no geometry to solve)
         return np.full(n, np.nan), np.zeros(n)
+    geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
     residual, _ = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
     t = wsse(residual, geometry)
     checked = (geometry.weight > 0) & (geometry.redundancy > REDUNDANCY_EPS)

@@ -16,7 +16,7 @@ K_H·d_major from the per-satellite σ's: an accuracy bound, not a RAIM output).
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -42,6 +42,7 @@ from tollcli.integrity.raim import (
 from tollcli.integrity.solution_separation import (
     SeparationResult,
     epoch_separation,
+    take_separation,
     separation_detection,
     separation_exclusion,
 )
@@ -66,11 +67,11 @@ _STATUS_OR_NONE = np.array(STATUSES + ("",), dtype=object)  # index -1: no verdi
 
 
 def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geometry | None = None,
-             separation: SeparationResult | None = None) -> pd.DataFrame:  # fmt: skip
+             hal_free: HalFreeTerms | None = None) -> pd.DataFrame:  # fmt: skip
     """One row of RAIM results per epoch of ``meas`` (``hal_m``: scalar or per epoch).
 
     ``geometry``: ``wls_geometry`` of ``meas`` when already computed (it does not depend on the HAL);
-    ``separation``: :func:`raim_separation` of ``meas`` when already computed (nor does it). Epochs the
+    ``hal_free``: :func:`hal_free_terms` of ``meas`` when already computed (nor do they). Epochs the
     trajectory estimator placed are judged by its bound and fault test instead (:mod:`tollcli.integrity.trajectory_verdicts`).
     """
     if meas.trajectory_hpl_m is not None:
@@ -91,7 +92,7 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     ratio = np.full(n_epochs, np.nan)
     if params.mode == "ss":
         detection, ratio = separation_detection(meas.H, meas.sigma_m, meas.mask, np.where(per_satellite[:, None], residual, np.nan),
-                                                geometry, t, params, hal_m, separation)  # fmt: skip
+                                                geometry, t, params, hal_m, hal_free.separation if hal_free else None)  # fmt: skip
         if params.fde:
             excluded_sv, shift = separation_exclusion(meas, geometry, residual, detection, ratio, params)
     else:
@@ -108,7 +109,8 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     status[probable_false_alarms(status, detection.test_stat, detection.dof, detection.p_fa, params.p_fa)] = PROBABLE_FALSE_ALARM
     if meas.satellites_reported is not None:  # a receiver that reports no satellites at all (GGA/RMC only): nothing
         status[~meas.satellites_reported & (geometry.n_meas == 0)] = STATUSES.index("unmonitored")  # to monitor, not "too few"
-    verdicts, extra = _source_verdicts(meas, status, source, detection.hal_m, params, geometry)
+    hpl_model = hal_free.model_hpl_m if hal_free is not None and hal_free.model_hpl_m is not None else model_hpl(meas, geometry, params.p_md)
+    verdicts, extra = _source_verdicts(meas, status, source, detection.hal_m, params, hpl_model)
     undecided = np.where(np.isin(status, (INSUFFICIENT, UNMONITORED)), status, UNMONITORED)  # no allowed source decided
     allowed = _allowed(meas, params)
     if "model" not in allowed:  # the weakest evidence denies nothing a stronger level vouches for
@@ -145,15 +147,33 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     )
 
 
-def raim_separation(meas: Measurements, params: RaimParams, geometry: Geometry) -> SeparationResult | None:
-    """The solution separation :func:`run_raim` computes for ``meas`` (None: not the ``ss`` mode, or positions the
-    trajectory estimator placed). It depends on neither the HAL nor exclusion: computed once for a chunk of a log, it
-    serves the epochs' RAIM and every (epoch, geo-object) pair's (:func:`tollcli.charging.recognition.inside_pairs`)."""
-    if params.mode != "ss" or meas.trajectory_hpl_m is not None:
+@dataclass
+class HalFreeTerms:
+    """What :func:`run_raim` computes per epoch that depends on neither the HAL nor exclusion: the solution
+    separation (None: not the ``ss`` mode) and the ``model`` level's HPL (None: to be computed, as for positions whose
+    model σ a geo-object's declared environment changed). Computed once for a chunk of a log, they serve the epochs'
+    RAIM and every (epoch, geo-object) pair's (:func:`tollcli.charging.recognition.inside_pairs`)."""
+
+    separation: SeparationResult | None
+    model_hpl_m: np.ndarray | None
+
+    def take(self, rows: np.ndarray, model: bool = True) -> HalFreeTerms:
+        """The terms of epochs ``rows`` (repeats allowed); without the model HPL unless ``model``."""
+        return HalFreeTerms(None if self.separation is None else take_separation(self.separation, rows),
+                            self.model_hpl_m[rows] if model and self.model_hpl_m is not None else None)  # fmt: skip
+
+
+def hal_free_terms(meas: Measurements, params: RaimParams, geometry: Geometry) -> HalFreeTerms | None:
+    """:class:`HalFreeTerms` of ``meas`` (None: positions the trajectory estimator placed, judged by its bound)."""
+    if meas.trajectory_hpl_m is not None:
         return None
-    residual, _ = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
-    per_satellite = np.isfinite(wsse(residual, geometry))
-    return epoch_separation(meas.H, meas.sigma_m, meas.mask, np.where(per_satellite[:, None], residual, np.nan), geometry, params)
+    separation = None
+    if params.mode == "ss":
+        residual, _ = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
+        per_satellite = np.isfinite(wsse(residual, geometry))
+        separation = epoch_separation(meas.H, meas.sigma_m, meas.mask, np.where(per_satellite[:, None], residual, np.nan),
+                                      geometry, params)  # fmt: skip
+    return HalFreeTerms(separation, model_hpl(meas, geometry, params.p_md))
 
 
 def _names(verdict: np.ndarray):
@@ -161,15 +181,15 @@ def _names(verdict: np.ndarray):
 
 
 def _source_verdicts(meas: Measurements, status: np.ndarray, source: np.ndarray, hal_m: np.ndarray, params: RaimParams,
-                     geometry: Geometry):  # fmt: skip
-    """Each source's verdict codes (-1: none), in SOURCES order, and the receiver's and the model's columns."""
+                     hpl_model: np.ndarray):  # fmt: skip
+    """Each source's verdict codes (-1: none), in SOURCES order, and the receiver's and the model's columns
+    (``hpl_model``: :func:`model_hpl`)."""
     n = status.size
     decided = np.isin(status, (VALID, FAULT, EXCLUDED, UNAVAILABLE, PROBABLE_FALSE_ALARM))
     residual = np.where(decided & np.isin(source, RESIDUAL_SOURCES), status, NONE)
     name = "pseudorange" if np.any(source == "pseudorange") else "grs"
     verdicts = {name: residual}
     hal = np.broadcast_to(hal_m, (n,))
-    hpl_model = model_hpl(meas, geometry, params.p_md)
     r = meas.receiver
     if r is None:
         verdicts["gbs"] = verdicts["gst"] = np.full(n, NONE)

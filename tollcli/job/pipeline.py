@@ -39,7 +39,7 @@ from tollcli.gnss.wls import wls_geometry
 from tollcli.integrity.environment import ENVIRONMENTS, EnvironmentCarry
 from tollcli.integrity.nav_authentication import epoch_authentication, not_checked
 from tollcli.integrity.raim import MODES, RaimParams
-from tollcli.integrity.run import level_name, raim_separation, run_raim, settle_sources
+from tollcli.integrity.run import hal_free_terms, level_name, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.integrity.trajectory import POSITIONINGS, with_trajectory
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
@@ -407,10 +407,10 @@ def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, ep
         meas, env_columns = measured_environment(epochs, meas, settings.environment, env_carry)
         epoch_raim = replace(epoch_raim, sources=params.sources)
         geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)  # once for the epoch RAIM and every HAL
-        separation = raim_separation(meas, epoch_raim, geometry)  # once for the epoch RAIM and every HAL too
-        raim = run_raim(meas, epoch_raim, geometry=geometry, separation=separation)
+        hal_free = hal_free_terms(meas, epoch_raim, geometry)  # once for the epoch RAIM and every HAL too
+        raim = run_raim(meas, epoch_raim, geometry=geometry, hal_free=hal_free)
         pairs = inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry, environment=settings.environment,
-                             separation=separation)  # fmt: skip
+                             hal_free=hal_free)  # fmt: skip
         cn0 = cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
         kept = epochs[[c for c in KEPT_EPOCH_COLUMNS if c in epochs]]
         auth = None
@@ -432,7 +432,7 @@ def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, ep
                                           env_columns, raim.reset_index(drop=True), *([auth] if auth is not None else [])],
                                          axis=1))  # fmt: skip
         offset += len(epochs)
-        del epochs, meas, geometry, separation, raim, pairs, cn0  # freed before the next chunk is read, not after
+        del epochs, meas, geometry, hal_free, raim, pairs, cn0  # freed before the next chunk is read, not after
     if epoch_table is not None and table_parts:
         epoch_table.append(pd.concat(table_parts, ignore_index=True))
     return params
