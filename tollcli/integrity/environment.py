@@ -63,12 +63,13 @@ def robust_statistics(meas: Measurements) -> tuple[np.ndarray, np.ndarray]:
     """The residual test statistic of every epoch under ``meas``'s own σ **without its most deviating
     measurement**, t₍ⱼ₎ = t − r_j² / (σ_j² (I − B)_jj) for the largest such term, and its k − 1 degrees of
     freedom: one faulty satellite (what the RAIM detects) does not widen the model; many deviating ones (a
-    street canyon) do. Epochs with k < 2 count nothing (k 0)."""
+    street canyon) do. Epochs with k < 2 count nothing (k 0); a batch without a residual gives t NaN and k 0
+    throughout."""
     from tollcli.gnss.wls import REDUNDANCY_EPS
 
     n = meas.mask.shape[0]
-    if meas.dy_m is None and meas.residual_m is None:  # no residuals: nothing to measure (and no geometry to solve)
-        return np.full(n, np.nan), np.zeros(n)
+    if meas.dy_m is None and (meas.residual_m is None or not np.isfinite(meas.residual_m).any()):
+        return np.full(n, np.nan), np.zeros(n)  # no residuals: nothing to measure (and no geometry to solve)
     geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
     residual, _ = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
     t = wsse(residual, geometry)
