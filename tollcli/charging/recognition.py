@@ -345,10 +345,24 @@ def charges(positions: pd.DataFrame, n_th: int) -> pd.DataFrame:
                           n_valid=("valid", "sum"), n_independent=("independent", "sum")).reset_index()  # fmt: skip
     out["charged"] = out["n_independent"] >= n_th
     if "part" in positions:  # which parts of a geo-object of several the passage went through (1-based)
-        seen = positions[["geoobject", "passage", "part"]].drop_duplicates()
-        by = seen.groupby(["geoobject", "passage"], sort=False)["part"].agg(lambda s: tuple(sorted(int(v) + 1 for v in s)))
-        out["parts_seen"] = [by.get((g, p), ()) for g, p in zip(out["geoobject"], out["passage"])]
+        out["parts_seen"] = _parts_seen(positions, out)
     return out.sort_values(["entry_utc", "geoobject"], kind="stable").reset_index(drop=True)
+
+
+def _parts_seen(positions: pd.DataFrame, out: pd.DataFrame) -> list[tuple[int, ...]]:
+    """Per row of ``out`` (a geo-object's passage): the parts (1-based, increasing) its positions were in."""
+    keys = pd.MultiIndex.from_arrays([out["geoobject"].to_numpy(dtype=object), out["passage"].to_numpy()])
+    row = keys.get_indexer(pd.MultiIndex.from_arrays([positions["geoobject"].to_numpy(dtype=object),
+                                                      positions["passage"].to_numpy()]))  # fmt: skip
+    part = positions["part"].to_numpy(np.int64)
+    width = int(part.max(initial=0)) + 1
+    pair = np.unique(row[row >= 0].astype(np.int64) * width + part[row >= 0])  # (row, part), by row then part
+    rows, parts = pair // width, (pair % width + 1).tolist()
+    counts = np.bincount(rows, minlength=len(out))
+    if (counts == 1).all():  # one part each (the usual geo-object): no splitting
+        return [(v,) for v in parts]
+    ends = np.cumsum(counts).tolist()
+    return [tuple(parts[a:b]) for a, b in zip([0, *ends[:-1]], ends)]
 
 
 def _charges_in_order(positions: pd.DataFrame) -> pd.DataFrame | None:
