@@ -119,12 +119,12 @@ def fill_angles(satellites: pd.DataFrame, epochs: pd.DataFrame, carry: AngleCarr
         return sats.drop(columns="t_s")
     if carry is not None:  # nothing to fill: only each satellite's latest angles are kept, from fewer rows
         idx = np.flatnonzero(fresh)
-        const = satellites["constellation"].array[idx].to_numpy(dtype=object)
+        const = satellites["constellation"].array[idx]  # as read (an Arrow array: only the latest rows become objects)
         svid = satellites["svid"].to_numpy()[idx]
         latest = _latest_rows(t_s[idx], const, svid)
         last = carry.last
-        known = {"t_s": t_s[idx][latest], "constellation": const[latest], "svid": svid[latest], "elev_deg": elev[idx][latest],
-                 "azim_deg": azim[idx][latest]}  # fmt: skip
+        known = {"t_s": t_s[idx][latest], "constellation": np.asarray(const[latest], dtype=object), "svid": svid[latest],
+                 "elev_deg": elev[idx][latest], "azim_deg": azim[idx][latest]}  # fmt: skip
         known = {c: np.concatenate([last[c].to_numpy(), known[c]]).astype(kind) for c, kind in _KNOWN.items()}
         if known["t_s"].size:
             carry.last = _latest_table(known)
@@ -141,18 +141,26 @@ def _latest_table(known: dict[str, np.ndarray]) -> pd.DataFrame:
 _KNOWN = {"t_s": float, "constellation": object, "svid": np.int64, "elev_deg": float, "azim_deg": float}
 
 
-def _latest_rows(t_s: np.ndarray, constellation: np.ndarray, svid: np.ndarray) -> np.ndarray:
+def _latest_rows(t_s: np.ndarray, constellation, svid: np.ndarray) -> np.ndarray:
     """Per (constellation, svid), the row with the latest time (of equal times, the later row), in sorted key order.
 
     What ``DataFrame.sort_values("t_s", kind="stable").groupby([...]).last()`` picks, for
-    rows without missing values; rows without a constellation are no group, as in groupby.
+    rows without missing values; rows without a constellation are no group, as in groupby. ``constellation``: any
+    array ``pandas.factorize`` takes (names as objects, or the reader's Arrow strings).
     """
-    order = np.argsort(t_s, kind="stable")
-    const, _ = pd.factorize(np.asarray(constellation, dtype=object), sort=True)  # no constellation: -1
-    key = const.astype(np.int64) * (1 << 32) + np.asarray(svid, np.int64)
+    t_s = np.asarray(t_s, float)
+    order = np.arange(t_s.size) if not (np.diff(t_s) < 0).any() else np.argsort(t_s, kind="stable")  # a log's rows: in time
+    const, _ = pd.factorize(constellation, sort=True)  # no constellation: -1
+    svid = np.asarray(svid, np.int64)
     ordered = order[const[order] >= 0]
-    _, last_rev = np.unique(key[ordered][::-1], return_index=True)  # sorted keys; the first seen backwards = the latest
-    return ordered[::-1][last_rev]
+    if not ordered.size:
+        return ordered
+    low = int(svid[ordered].min())
+    width = int(svid[ordered].max()) - low + 1
+    key = const[ordered].astype(np.int64) * width + (svid[ordered] - low)  # dense, in (constellation, svid) order
+    last = np.full(int(key.max()) + 1, -1, np.int64)
+    np.maximum.at(last, key, np.arange(ordered.size))  # each key's last place in time order
+    return ordered[last[last >= 0]]
 
 
 def nmea_measurements(
