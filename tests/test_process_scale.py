@@ -202,15 +202,18 @@ def test_canonical_json_of_a_real_invoice_and_unusual_values():
 
 def test_latest_angles_per_satellite_are_groupby_last():
     rng = np.random.default_rng(5)
-    for _ in range(200):
+    for trial in range(200):
         n = int(rng.integers(1, 60))
-        known = pd.DataFrame({"t_s": rng.integers(0, 10, n).astype(float),
+        t_s = rng.integers(0, 10, n).astype(float)
+        known = pd.DataFrame({"t_s": np.sort(t_s) if trial % 2 else t_s,  # a log's rows are in time: its own path
                               "constellation": rng.choice(np.array(["GPS", "Galileo", None, "BeiDou"], dtype=object), n),
                               "svid": rng.integers(1, 5, n).astype(np.int64), "elev_deg": rng.random(n), "azim_deg": rng.random(n)})  # fmt: skip
         expected = known.sort_values("t_s", kind="stable").groupby(["constellation", "svid"], as_index=False).last()
         rows = nmea_measurements._latest_rows(known["t_s"].to_numpy(), known["constellation"].to_numpy(), known["svid"].to_numpy())
         got = known.iloc[rows][expected.columns].reset_index(drop=True)
         pd.testing.assert_frame_equal(got, expected, check_dtype=False)
+        arrow = pd.array(known["constellation"].to_numpy(), dtype="string[pyarrow]")  # the reader's strings: the same rows
+        assert np.array_equal(nmea_measurements._latest_rows(known["t_s"].to_numpy(), arrow, known["svid"].to_numpy()), rows)
 
 
 def test_first_of_each_satellite_is_drop_duplicates():
