@@ -84,14 +84,24 @@ def radius_factor(p) -> np.ndarray:
     return np.sqrt(-2.0 * np.log(np.clip(np.asarray(p, float), 1e-300, 1.0)))
 
 
-def _risk(hpl: np.ndarray, sigma_0: np.ndarray, prior: np.ndarray, threshold: np.ndarray, sigma_k: np.ndarray) -> np.ndarray:
+def _risk(hpl: np.ndarray, sigma_0: np.ndarray, prior: np.ndarray, threshold: np.ndarray, sigma_k: np.ndarray,
+          finite: bool = False) -> np.ndarray:  # fmt: skip
     """The integrity risk at protection level ``hpl`` (E,): exp(−(L/σ₀)²/2) + Σₖ pₖ·exp(−((L − Tₖ)/σₖ)²/2), each
-    term the bound on a 2-D Gaussian leaving a circle (a mode's term is pₖ while L ≤ Tₖ)."""
+    term the bound on a 2-D Gaussian leaving a circle (a mode's term is pₖ while L ≤ Tₖ). ``finite``: the caller
+    knows every L, pₖ, Tₖ finite and every σₖ finite and positive (:func:`_finite_modes`) — no term is then NaN and
+    the guards against one are skipped (the same sums)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         free = np.exp(-0.5 * (hpl / sigma_0) ** 2)
         over = np.maximum(hpl[:, None] - threshold, 0.0) / sigma_k
+        if finite:
+            return np.where(sigma_0 > 0, free, 0.0) + (prior * np.exp(-0.5 * over**2)).sum(axis=1)
         modes = prior * np.exp(-0.5 * np.where(np.isfinite(over), over, np.inf) ** 2)
     return np.where(sigma_0 > 0, free, 0.0) + np.nansum(modes, axis=1)
+
+
+def _finite_modes(prior: np.ndarray, threshold: np.ndarray, sigma_k: np.ndarray) -> bool:
+    """Every prior and threshold finite, every σ finite and positive: :func:`_risk` has no NaN term to guard."""
+    return bool(np.isfinite(prior).all() and np.isfinite(threshold).all() and np.isfinite(sigma_k).all() and (sigma_k > 0).all())
 
 
 def _solve_hpl(sigma_0: np.ndarray, prior: np.ndarray, threshold: np.ndarray, sigma_k: np.ndarray,
@@ -109,9 +119,10 @@ def _solve_hpl(sigma_0: np.ndarray, prior: np.ndarray, threshold: np.ndarray, si
     lo = np.zeros_like(hi)
     ok = (budget > 0) & np.isfinite(hi)
     hi = np.where(ok, hi, 0.0)
+    finite = _finite_modes(prior, threshold, sigma_k)
     for _ in range(iterations):
         mid = 0.5 * (lo + hi)
-        fits = _risk(mid, sigma_0, prior, threshold, sigma_k) <= budget
+        fits = _risk(mid, sigma_0, prior, threshold, sigma_k, finite) <= budget
         hi, lo = np.where(fits, mid, hi), np.where(fits, lo, mid)
     return np.where(ok, hi, np.nan)
 
@@ -240,13 +251,18 @@ def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m):
     A = geometry.A
     Ah = A[:, :2, :]  # (E, 2, N)
     Hm = np.where(used[..., None], H, 0.0)
-    M = np.eye(n_slots)[None] - Hm @ A  # (E, N, N)
     y = np.where(used, np.nan_to_num(dy_m), 0.0) if dy_m is not None else np.zeros(used.shape)
-    r = np.einsum("emn,en->em", M, y)  # the post-fit residuals (y pre-fit, or post-fit already: M·r = r)
+    if i.size:  # pairs take M's off-diagonal entries: the whole N×N
+        M = np.eye(n_slots)[None] - Hm @ A  # (E, N, N)
+        r = np.einsum("emn,en->em", M, y)  # the post-fit residuals (y pre-fit, or post-fit already: M·r = r)
+        m = np.einsum("enn->en", M)  # (E, N) the redundancies
+    else:  # a satellite alone needs M's diagonal and M·y only
+        m = 1.0 - np.einsum("enu,eun->en", Hm, A)
+        r = y - np.einsum("enu,eu->en", Hm, np.einsum("eun,en->eu", A, y))
     cov0 = _cov_h(A, var)
-    # the normal matrix as wls_geometry scales it: its determinant and diagonal decide a subset's singularity
+    # the normal matrix as wls_geometry forms it: its determinant and diagonal decide a subset's singularity
     weight = geometry.weight
-    G = np.einsum("enu,en,env->euv", Hm, weight, Hm)
+    G = (Hm * weight[..., None]).transpose(0, 2, 1) @ Hm
     active = np.abs(Hm).sum(axis=1) > 0
     idx = np.arange(G.shape[-1])
     G[:, idx, idx] += ~active
@@ -268,7 +284,6 @@ def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m):
         return (d > 0).all(axis=-1) & (scaled > SINGULAR_RCOND)
 
     # --- single satellites
-    m = np.einsum("enn->en", M)  # (E, N) the redundancies
     lone = used & (np.take_along_axis(clock_count, np.maximum(const, 0), axis=1) <= 1) & (clock_cols > 0)
     update = used & ~lone & (m > REDUNDANCY_EPS)
     with np.errstate(divide="ignore", invalid="ignore"):
