@@ -95,6 +95,8 @@ def test_noise_per_cn0_bin_and_its_correlation():
     held = np.repeat(rng.normal(size=(n_epochs // 20, n_sats)), 20, axis=0)
     factor, rho = correlation_inflation(held, sv, mask)
     assert 15 < factor < 25 and rho[10] > 0.4
+    codes = pd.factorize(sv.ravel(), sort=True)[0].reshape(sv.shape)  # the labels as the estimator passes them
+    assert correlation_inflation(held, codes, mask)[0] == factor
     cn0 = np.where(np.arange(n_sats) < 4, 42.0, 27.0)[None, :].repeat(n_epochs, 0)
     cn0[0, 0] = 10.0  # one lonely residual below 25 dB-Hz
     residual = np.where(cn0 > 40, 2.0 * white, 30.0 + 10.0 * white)

@@ -81,7 +81,7 @@ def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tu
     over all series (FFT, zero where a series has no value)."""
     n_epochs = z.shape[0]
     ok = mask & np.isfinite(z)
-    labels, inverse = np.unique(sv[ok], return_inverse=True)
+    labels, inverse = _labels(sv[ok])
     if labels.size == 0 or n_epochs < 3:
         return 1.0, np.ones(1)
     series = np.zeros((labels.size, n_epochs))
@@ -100,3 +100,13 @@ def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tu
     below = np.flatnonzero(rho < RHO_CUT)
     cut = int(below[0]) if below.size else rho.size
     return float(1.0 + 2.0 * rho[1:cut].sum()), rho
+
+
+def _labels(sv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(sv, return_inverse=True)``; for small non-negative integer codes (the estimator's factorized
+    labels) by counting, without a sort."""
+    if sv.dtype.kind in "iu" and sv.size and sv.min() >= 0 and sv.max() < 1 << 20:
+        present = np.bincount(sv) > 0
+        labels = np.flatnonzero(present).astype(sv.dtype)
+        return labels, (np.cumsum(present) - 1)[sv]
+    return np.unique(sv, return_inverse=True)
