@@ -179,26 +179,47 @@ def test_kernels_reject_mismatched_buffers():
 def test_gsa_slots_compiled_and_numpy_are_the_same(monkeypatch):
     """The GSA satellite slots read in one compiled pass equal the numpy reading, on every real log's GSA lines
     (any slot count, system ids, bad numbers) and on a GSA of 24 and of 40 slots."""
-    from tollcli.readers.nmea import bulk_sentences
-    from tollcli.readers.nmea.bulk_lines import pack_address, type_code
-
     extra = b"\n".join([b"$GPGSA,A,3," + b",".join(b"%02d" % i for i in range(1, 25)) + b",1.0,2.0,3.0*00",
                          b"$GPGSA,A,3," + b",".join(b"%02d" % i for i in range(1, 41)) + b",1.0,2.0,3.0*00",
                          b"$GPGSA,A,3,01,-2,3.5,1024,,x,07,,,,,,1.0,2.0,3.0,4*00", b""])  # fmt: skip
-    n_gsa = 0
+    n_gsa, _ = _decoded_alike(monkeypatch, "GSA", extra)
+    assert n_gsa > 2_000
+
+
+def _decoded_alike(monkeypatch, sentence: str, extra: bytes) -> tuple[int, int]:
+    """Every real log's ``sentence`` lines (and ``extra``) decoded by the compiled kernels and by numpy, held equal;
+    (lines compared, lines the bulk path refused)."""
+    from tollcli.readers.nmea import bulk_sentences
+    from tollcli.readers.nmea.bulk_lines import pack_address, type_code
+
+    decode = getattr(bulk_sentences, sentence.lower())
+    n_lines = refused = 0
     for path in [*_logs(), None]:
         data = extra if path is None else path.read_bytes()[:1_500_000]
         cut = data[: data.rfind(b"\n")] if b"\n" in data else data
         bl = bulk_lines.split_block(cut)
-        idx = np.flatnonzero(bl.plain & (type_code(bl.address) == pack_address("XXGSA") >> 16))
+        idx = np.flatnonzero(bl.plain & (type_code(bl.address) == pack_address("XX" + sentence) >> 16))
         if not idx.size:
             continue
-        fast = bulk_sentences.gsa(bl, idx)
+        fast = decode(bl, idx)
         with monkeypatch.context() as m:
             m.setattr(kernels, "compiled", None)
-            ref = bulk_sentences.gsa(bl, idx)
+            ref = decode(bl, idx)
         assert fast.keys() == ref.keys()
         for key in fast:
             assert _same(fast[key], ref[key]), (path, key)
-        n_gsa += idx.size
-    assert n_gsa > 2_000
+        n_lines += idx.size
+        refused += int((~fast["ok"]).sum())
+    return n_lines, refused
+
+
+@needs_compiled
+def test_gsv_groups_compiled_and_numpy_are_the_same(monkeypatch):
+    """The GSV satellite groups read in one compiled pass equal the numpy reading, on every real log's GSV lines
+    (signal ids, empty groups, NMEA 4.10 and older) and on groups the bulk path must refuse: a dotted or too large
+    number, an elevation beyond ±90°, an azimuth beyond 360°, an exponent."""
+    extra = b"\n".join([b"$GPGSV,3,1,11,01,45,120,40,02,-91,10,,03,5.0,,30,04,,361,*00",
+                        b"$GPGSV,3,1,11,1.5,45,120,40,1024,1,1,1,x,1,1,1,07,1,1,1e3*00",
+                        b"$GLGSV,1,1,02,65,10,20,30,70,,,*00", b"$GAGSV,1,1,01,05,10,20,30,7*00", b""])  # fmt: skip
+    n_gsv, refused = _decoded_alike(monkeypatch, "GSV", extra)
+    assert n_gsv > 5_000 and refused >= 2

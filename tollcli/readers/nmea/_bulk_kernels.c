@@ -403,6 +403,72 @@ done:
     return result;
 }
 
+/* gsv_groups(buf, first_comma, end, commas, lines, groups, row, prn, elev, azim, cn0, ok) -> number of satellites
+ *
+ * The satellite groups of GSV lines (fields 4+4g … 7+4g of lines[i], g < groups[i]): a group whose number field
+ * is not empty is written, compacted, to row (its line's place in ``lines``), prn (int64: the number, -1 when it
+ * is no plain integer), elev/azim/cn0 (float64, NaN when empty or not a plain decimal); ok[i] is cleared when a
+ * group of the line is not one the bulk path reads — a number not an integer in 1 … 1023, an angle or C/N0 not a
+ * plain decimal, an elevation outside ±90° or an azimuth outside 0 … 360° — as bulk_sentences.gsv's numpy path.
+ * row/prn/elev/azim/cn0 have room for every group; ok: uint8, set by the caller. */
+static PyObject *gsv_groups(PyObject *self, PyObject *args) {
+    Py_buffer b_buf, b_first, b_end, b_commas, b_lines, b_groups, b_row, b_prn, b_elev, b_azim, b_cn0, b_ok;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*w*w*w*w*w*w*", &b_buf, &b_first, &b_end, &b_commas, &b_lines, &b_groups,
+                          &b_row, &b_prn, &b_elev, &b_azim, &b_cn0, &b_ok))
+        return NULL;
+    PyObject *result = NULL;
+    const uint8_t *buf = (const uint8_t *)b_buf.buf;
+    const Py_ssize_t n = b_buf.len;
+    Py_ssize_t m = b_lines.len / 8, n_lines = b_first.len / 8, top = b_commas.len / 8 - 2, room = b_row.len / 8;
+    if (top < 0 || b_end.len / 8 != n_lines || b_groups.len / 8 != m || b_prn.len / 8 != room ||
+        b_elev.len / 8 != room || b_azim.len / 8 != room || b_cn0.len / 8 != room || !check(&b_ok, m, 1, "ok")) {
+        PyErr_SetString(PyExc_ValueError, "gsv_groups: sizes do not match");
+        goto done;
+    }
+    const int64_t *first = b_first.buf, *end = b_end.buf, *commas = b_commas.buf, *lines = b_lines.buf,
+                  *groups = b_groups.buf;
+    int64_t *row = b_row.buf, *prn = b_prn.buf;
+    double *elev = b_elev.buf, *azim = b_azim.buf, *cn0 = b_cn0.buf;
+    uint8_t *ok = b_ok.buf;
+    Py_ssize_t out = 0;
+    int bad = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < m && !bad; i++) {
+        int64_t line = lines[i];
+        if (line < 0 || line >= n_lines) { bad = 1; break; }
+        for (int64_t g = 0; g < groups[i]; g++) {
+            int64_t s, e;
+            double v[4];
+            uint8_t empty[4], dot[4];
+            int good[4];
+            for (int f = 0; f < 4; f++) {
+                if (!field_bounds(first, end, commas, top, line, 4 + 4 * g + f, &s, &e)) { bad = 1; break; }
+                good[f] = parse_decimal(buf, n, s, e, 0, v + f, empty + f, dot + f);
+            }
+            if (bad) break;
+            if (empty[0]) continue;  /* no satellite in this group */
+            int64_t number = good[0] ? (int64_t)v[0] : -1;
+            int ok_number = good[0] && !dot[0] && number >= 1 && number <= 1023;
+            int ok_range = (isnan(v[1]) || (v[1] >= -90.0 && v[1] <= 90.0)) && (isnan(v[2]) || (v[2] >= 0.0 && v[2] <= 360.0));
+            if (!(ok_number && good[1] && good[2] && good[3] && ok_range)) ok[i] = 0;
+            if (out >= room) { bad = 1; break; }
+            row[out] = i; prn[out] = number; elev[out] = v[1]; azim[out] = v[2]; cn0[out] = v[3];
+            out++;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    if (bad) {
+        PyErr_SetString(PyExc_IndexError, "gsv_groups: line or field out of range, or no room");
+        goto done;
+    }
+    result = PyLong_FromSsize_t(out);
+done:
+    PyBuffer_Release(&b_buf); PyBuffer_Release(&b_first); PyBuffer_Release(&b_end); PyBuffer_Release(&b_commas);
+    PyBuffer_Release(&b_lines); PyBuffer_Release(&b_groups); PyBuffer_Release(&b_row); PyBuffer_Release(&b_prn);
+    PyBuffer_Release(&b_elev); PyBuffer_Release(&b_azim); PyBuffer_Release(&b_cn0); PyBuffer_Release(&b_ok);
+    return result;
+}
+
 /* time_of_day(buf, start, end, tod, ok): hhmmss[.sss] fields → seconds after midnight
  * (float64, NaN when empty or bad) and ok (uint8: empty or good). The rules of
  * bulk_fields.time_of_day_s_numpy: six leading digits, hh <= 23, mm <= 59, the seconds
@@ -506,6 +572,7 @@ static PyMethodDef methods[] = {
     {"frame", frame, METH_VARARGS, "Frame the lines of a block (see bulk_lines.split_block)."},
     {"decimal", decimal, METH_VARARGS, "Read decimal fields (see bulk_fields.decimal)."},
     {"gsa_slots", gsa_slots, METH_VARARGS, "Read the satellite slots of GSA lines (see bulk_sentences.gsa)."},
+    {"gsv_groups", gsv_groups, METH_VARARGS, "Read the satellite groups of GSV lines (see bulk_sentences.gsv)."},
     {"field_decimal", field_decimal, METH_VARARGS, "Read field k of lines as decimals (see BlockLines.field_decimals)."},
     {NULL, NULL, 0, NULL},
 };

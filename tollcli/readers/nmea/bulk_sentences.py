@@ -280,6 +280,29 @@ def gsv(bl: BlockLines, idx: np.ndarray) -> dict:
     signal = np.where(has_signal, np.where(e == s, -1, np.where(e - s == 1, hexv, -2)), -1)
     ok &= signal >= -1
     groups = np.maximum(body, 0) // 4
+    read = _gsv_groups if kernels.compiled is None else _gsv_groups_compiled  # the compiled one: a single pass
+    r, prn, elev, azim, cn0, ok_groups = read(bl, idx, groups)
+    ok &= ok_groups
+    hint = talker_rows(bl.address[idx])
+    safe = np.clip(prn, 0, MAX_PRN)
+    return dict(ok=ok, sat_row=r, **_satellites(hint[r], safe),
+                sat_prn=prn, sat_signal=signal[r], sat_elev=elev, sat_azim=azim, sat_cn0=cn0)  # fmt: skip
+
+
+def _gsv_groups_compiled(bl: BlockLines, idx: np.ndarray, groups: np.ndarray):
+    """:func:`_gsv_groups` by the compiled kernel."""
+    room = int(groups.sum())
+    row, prn = np.empty(room, np.int64), np.empty(room, np.int64)
+    elev, azim, cn0 = np.empty(room), np.empty(room), np.empty(room)
+    ok = np.ones(idx.size, bool)
+    m = kernels.compiled.gsv_groups(bl.buf, bl.first_comma, bl.end, bl.commas, np.ascontiguousarray(idx, np.int64),
+                                    np.ascontiguousarray(groups, np.int64), row, prn, elev, azim, cn0, ok)  # fmt: skip
+    return row[:m], prn[:m], elev[:m], azim[:m], cn0[:m], ok
+
+
+def _gsv_groups(bl: BlockLines, idx: np.ndarray, groups: np.ndarray):
+    """The satellites of GSV lines ``idx`` (``groups`` of four fields from field 4): (row, number, elevation,
+    azimuth, C/N0) of each group with a number, and each line's ok (every such group one the bulk path reads)."""
     rows = np.repeat(np.arange(idx.size), groups)
     first = np.cumsum(groups) - groups
     g = np.arange(rows.size) - first[rows]
@@ -296,13 +319,9 @@ def gsv(bl: BlockLines, idx: np.ndarray) -> dict:
     with np.errstate(invalid="ignore"):
         ok_range = (np.isnan(elev) | ((elev >= -90.0) & (elev <= 90.0))) & (np.isnan(azim) | ((azim >= 0.0) & (azim <= 360.0)))
     sat_ok = ~present | (ok_prn & ok_e & ok_a & ok_c & ok_range)
-    ok &= np.bincount(rows[~sat_ok], minlength=idx.size) == 0
+    ok = np.bincount(rows[~sat_ok], minlength=idx.size) == 0
     keep = present
-    hint = talker_rows(bl.address[idx])
-    safe = np.clip(prn[keep], 0, MAX_PRN)
-    r = rows[keep]
-    return dict(ok=ok, sat_row=r, **_satellites(hint[r], safe),
-                sat_prn=prn[keep], sat_signal=signal[r], sat_elev=elev[keep], sat_azim=azim[keep], sat_cn0=cn0[keep])  # fmt: skip
+    return rows[keep], prn[keep], elev[keep], azim[keep], cn0[keep], ok
 
 
 def gll(bl: BlockLines, idx: np.ndarray) -> dict:
