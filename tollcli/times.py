@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 
 
 #: the years a receiver's date may fall in: GPS time starts in 1980; beyond 2200 a date is a damaged field (and pandas'
@@ -21,7 +20,7 @@ def plausible_date(year, month, day, hour=0, minute=0, second=0):
             & (hour >= 0) & (hour <= 23) & (minute >= 0) & (minute <= 59) & (second >= 0) & (second <= 60))  # fmt: skip
 
 
-def epoch_seconds(epochs: pd.DataFrame) -> np.ndarray:
+def epoch_seconds(epochs) -> np.ndarray:
     """Seconds since 1970 from ``time_utc`` where dated, else the time of day unwrapped over midnights."""
     if "time_utc" in epochs and epochs["time_utc"].notna().all() and len(epochs):
         return epochs["time_utc"].dt.tz_convert(None).to_numpy().astype("datetime64[ms]").astype(np.int64) / 1000.0
@@ -54,11 +53,15 @@ def nearest_index(times: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, n
 
 def iso_from_seconds(t_s: float) -> str:
     """Seconds since 1970 → ``YYYY-MM-DDTHH:MM:SS.mmmZ``."""
+    import pandas as pd
+
     return pd.Timestamp(t_s, unit="s", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
 
 
 def iso_utc(values) -> np.ndarray:
     """Many timestamps (tz-aware or UTC-naive; Series, array or index) → ``YYYY-MM-DDTHH:MM:SS.mmmZ`` strings."""
+    import pandas as pd
+
     dtype = getattr(values, "dtype", None)
     if isinstance(dtype, pd.DatetimeTZDtype):  # already times: only the zone to drop (no parsing pass)
         index = pd.DatetimeIndex(values).tz_convert(None)

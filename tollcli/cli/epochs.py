@@ -12,7 +12,7 @@ from tollcli.cli.console import note, progress
 from tollcli.errors import UsageError
 from tollcli.io.log_run import LogRun
 from tollcli.io.writers import TableWriter, format_for
-from tollcli.job.log_integrity import iter_epoch_tables
+from tollcli.readers.navigation import iter_epoch_tables
 from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_partial, check_usable
 
@@ -52,19 +52,20 @@ def epochs(
     epoch_writer = TableWriter(output, format_for(output, fmt=out_fmt))
     sat_writer = TableWriter(satellites, _sat_format(satellites, out_fmt)) if satellites else None
     with epoch_writer, (sat_writer or _Null()):
-        with progress(f"reading {log}", quiet, log=log) as advance, LogRun(log) as run:  # the log opened once
+        with progress(f"reading {log}", quiet, log=log) as advance, LogRun(log, hashed=False) as run:  # the log opened once, not hashed: no invoice names it
             for chunk in iter_epoch_tables(run, strict=strict, date=date.date() if date else None, stats=stats, engine=reader):
-                epoch_writer.write(chunk.epochs)
+                epochs = chunk.epoch_columns
+                epoch_writer.write(epochs)
                 if sat_writer is not None:
-                    sat_writer.write(chunk.satellites)
-                advance(len(chunk.epochs), int(chunk.epochs["line"].max()) if len(chunk.epochs) else None)
+                    sat_writer.write(chunk.satellite_columns)
+                advance(len(epochs), int(epochs["line"].max()) if len(epochs) else None)
         check_usable(stats)
         if stats.epochs == 0:
-            from tollcli.readers.nmea.tables import epoch_frame, satellite_frame
+            from tollcli.readers.nmea.tables import epoch_columns, satellite_columns
 
-            epoch_writer.write(epoch_frame(None))
+            epoch_writer.write(epoch_columns(None))
             if sat_writer is not None:
-                sat_writer.write(satellite_frame(None, None))
+                sat_writer.write(satellite_columns(None, None))
         epoch_writer.commit()
         if sat_writer is not None:
             sat_writer.commit()

@@ -34,19 +34,25 @@ COPY_BYTES = 1 << 20
 
 
 class _HashingReader(io.RawIOBase):
-    """A raw stream that updates a SHA-256 with every byte read through it."""
+    """A raw stream that updates a SHA-256 with every byte read through it (``hashed=False``: counts them only)."""
 
-    def __init__(self, raw: BinaryIO, name: str):
-        self.raw, self.name, self.digest, self.bytes_read = raw, name, hashlib.sha256(), 0
+    def __init__(self, raw: BinaryIO, name: str, hashed: bool = True):
+        self.raw, self.name, self.bytes_read = raw, name, 0
+        self.digest = hashlib.sha256() if hashed else None
+        self._into = getattr(raw, "readinto", None)
 
     def readable(self) -> bool:
         return True
 
     def readinto(self, buffer) -> int:
-        data = self.raw.read(len(buffer))
-        n = len(data)
-        buffer[:n] = data
-        self.digest.update(data)
+        if self._into is not None:  # straight into the buffer: no copy
+            n = self._into(buffer) or 0
+        else:
+            data = self.raw.read(len(buffer))
+            n = len(data)
+            buffer[:n] = data
+        if self.digest is not None:
+            self.digest.update(memoryview(buffer)[:n])
         self.bytes_read += n
         return n
 
@@ -60,14 +66,15 @@ class LogRun:
     """A log (a path, a ``.gz`` path or ``-``) opened once (module docstring).
 
     ``kind``: the input format, ``auto`` to tell it from the head (:func:`tollcli.io.sources.format_of_head`).
+    ``hashed=False``: no SHA-256 is taken (what only decodes the log, ``tollcli epochs``; :attr:`sha256` refuses).
     Use as a context manager, or call :meth:`close`.
     """
 
-    def __init__(self, log: str, kind: str = "auto"):
+    def __init__(self, log: str, kind: str = "auto", hashed: bool = True):
         self.log = log
         self.name = printable_path(log)
         raw = open_raw(log)
-        self._hashing = _HashingReader(raw, self.name)
+        self._hashing = _HashingReader(raw, self.name, hashed)
         buffered = io.BufferedReader(self._hashing, buffer_size=COPY_BYTES)
         self.compressed = buffered.peek(2)[:2] == GZIP_MAGIC
         self._stream: BinaryIO = gzip.GzipFile(fileobj=buffered, mode="rb") if self.compressed else buffered  # type: ignore[assignment]
@@ -133,6 +140,8 @@ class LogRun:
     @property
     def sha256(self) -> str:
         """SHA-256 of the log's bytes as stored; reads what no consumer read (a reader that stopped early)."""
+        if self._hashing.digest is None:
+            raise ValueError(f"{self.name}: opened without hashing")
         while self._buffered.read(COPY_BYTES):
             pass
         return self._hashing.digest.hexdigest()

@@ -23,11 +23,17 @@ signals held while a temporary file is named), which is the part that must not b
 
 Floats in CSV are written with 15 significant digits: every number a log wrote comes back as written
 (``42.6987``, not ``42.698699999999995``); Parquet keeps the doubles.
+
+A chunk is a pandas DataFrame or a :class:`~tollcli.io.columns.Columns` (what the readers give): the second is
+written without importing pandas, to the same CSV, JSON and GeoJSON bytes (``tests/test_columns.py`` holds them
+to it on real logs) and the same Parquet columns, types and values (without pandas' own metadata: pandas reads
+their text back as its default ``str``).
 """
 
 from __future__ import annotations
 
 import contextlib
+import csv
 import json
 import math
 import os
@@ -39,9 +45,9 @@ import threading
 from typing import IO
 
 import numpy as np
-import pandas as pd
 
 from tollcli.errors import UsageError
+from tollcli.io.columns import Columns, is_text, is_time
 
 FORMATS = ("csv", "parquet", "geojson", "geojsonseq", "json")
 _EXTENSIONS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".geojson": "geojson", ".json": "json",
@@ -84,16 +90,25 @@ def format_for(path: str, default: str = "csv", fmt: str | None = None, allowed:
     raise UsageError(f"{path}: unknown output format {ext or '(no extension)'!r}; use {exts}, or name it with -f")
 
 
-def iso_utc(values: pd.Series) -> np.ndarray:
-    """UTC timestamps → ISO 8601 strings with ms and ``Z`` ('' for NaT)."""
+def iso_utc(values) -> np.ndarray:
+    """UTC timestamps (a pandas Series) → ISO 8601 strings with ms and ``Z`` ('' for NaT)."""
     raw = values.dt.tz_convert(None).to_numpy().astype("datetime64[ms]")
     text = np.datetime_as_string(raw, unit="ms").astype(object)
     text = np.where(np.isnat(raw), "", text + "Z")
     return text
 
 
-def _json_ready(df: pd.DataFrame) -> list[dict]:
+def _iso_ms(values: np.ndarray) -> list[str]:
+    """``datetime64`` (UTC) → ISO 8601 strings with ms and ``Z`` ('' for NaT)."""
+    return ["" if t == "NaT" else t + "Z" for t in np.datetime_as_string(values.astype("datetime64[ms]"), unit="ms").tolist()]
+
+
+def _json_ready(df) -> list[dict]:
     """Rows as dicts of JSON-safe values (NaN → None, times → ISO strings)."""
+    if isinstance(df, Columns):
+        return _json_ready_columns(df)
+    import pandas as pd
+
     out = {}
     for name in df.columns:
         col = df[name]
@@ -110,7 +125,36 @@ def _json_ready(df: pd.DataFrame) -> list[dict]:
     return [dict(zip(names, row)) for row in zip(*out.values())]
 
 
-def _point_features(df: pd.DataFrame):
+def _json_ready_columns(table: Columns) -> list[dict]:
+    """:func:`_json_ready` of a :class:`Columns`: the same values, without pandas."""
+    out = {}
+    for name in table:
+        values = table[name]
+        if is_time(values):
+            out[name] = [v or None for v in _iso_ms(values)]
+        elif is_text(values):
+            out[name] = [v if isinstance(v, str) else None for v in values.tolist()]
+        elif values.dtype.kind == "f":
+            out[name] = [v if math.isfinite(v) else None for v in values.tolist()]
+        else:
+            out[name] = values.tolist()
+    names = list(out)
+    return [dict(zip(names, row)) for row in zip(*out.values())]
+
+
+def _csv_cells(values: np.ndarray) -> list:
+    """One column of a :class:`Columns` as the cells pandas' ``to_csv`` writes for it (floats ``%.15g``, NaN and
+    missing text empty, times ISO with ms and ``Z``, booleans ``True``/``False``)."""
+    if is_time(values):
+        return _iso_ms(values)
+    if is_text(values):
+        return [v if isinstance(v, str) else "" for v in values.tolist()]
+    if values.dtype.kind == "f":
+        return [CSV_FLOAT % v if v == v else "" for v in values.tolist()]
+    return values.tolist()
+
+
+def _point_features(df):
     """Each row as a GeoJSON point Feature (``lon_deg``, ``lat_deg``; null geometry without a position)."""
     for row in _json_ready(df):
         lon, lat = row.get("lon_deg"), row.get("lat_deg")
@@ -172,8 +216,8 @@ class TableWriter:
             self._fh = os.fdopen(fd, "wb" if binary else "w", encoding=None if binary else "utf-8", newline=None if binary else "")
         return self._fh
 
-    def write(self, df: pd.DataFrame) -> None:
-        """Append a chunk (same columns every time)."""
+    def write(self, df) -> None:
+        """Append a chunk (a DataFrame or :class:`~tollcli.io.columns.Columns`; same columns every time)."""
         if self._columns is None:
             self._columns = list(df.columns)
         fh = self._open()
@@ -213,7 +257,16 @@ class TableWriter:
                 self._tmp = None
 
     # -------------------------------------------------------------- CSV
-    def _write_csv(self, fh: IO, df: pd.DataFrame) -> None:
+    def _write_csv(self, fh: IO, df) -> None:
+        if isinstance(df, Columns):
+            rows = csv.writer(fh, lineterminator="\n")
+            if not self._started:
+                rows.writerow(df.columns)
+            rows.writerows(zip(*(_csv_cells(df[name]) for name in df)))
+            self._started = True
+            return
+        import pandas as pd
+
         out = df.copy(deep=False)
         for name in out.columns:
             if isinstance(out[name].dtype, pd.DatetimeTZDtype):
@@ -226,11 +279,16 @@ class TableWriter:
             fh.write(",".join(self._columns) + "\n")
 
     # -------------------------------------------------------------- Parquet
-    def _write_parquet(self, fh: IO, df: pd.DataFrame) -> None:
+    def _write_parquet(self, fh: IO, df) -> None:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        table = pa.Table.from_pandas(df, preserve_index=False, schema=self._schema)
+        if isinstance(df, Columns):
+            table = df.to_arrow()
+            if self._schema is not None:
+                table = table.cast(self._schema)
+        else:
+            table = pa.Table.from_pandas(df, preserve_index=False, schema=self._schema)
         if self._parquet is None:
             self._schema = table.schema
             self._parquet = pq.ParquetWriter(fh, self._schema)
@@ -243,7 +301,7 @@ class TableWriter:
         self._parquet = None
 
     # -------------------------------------------------------------- GeoJSON
-    def _write_geojson(self, fh: IO, df: pd.DataFrame) -> None:
+    def _write_geojson(self, fh: IO, df) -> None:
         if not self._started:
             fh.write('{"type": "FeatureCollection", "features": [\n')
             self._started = True
@@ -256,7 +314,7 @@ class TableWriter:
         fh.write("\n]}\n")
 
     # -------------------------------------------------------------- GeoJSON sequence
-    def _write_geojsonseq(self, fh: IO, df: pd.DataFrame) -> None:
+    def _write_geojsonseq(self, fh: IO, df) -> None:
         for feature in _point_features(df):
             fh.write(json.dumps(feature, separators=(",", ":"), allow_nan=False) + "\n")
 
@@ -264,7 +322,7 @@ class TableWriter:
         pass
 
     # -------------------------------------------------------------- JSON
-    def _write_json(self, fh: IO, df: pd.DataFrame) -> None:
+    def _write_json(self, fh: IO, df) -> None:
         if not self._started:
             fh.write("[\n")
             self._started = True

@@ -153,8 +153,8 @@ def _solution_info(path: str, kind: str) -> dict:
     box = np.array([np.inf, np.inf, -np.inf, -np.inf])
     distance_m, last_fix = 0.0, None
     for chunk in iter_navigation_tables(path, kind, stats=stats):
-        e, s = chunk.epochs, chunk.satellites
-        lat, lon = e["lat_deg"].to_numpy(float), e["lon_deg"].to_numpy(float)
+        e, s = chunk.epoch_columns, chunk.satellite_columns  # arrays: info imports no pandas
+        lat, lon = e["lat_deg"].astype(float), e["lon_deg"].astype(float)
         ok = np.isfinite(lat) & np.isfinite(lon)
         if ok.any():
             lat_ok, lon_ok = lat[ok], lon[ok]
@@ -164,36 +164,39 @@ def _solution_info(path: str, kind: str) -> dict:
             last_fix = (lat_ok[-1], lon_ok[-1])
             box = np.array([min(box[0], lon[ok].min()), min(box[1], lat[ok].min()), max(box[2], lon[ok].max()), max(box[3], lat[ok].max())])
         epochs += len(e)
-        with_position += int((np.isfinite(e["lat_deg"].to_numpy(float)) & np.isfinite(e["lon_deg"].to_numpy(float))).sum())
-        t = e["time_utc"].dropna()
-        if len(t):
-            first = t.min() if first is None else min(first, t.min())
-            last = t.max() if last is None else max(last, t.max())
-            times = t.to_numpy("datetime64[ms]").astype(np.int64)
-            if previous is not None:
-                times = np.r_[previous, times]
+        with_position += int(ok.sum())
+        t = e["time_utc"][~np.isnat(e["time_utc"])].astype(np.int64)  # ms since 1970, the dated epochs
+        if t.size:
+            first = int(t.min()) if first is None else min(first, int(t.min()))
+            last = int(t.max()) if last is None else max(last, int(t.max()))
+            times = t if previous is None else np.r_[previous, t]
             steps.update(np.round(np.diff(times) / 1000.0, 3).tolist())
             previous = times[-1]
         quality.update(e["fix_quality"].astype(int).tolist())
-        evidence["residuals"] += int(s["epoch"][np.isfinite(s["residual_m"].to_numpy(float))].nunique()) if len(s) else 0
-        evidence["receiver_raim"] += int(np.isfinite(e["gbs_err_lat_m"].to_numpy(float)).sum())
-        evidence["error_ellipse"] += int((np.isfinite(e["sigma_major_m"].to_numpy(float))
-                                          | np.isfinite(e["sigma_lat_m"].to_numpy(float))).sum())
-        evidence["satellites"] += int(s.loc[s["used"].astype(bool), "epoch"].nunique()) if len(s) else 0
-        evidence["hdop"] += int(np.isfinite(e["hdop"].to_numpy(float)).sum())
+        sat_epoch = s["epoch"]
+        evidence["residuals"] += np.unique(sat_epoch[np.isfinite(s["residual_m"].astype(float))]).size
+        evidence["receiver_raim"] += int(np.isfinite(e["gbs_err_lat_m"].astype(float)).sum())
+        evidence["error_ellipse"] += int((np.isfinite(e["sigma_major_m"].astype(float)) | np.isfinite(e["sigma_lat_m"].astype(float))).sum())
+        evidence["satellites"] += np.unique(sat_epoch[s["used"].astype(bool)]).size
+        evidence["hdop"] += int(np.isfinite(e["hdop"].astype(float)).sum())
     positive = {k: v for k, v in steps.items() if k > 0}
     rate_s = max(sorted(positive), key=positive.get) if positive else None
     level = next((name for name, key in LEVEL_EVIDENCE if evidence[key]), "model" if evidence["hdop"] else "none")
     return {
         "protocol": stats.protocol, "lines": stats.lines, "skipped_lines": stats.skipped,
         "first_problem": stats.first_problem or None, "epochs": epochs, "epochs_with_position": with_position,
-        "first_utc": _iso(first), "last_utc": _iso(last),
-        "span_s": round((last - first).total_seconds(), 3) if first is not None and last is not None else None,
+        "first_utc": _iso_ms(first), "last_utc": _iso_ms(last),
+        "span_s": round((last - first) / 1000.0, 3) if first is not None and last is not None else None,
         "interval_s": rate_s, "rate_hz": round(1.0 / rate_s, 3) if rate_s else None,
         "fix_quality": {str(k): v for k, v in sorted(quality.items()) if k >= 0},  # (-1: no GGA said: no quality to count)
         "box_deg": [round(float(v), 6) for v in box] if np.isfinite(box).all() else None, "distance_m": round(distance_m, 1),
         "integrity_evidence_epochs": evidence, "integrity_level": level,
     }
+
+
+def _iso_ms(ms: int | None) -> str | None:
+    """Milliseconds since 1970 → ``YYYY-MM-DDTHH:MM:SS.mmmZ``."""
+    return None if ms is None else str(np.datetime64(ms, "ms")) + "Z"
 
 
 def _iso(stamp) -> str | None:

@@ -20,7 +20,7 @@ from tollcli.io.sources import iter_text_blocks, open_binary, source_name
 from tollcli.readers.nmea.line_reader import ReadStats
 from tollcli.readers.nmea.reader import NmeaTables
 from tollcli.readers.nmea.satellite_ids import CONSTELLATIONS
-from tollcli.readers.nmea.tables import EPOCH_COLUMNS, epoch_frame, satellite_frame
+from tollcli.readers.nmea.tables import EPOCH_COLUMNS, epoch_columns, satellite_columns
 
 _INT_FIELDS = {"fix_quality": -1, "fix_mode": -1, "n_used": -1, "n_in_view": -1, "gbs_failed_svid": -1}
 _SAT_FIELDS = ("sat_epoch", "sat_constellation", "sat_svid", "sat_prn", "sat_signal_id", "sat_elev_deg", "sat_azim_deg",
@@ -90,8 +90,8 @@ class TableBuilder:
         time_utc = np.where(known, time_ms, np.iinfo(np.int64).min).astype("datetime64[ms]")
         for key, values in self.sats.items():
             arrays[key] = np.array(values, dtype=bool if key == "sat_used" else float if key.endswith(("_deg", "_dbhz", "_m")) else np.int64)
-        epochs = epoch_frame(arrays, time_utc)
-        sats = satellite_frame(arrays, time_utc)
+        epochs = epoch_columns(arrays, time_utc)
+        sats = satellite_columns(arrays, time_utc)
         self.stats.epochs += n
         self.stats.satellite_rows += len(sats)
         self.stats.undated_epochs += int((~known).sum())

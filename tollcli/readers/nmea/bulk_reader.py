@@ -21,7 +21,6 @@ what the epoch cut assumes, the rest of the log is read by the reference path.
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 
 from tollcli.errors import DataError
 from tollcli.readers.nmea import bulk_epochs, bulk_sentences
@@ -265,9 +264,9 @@ class BulkReader:
             if unnamed.any():  # plain lines: their packed five-character address
                 codes, inverse = np.unique(bl.address[unused[unnamed]], return_inverse=True)
                 names[unnamed] = np.array([unpack_address(int(c)) for c in codes], dtype=object)[inverse.ravel()]
-            codes, uniq = pd.factorize(names)  # in first-seen order, as the reference reader's dict
-            for name, count in zip(uniq.tolist(), np.bincount(codes, minlength=len(uniq)).tolist()):
-                stats.unused_types[name] = stats.unused_types.get(name, 0) + count
+            uniq, first, counts = np.unique(names.astype(str), return_index=True, return_counts=True)
+            for j in np.argsort(first, kind="stable"):  # in first-seen order, as the reference reader's dict
+                stats.unused_types[str(uniq[j])] = stats.unused_types.get(str(uniq[j]), 0) + int(counts[j])
         stats.lines = first_line + cut
 
     def _assemble(self, bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, decoded, parsed):

@@ -14,11 +14,9 @@ from __future__ import annotations
 import datetime as _dt
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass
 from typing import BinaryIO
 
 import numpy as np
-import pandas as pd
 
 from tollcli.errors import DataError, PartialError
 from tollcli.io.sources import (
@@ -32,7 +30,8 @@ from tollcli.readers.nmea.assembler import EpochAssembler
 from tollcli.readers.nmea.bulk_reader import BulkReader, merge_arrays
 from tollcli.readers.nmea.dates import DateCarry, first_own_date_contradiction, resolve_days, to_time_utc_ms
 from tollcli.readers.nmea.line_reader import ReadStats, feed_lines
-from tollcli.readers.nmea.tables import epoch_frame, satellite_frame
+from tollcli.io.columns import Columns, as_columns
+from tollcli.readers.nmea.tables import epoch_columns, satellite_columns
 
 #: epochs per chunk handed downstream
 CHUNK_EPOCHS = 20_000
@@ -40,13 +39,52 @@ CHUNK_EPOCHS = 20_000
 MAX_UNDATED_EPOCHS = 100_000
 
 
-@dataclass
 class NmeaTables:
-    """The two tables of a log: one row per epoch, one per satellite and epoch."""
+    """The two tables of a log: one row per epoch, one per satellite and epoch.
 
-    epochs: pd.DataFrame
-    satellites: pd.DataFrame
-    stats: ReadStats | None = None
+    Built from :class:`~tollcli.io.columns.Columns` (or DataFrames; the satellite table may also be given as a
+    function that builds it, called on first use); ``epochs`` and ``satellites`` are pandas DataFrames, converted on
+    first use, and ``epoch_columns`` and ``satellite_columns`` the arrays, so that what only writes or counts the
+    tables (``tollcli epochs``, ``info``) never imports pandas, nor builds a satellite table it does not write."""
+
+    __slots__ = ("_epochs", "_satellites", "stats")
+
+    def __init__(self, epochs, satellites, stats: ReadStats | None = None):
+        self._epochs, self._satellites, self.stats = epochs, satellites, stats
+
+    @property
+    def epochs(self):
+        if isinstance(self._epochs, Columns):
+            self._epochs = self._epochs.to_pandas()
+        return self._epochs
+
+    @epochs.setter
+    def epochs(self, frame) -> None:
+        self._epochs = frame
+
+    def _built_satellites(self):
+        if callable(self._satellites):
+            self._satellites = self._satellites()
+        return self._satellites
+
+    @property
+    def satellites(self):
+        self._built_satellites()
+        if isinstance(self._satellites, Columns):
+            self._satellites = self._satellites.to_pandas()
+        return self._satellites
+
+    @satellites.setter
+    def satellites(self, frame) -> None:
+        self._satellites = frame
+
+    @property
+    def epoch_columns(self) -> Columns:
+        return as_columns(self._epochs)
+
+    @property
+    def satellite_columns(self) -> Columns:
+        return as_columns(self._built_satellites())
 
 
 def read_nmea(source: str | os.PathLike | BinaryIO, **options) -> NmeaTables:
@@ -54,7 +92,9 @@ def read_nmea(source: str | os.PathLike | BinaryIO, **options) -> NmeaTables:
     stats = options.pop("stats", None) or ReadStats()
     chunks = list(iter_nmea_tables(source, stats=stats, **options))
     if not chunks:
-        return NmeaTables(epoch_frame(None), satellite_frame(None, None), stats)
+        return NmeaTables(epoch_columns(None), satellite_columns(None, None), stats)
+    import pandas as pd
+
     epochs = pd.concat([c.epochs for c in chunks], ignore_index=True)
     sats = pd.concat([c.satellites for c in chunks], ignore_index=True)
     return NmeaTables(epochs, sats, stats)
@@ -160,12 +200,11 @@ def _emit(
                         f"(it is for logs without RMC/ZDA dates)")  # fmt: skip
     days, arrays["date_jump_days"] = resolve_days(arrays["tod_s"], arrays["date_days"], carry)
     time_utc = to_time_utc_ms(days, arrays["tod_s"])
-    epochs = epoch_frame(arrays, time_utc)
-    sats = satellite_frame(arrays, time_utc)
+    epochs = epoch_columns(arrays, time_utc)
     stats.epochs += len(epochs)
-    stats.satellite_rows += len(sats)
+    stats.satellite_rows += arrays["sat_epoch"].size
     stats.undated_epochs += int((days < 0).sum())
-    yield NmeaTables(epochs, sats, stats)
+    yield NmeaTables(epochs, lambda: satellite_columns(arrays, time_utc), stats)  # built when asked for
 
 
 def check_partial(stats: ReadStats, max_bad: int | None) -> None:

@@ -45,13 +45,10 @@ signal id (the primary signal, e.g. L1 C/A).
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
-import pyarrow as pa
 
+from tollcli.io.columns import UTC_MS, Coded, Columns
 from tollcli.readers.nmea.assembler import FLOAT_COLUMNS
 from tollcli.readers.nmea.satellite_ids import CONSTELLATIONS
-
-_NAMES = np.array(CONSTELLATIONS, dtype=object)
 
 EPOCH_COLUMNS = (
     "epoch", "time_utc", "tod_s", "line", "lat_deg", "lon_deg", "alt_m", "geoid_sep_m",
@@ -84,54 +81,42 @@ _SAT_SOURCES = {
 }  # fmt: skip
 
 
-def _strings(values: np.ndarray) -> pd.api.extensions.ExtensionArray:
-    """An object array of str/None → pandas' ``string`` column (Arrow-backed; built by pyarrow directly, faster)."""
-    if pd.StringDtype().storage != "pyarrow":  # pragma: no cover - pandas configured for Python strings
-        return pd.array(values, dtype="string")
-    return pd.arrays.ArrowStringArray(pa.array(values, type=pa.string(), from_pandas=True))
-
-
-def _constellation_names(codes: np.ndarray) -> pd.api.extensions.ExtensionArray:
-    """Indices into ``satellite_ids.CONSTELLATIONS`` → the ``string`` column of their names."""
-    if pd.StringDtype().storage != "pyarrow":  # pragma: no cover - pandas configured for Python strings
-        return pd.array(_NAMES[codes], dtype="string")
-    names = pa.DictionaryArray.from_arrays(pa.array(codes, type=pa.int8()), pa.array(CONSTELLATIONS, type=pa.string()))
-    return pd.arrays.ArrowStringArray(names.cast(pa.string()))
-
-
-def _utc(values: np.ndarray) -> pd.DatetimeIndex:
-    return pd.DatetimeIndex(values.astype("datetime64[ms]")).tz_localize("UTC")
-
-
-def epoch_frame(arrays: dict[str, np.ndarray] | None, time_utc: np.ndarray | None = None) -> pd.DataFrame:
-    """The epoch table from the assembler's arrays (an empty table for ``None``)."""
+def epoch_columns(arrays: dict[str, np.ndarray] | None, time_utc: np.ndarray | None = None) -> Columns:
+    """The epoch table from the assembler's arrays (an empty table for ``None``), as :class:`Columns`."""
     if arrays is None:
         arrays = {k: np.empty(0, dtype=t) for k, t in _EPOCH_DTYPES.items()}
         arrays["epoch"] = np.empty(0, dtype=np.int64)
-        time_utc = np.empty(0, dtype="datetime64[ms]")
+        time_utc = np.empty(0, dtype=UTC_MS)
     data = {}
     for name in EPOCH_COLUMNS:
         if name == "time_utc":
-            data[name] = _utc(time_utc)
-        elif name == "mode_indicator":
-            data[name] = _strings(np.asarray(arrays[name], dtype=object))
+            data[name] = np.asarray(time_utc).astype(UTC_MS, copy=False)
         else:
             data[name] = np.asarray(arrays[name], dtype=_EPOCH_DTYPES[name])
-    return pd.DataFrame(data)
+    return Columns(data)
 
 
-def satellite_frame(arrays: dict[str, np.ndarray] | None, time_utc: np.ndarray | None) -> pd.DataFrame:
-    """The satellite table; ``time_utc`` is the epoch table's, looked up by epoch."""
+def satellite_columns(arrays: dict[str, np.ndarray] | None, time_utc: np.ndarray | None) -> Columns:
+    """The satellite table as :class:`Columns`; ``time_utc`` is the epoch table's, looked up by epoch."""
     if arrays is None:
-        data = {"epoch": np.empty(0, np.int64), "time_utc": _utc(np.empty(0, "datetime64[ms]"))}
+        data = {"epoch": np.empty(0, np.int64), "time_utc": np.empty(0, UTC_MS)}
         for name, (_, dtype) in _SAT_SOURCES.items():
-            data[name] = np.empty(0, dtype=dtype)
-        data["constellation"] = pd.array([], dtype="string")
-        return pd.DataFrame(data)
+            data[name] = np.empty(0, dtype=object if name == "constellation" else dtype)
+        return Columns(data)
     sat_epoch = arrays["sat_epoch"]
     first = arrays["epoch"][0] if arrays["epoch"].size else 0
-    data = {"epoch": sat_epoch, "time_utc": _utc(time_utc[sat_epoch - first])}
+    data = {"epoch": sat_epoch, "time_utc": np.asarray(time_utc).astype(UTC_MS, copy=False)[sat_epoch - first]}
     for name, (key, dtype) in _SAT_SOURCES.items():
         values = np.asarray(arrays[key], dtype=dtype)
-        data[name] = _constellation_names(values) if name == "constellation" else values
-    return pd.DataFrame(data)
+        data[name] = Coded(values, CONSTELLATIONS) if name == "constellation" else values
+    return Columns(data)
+
+
+def epoch_frame(arrays: dict[str, np.ndarray] | None, time_utc: np.ndarray | None = None):
+    """The epoch table as a pandas DataFrame (:func:`epoch_columns` converted)."""
+    return epoch_columns(arrays, time_utc).to_pandas()
+
+
+def satellite_frame(arrays: dict[str, np.ndarray] | None, time_utc: np.ndarray | None):
+    """The satellite table as a pandas DataFrame (:func:`satellite_columns` converted)."""
+    return satellite_columns(arrays, time_utc).to_pandas()
