@@ -44,6 +44,15 @@ def passage_gaps_s(geo, passage_gap_s: float = PASSAGE_GAP_S) -> np.ndarray:
 from tollcli.geoobjects.store import GeoObjects, load_geoobjects  # noqa: E402,F401  (re-exported)
 
 
+def warm_up(geo: GeoObjects) -> None:
+    """Make this thread's transformer into the geo-objects' search CRS now (the first one loads PROJ's database,
+    ~0.1–0.2 s): done while a reading thread reads the log's first chunk, it is off the charge's path."""
+    from tollcli.spatial import wgs84_to
+
+    if geo is not None and getattr(geo, "crs", None) and len(geo.ids):
+        wgs84_to(geo.crs)
+
+
 def candidate_pairs(epochs: pd.DataFrame, geo: GeoObjects) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(epoch row, geo-object index) for every position inside a geo-object, and per pair the position's metric x, y
     in that geo-object's own frame (the bounding boxes are found in the file's search CRS)."""

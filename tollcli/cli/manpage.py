@@ -36,6 +36,11 @@ ENVIRONMENT = (
                           "'off' turns it off. Results never depend on it: every cached file is named by all its inputs "
                           "and checked against the SHA-256 written with it before use; a folder others can write is not "
                           "used (a sticky shared one holds a private tollcli-UID folder per user); verify reads no cache"),
+    ("TOLLCLI_READ_AHEAD", "'0': process, integrity, locate and findings read a receiver log on one thread (by default the "
+                           "next chunk is read on a second thread while the current one is checked). The outputs are the same "
+                           "byte for byte either way. batch's workers do not read ahead when there are as many as cores ('1' makes them)"),
+    ("TOLLCLI_KERNELS", "'numpy': the NMEA reader and the trajectory filter use their numpy versions instead of the compiled "
+                        "ones (the same tables and invoices, slower; what an install without a C compiler gets)"),
     ("NO_COLOR", "no colours in the tables shown on a terminal"),
 )
 

@@ -29,6 +29,10 @@ A log that fails in any way — bad data or an error of the tool — is reported
 summary; it never stops the others.
 Work runs on a local process pool (``workers``) or, with ``scheduler``, on an existing Dask
 distributed cluster; each log's outputs depend only on that log and the shared settings.
+
+Why this file is long: the pool's life cycle (its workers started so that each dies with the batch, reads on one
+thread when the workers take every core, and is stopped at once on an interruption) belongs with the loop that
+hands out the logs (where each log writes lives in ``batch_outputs.py``).
 """
 
 from __future__ import annotations
@@ -242,6 +246,16 @@ def summarise(outcomes: list[dict]) -> dict:
             "outcomes": outcomes}  # fmt: skip
 
 
+def _start_worker(parent_pid: int, one_thread: bool) -> None:
+    """Pool worker initializer: :func:`die_with_parent`; with ``one_thread`` (the workers take every core) the
+    worker reads its logs without reading ahead, unless ``TOLLCLI_READ_AHEAD`` says otherwise."""
+    die_with_parent(parent_pid)
+    if one_thread:
+        from tollcli.io.prefetch import ENVIRONMENT
+
+        os.environ.setdefault(ENVIRONMENT, "0")
+
+
 def die_with_parent(parent_pid: int) -> None:
     """Pool worker initializer: the worker ends when the batch process ends, however it ends (even SIGKILL).
 
@@ -374,7 +388,9 @@ def run_batch(logs: list[str], geo: str, tariff: str, settings: ChargeSettings, 
         from concurrent.futures import ProcessPoolExecutor
         from concurrent.futures import as_completed as done_first
 
-        pool = ProcessPoolExecutor(max_workers=workers, initializer=die_with_parent, initargs=(os.getpid(),))
+        # workers on every core: none reads ahead (a second thread per log would only cost CPU, ~10 %)
+        one_thread = workers >= (os.cpu_count() or 1)
+        pool = ProcessPoolExecutor(max_workers=workers, initializer=_start_worker, initargs=(os.getpid(), one_thread))
         try:
             for fut in done_first([pool.submit(_run_in_worker, job) for job in jobs]):
                 outcomes.append(fut.result())

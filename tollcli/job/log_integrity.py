@@ -17,6 +17,7 @@ from tollcli.gnss.sigma_models import NominalModel
 from tollcli.integrity.environment import EnvironmentCarry, with_environment
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim, settle_sources
+from tollcli.io.prefetch import read_ahead
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
 
@@ -80,13 +81,15 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
     if sigma_model == "input":
         raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")
     carry, env_carry = AngleCarry(), EnvironmentCarry()
-    for chunk in iter_navigation_tables(log, kind, strict=strict, stats=stats if stats is not None else ReadStats(), date=date):
-        meas = nmea_measurements(chunk.epochs, chunk.satellites, sigma_model, sigma_m, nominal, carry)
-        params = settle_sources(params, meas)  # the level is the log's, from its first epoch with a source
-        meas, env_columns = measured_environment(chunk.epochs, meas, environment, env_carry)
-        raim = run_raim(meas, params)
-        table = chunk.epochs.rename(columns={"n_used": "n_used_receiver"}).reset_index(drop=True)
-        yield IntegrityChunk(with_raim_position(pd.concat([table, env_columns, raim], axis=1)), chunk.satellites)
+    read = iter_navigation_tables(log, kind, strict=strict, stats=stats if stats is not None else ReadStats(), date=date)
+    measured = ((chunk, nmea_measurements(chunk.epochs, chunk.satellites, sigma_model, sigma_m, nominal, carry)) for chunk in read)
+    with read_ahead(measured) as read:  # the next chunk read and measured while this one is checked
+        for chunk, meas in read:
+            params = settle_sources(params, meas)  # the level is the log's, from its first epoch with a source
+            meas, env_columns = measured_environment(chunk.epochs, meas, environment, env_carry)
+            raim = run_raim(meas, params)
+            table = chunk.epochs.rename(columns={"n_used": "n_used_receiver"}).reset_index(drop=True)
+            yield IntegrityChunk(with_raim_position(pd.concat([table, env_columns, raim], axis=1)), chunk.satellites)
 
 
 def measured_environment(epochs: pd.DataFrame, meas, setting: str, carry: EnvironmentCarry | None = None):
@@ -145,18 +148,3 @@ def trip_tables(log, hal: float, strict: bool, date=None) -> tuple[pd.DataFrame,
         check_usable(stats)
     table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
     return table, (pd.concat(sats, ignore_index=True) if sats else None)
-
-
-def iter_epoch_tables(run, strict: bool = False, date: dt.date | None = None, stats: ReadStats | None = None,
-                      engine: str = "bulk"):  # fmt: skip
-    """A log's epoch and satellite tables, chunk by chunk, through its :class:`~tollcli.io.log_run.LogRun` (``epochs``):
-    NMEA (and what is nothing else: its errors say why) by the NMEA reader's ``engine``, the other receiver solutions
-    by their readers."""
-    from tollcli.readers.nmea import iter_nmea_tables
-
-    stats = stats if stats is not None else ReadStats()
-    with run.named_errors():
-        if run.kind not in NAVIGATION_KINDS or run.kind == "nmea":
-            yield from iter_nmea_tables(run.stream(), strict=strict, date=date, stats=stats, engine=engine)
-        else:
-            yield from iter_navigation_tables(run.stream(), run.kind, strict=strict, stats=stats)

@@ -8,6 +8,7 @@ were not (``receiver_notes.py``) live beside it.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import math
 import os
@@ -26,7 +27,7 @@ from tollcli.charging.invoice import (
 )
 from tollcli.charging.nothing_seen import TrackExtent
 from tollcli.charging.rate_tables import check_vehicle
-from tollcli.charging.recognition import inside_pairs, load_geoobjects
+from tollcli.charging.recognition import inside_pairs, load_geoobjects, warm_up
 from tollcli.charging.tariffs import load_tariff
 from tollcli.enforcement.findings import FindingSettings
 from tollcli.enforcement.trip import cn0_summary
@@ -52,6 +53,7 @@ from tollcli.job.streaming import TailCharger
 from tollcli.job.file_info import solutions_instead
 from tollcli.job.log_clock import RELATIVE_CLOCK_KINDS, check_given_date, check_not_future, on_the_clock, start_time_utc
 from tollcli.job.receiver_notes import GPSD_DROPPED, count_ignored, receiver_notes
+from tollcli.io.prefetch import read_ahead
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_usable
@@ -239,8 +241,11 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
             placed: dict[str, str] = {}  # how a pseudorange log's epochs were placed: positioning, and a note why not
             chunks = (_navigation_chunks(run, kind, settings, nominal, stats) if kind in NAVIGATION_KINDS
                       else _pseudorange_chunks(run, kind, nav, settings, nominal, placed, charger))  # fmt: skip
-            params = _charge_chunks(chunks, settings, geo_objects, params, epoch_raim, charger, epoch_table, osnma, auth_counts,
-                                    failure_fixes, ignored, track)  # fmt: skip
+            prepared = _prepared_chunks(chunks, settings, params)
+            # a navigation log's next chunk read and prepared on a second thread while this one is charged
+            with (read_ahead(prepared) if kind in NAVIGATION_KINDS else contextlib.nullcontext(prepared)) as read:
+                params = _charge_chunks(read, settings, geo_objects, params, epoch_raim, charger, epoch_table, osnma, auth_counts,
+                                        failure_fixes, ignored, track)  # fmt: skip
             if stats is not None:
                 check_usable(stats)
         policy, table, details, found, period = charger.finish()
@@ -387,27 +392,35 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
         yield epochs.iloc[rows].reset_index(drop=True), meas.take(rows), None
 
 
+def _prepared_chunks(chunks, settings: ChargeSettings, params: RaimParams):
+    """Each chunk (epochs, RAIM measurements, satellite table or None) with what needs no geo-object: the integrity
+    sources the log settled on so far (``params``), its measured environment (the σ of the epochs the residuals say
+    urban, and that column) and its WLS geometry. Chunks in order: the environment carries from one to the next."""
+    env_carry = EnvironmentCarry()
+    for epochs, meas, satellites in chunks:
+        params = settle_sources(params, meas)  # the log's level, from its first epoch with a source
+        meas, env_columns = measured_environment(epochs, meas, settings.environment, env_carry)
+        geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)  # once for the epoch RAIM and every HAL
+        yield epochs, meas, satellites, params, env_columns, geometry
+
+
 def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams, charger: TailCharger,
                    epoch_table: list | None = None, osnma: OsnmaEvidence | None = None, auth_counts: dict | None = None,
                    failure_fixes: list | None = None, ignored: dict | None = None,
                    track: TrackExtent | None = None) -> RaimParams:  # fmt: skip
-    """Charge a log chunk by chunk (``chunks``: epochs, RAIM measurements, satellite table or None): each chunk's
-    environment, RAIM, geo-object pairs and OSNMA authentication are done before the next, and handed to ``charger``
-    with the few per-epoch columns it needs.
+    """Charge a log chunk by chunk (``chunks``: :func:`_prepared_chunks`): each chunk's RAIM, geo-object pairs and
+    OSNMA authentication are done before the next, and handed to ``charger`` with the few per-epoch columns it needs.
 
     Memory is the chunk's and the charger's tail, not the log's (``epoch_table``, a list for batch
     outputs, receives the whole per-epoch table and so grows with the log). Returns ``params`` with the integrity
     sources the log settled on.
     """
-    env_carry = EnvironmentCarry()
     table_parts = []
     offset = 0
-    for epochs, meas, satellites in chunks:
-        params = settle_sources(params, meas)  # the log's level, from its first epoch with a source
-        meas, env_columns = measured_environment(epochs, meas, settings.environment, env_carry)
+    warm_up(geo)  # while the first chunk is read
+    for epochs, meas, satellites, params, env_columns, geometry in chunks:
         epoch_raim = replace(epoch_raim, sources=params.sources)
-        geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)  # once for the epoch RAIM and every HAL
-        hal_free = hal_free_terms(meas, epoch_raim, geometry)  # once for the epoch RAIM and every HAL too
+        hal_free = hal_free_terms(meas, epoch_raim, geometry)  # once for the epoch RAIM and every HAL
         raim = run_raim(meas, epoch_raim, geometry=geometry, hal_free=hal_free)
         pairs = inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry, environment=settings.environment,
                              hal_free=hal_free)  # fmt: skip
