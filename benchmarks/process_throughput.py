@@ -5,9 +5,10 @@ epochs. The network: the motorway under the drive cut into 250 m tolled segments
 plus parallel tolled roads 300 m apart, all cut the same way, to 10 000
 geo-objects (built by ``build_geoobjects``; HAL 50 m). Reported, each in a fresh
 process: wall time and peak RSS of ``tollcli process``, and of ``tollcli epochs``
-(the reader alone, the baseline) on the same log. ``process`` runs twice: first
+(the reader alone, the baseline; best of 3, and its lines per second) on the same log. ``process`` runs twice: first
 with an empty cache directory (it parses the geo-object GeoJSON and compiles it),
-then again (it reads the compiled copy: what every later log of a fleet sees). The commands run as an
+then again (it reads the compiled copy: what every later log of a fleet sees; best of 3), and on one thread
+(``TOLLCLI_READ_AHEAD=0``: the next chunk not read while this one is checked; best of 2). The commands run as an
 installed package does, with tollcli's bytecode compiled (``compileall`` first; the environment
 variable ``PYTHONDONTWRITEBYTECODE`` is dropped for them).
 ``--mix ublox``: a 25 m/s drive written with the sentences of a real u-blox ZED-F9P (``ublox-zed-f9p-nmea.log``
@@ -173,16 +174,23 @@ def main() -> None:
         env["TOLLCLI_CACHE_DIR"] = str(Path(tmp) / "cache")
         subprocess.run([sys.executable, "-m", "compileall", "-q", str(Path(tollcli_package.__file__).parent)],
                        check=False, env=env, stdout=subprocess.DEVNULL)  # fmt: skip
-        t_read, m_read = timed([*tollcli, "epochs", str(log), "-o", str(Path(tmp) / "e.parquet"), "-q"], env)
+        t_read, m_read = min(timed([*tollcli, "epochs", str(log), "-o", str(Path(tmp) / "e.parquet"), "-q"], env) for _ in range(3))
+        with open(log, "rb") as fh:
+            n_lines = sum(block.count(b"\n") for block in iter(lambda: fh.read(1 << 20), b""))
         process = [*tollcli, "process", str(log), "--geo", str(geo_file), "--tariff", str(tariff), "-q",
                    "--environment", args.environment]  # fmt: skip
         t_cold, m_cold = timed([*process, "-o", str(Path(tmp) / "invoice-cold.json")], env)
         t_proc, m_proc = min(timed([*process, "-o", str(Path(tmp) / "invoice.json")], env) for _ in range(3))
+        # the same on one thread (the log's next chunk not read ahead while this one is checked)
+        t_one, m_one = min(timed([*process, "-o", str(Path(tmp) / "invoice-one.json")], {**env, "TOLLCLI_READ_AHEAD": "0"}) for _ in range(2))
+        one_same = (Path(tmp) / "invoice.json").read_bytes() == (Path(tmp) / "invoice-one.json").read_bytes()
         invoice = json.loads((Path(tmp) / "invoice.json").read_text())
         same = (Path(tmp) / "invoice.json").read_bytes() == (Path(tmp) / "invoice-cold.json").read_bytes()
         print(f"tollcli epochs  (reader, baseline):           {t_read:6.2f} s  {n_epochs / t_read:9,.0f} epochs/s  peak RSS {m_read:6.0f} MB")
         print(f"tollcli process, first run (compiles geo):    {t_cold:6.2f} s  {n_epochs / t_cold:9,.0f} epochs/s  peak RSS {m_cold:6.0f} MB")
         print(f"tollcli process, geo-objects compiled:        {t_proc:6.2f} s  {n_epochs / t_proc:9,.0f} epochs/s  peak RSS {m_proc:6.0f} MB")
+        print(f"tollcli process, one thread (READ_AHEAD=0):   {t_one:6.2f} s  {n_epochs / t_one:9,.0f} epochs/s  peak RSS {m_one:6.0f} MB"
+              f"  (invoice {'byte-identical' if one_same else 'DIFFERS'})")  # fmt: skip
         print(f"ratio process / reader time: {t_proc / t_read:.2f}; invoice: {len(invoice['lines'])} lines, total {invoice['total']}; "
               f"cold and warm invoices {'byte-identical' if same else 'DIFFER'}")  # fmt: skip
         under = {f["properties"]["id"] for f in geo["features"] if f["properties"]["id"].startswith("R0-")}
@@ -210,7 +218,8 @@ def main() -> None:
                   f"elsewhere {dict(rest['raim_status'].value_counts())}")  # fmt: skip
         if args.mix != "ubx":
             t_py = plain_pynmea2(log)
-            print(f"pynmea2.parse alone on the same file: {t_py:6.2f} s; ratio process / pynmea2: {t_proc / t_py:.2f}")
+            print(f"pynmea2.parse alone on the same file: {t_py:6.2f} s; ratio process / pynmea2: {t_proc / t_py:.2f} "
+                  f"(on one thread {t_one / t_py:.2f}); tollcli epochs {n_lines / t_read:,.0f} lines/s")  # fmt: skip
         memory = []
         for hours in sorted(args.memory_hours):
             n = int(hours * 3600)
