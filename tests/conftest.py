@@ -15,6 +15,10 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 # compiled geo-objects and threshold tables go to a fresh folder, never the user's cache
 os.environ.setdefault("TOLLCLI_CACHE_DIR", tempfile.mkdtemp(prefix="tollcli-test-cache-"))
+# xdist's workers on every core: each test's logs are read on one thread, as batch's workers read theirs (a second
+# thread per run would only cost CPU there); the two-thread path is tested on its own (test_prefetch.py sets it)
+if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) >= (os.cpu_count() or 1):
+    os.environ.setdefault("TOLLCLI_READ_AHEAD", "0")
 SHARED_DATA = REPO.parent / "shared" / "data"
 SAMPLES = REPO / "samples"
 #: when the Berlin drive (libRSF: seconds from its start, no date) is said to have started: a Tuesday noon, outside every

@@ -5,6 +5,7 @@ writes the same invoice and epoch table with it and without it."""
 from __future__ import annotations
 
 import json
+import os
 import threading
 import time
 
@@ -26,8 +27,10 @@ _BEFORE: set = set()
 
 
 @pytest.fixture(autouse=True)
-def _threads_before():
-    """The reading threads alive before each test (another test's generator not yet collected): not this one's."""
+def _threads_before(monkeypatch):
+    """Reading ahead on (the suite may run with it off: conftest.py), and the reading threads alive before each test
+    (another test's generator not yet collected): not this one's."""
+    monkeypatch.setenv(ENVIRONMENT, "1")
     _BEFORE.clear()
     _BEFORE.update(t for t in threading.enumerate() if t.name == THREAD_NAME)
 
@@ -168,3 +171,30 @@ def test_batch_workers_on_every_core_do_not_read_ahead_unless_told(monkeypatch):
     monkeypatch.setenv(ENVIRONMENT, "1")
     batch._start_worker(1, one_thread=True)
     assert prefetch.read_ahead_on()
+
+
+@pytest.mark.parametrize("log", ["sim/urban-fault/drive.nmea", "straight-drive.nmea"])
+def test_integrity_tables_are_the_same_reading_ahead_or_not(monkeypatch, log):
+    """``integrity``, ``locate`` and ``findings`` read through ``iter_integrity``: the same tables on both paths."""
+    from tollcli.integrity.raim import RaimParams
+    from tollcli.job.log_integrity import iter_integrity
+
+    tables = {}
+    for ahead in ("1", "0"):
+        monkeypatch.setenv(ENVIRONMENT, ahead)
+        chunks = list(iter_integrity(str(SAMPLES / log), "nmea", RaimParams(hal_m=50.0)))
+        tables[ahead] = [(c.table, c.satellites) for c in chunks]
+    assert len(tables["1"]) == len(tables["0"]) >= 1
+    for (a, sa), (b, sb) in zip(tables["1"], tables["0"]):
+        assert a.equals(b) and sa.equals(sb)
+    assert not _reader_threads()
+
+
+def test_reading_ahead_is_the_default_outside_the_suite():
+    """Reading ahead is the default outside the suite's full-machine runs (conftest.py turns it off there only)."""
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != ENVIRONMENT}
+    code = "from tollcli.io.prefetch import read_ahead_on; print(read_ahead_on())"
+    assert subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True).stdout.strip() == "True"
