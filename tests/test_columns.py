@@ -65,8 +65,11 @@ def test_to_pandas_and_back_keeps_every_value():
 @pytest.mark.skipif(not GPSD_LOGS, reason="needs ../shared/data/gpsd")
 @pytest.mark.parametrize("fmt", ["csv", "json", "geojson", "geojsonseq"])
 def test_every_real_log_writes_the_same_bytes_from_columns_as_from_its_frame(tmp_path, fmt):
+    """Both tables of every real log as CSV and JSON (every fourth log as GeoJSON and its sequence: the JSON rows
+    with a point each): the same bytes from the columns as from the DataFrames they become."""
+    logs = GPSD_LOGS if fmt in ("csv", "json") else GPSD_LOGS[::4]
     compared = 0
-    for log in GPSD_LOGS + [p for p in OTHER_KINDS if p.exists()]:
+    for log in logs + [p for p in OTHER_KINDS if p.exists()]:
         chunks = _tables(log)
         if not chunks:
             continue
@@ -76,7 +79,7 @@ def test_every_real_log_writes_the_same_bytes_from_columns_as_from_its_frame(tmp
             assert all(isinstance(c, Columns) for c in columns)
             assert _written(tmp_path, "columns", columns, fmt) == _written(tmp_path, "frame", frames, fmt), f"{log.name} {table} {fmt}"
             compared += 1
-    assert compared >= 2 * 110  # 117 of the 177 logs give tables (the rest are binary protocols the reader refuses)
+    assert compared >= 2 * len(logs) * 0.6  # 117 of the 177 logs give tables (the rest are binary protocols the reader refuses)
 
 
 @pytest.mark.skipif(not GPSD_LOGS, reason="needs ../shared/data/gpsd")
