@@ -223,3 +223,32 @@ def test_gsv_groups_compiled_and_numpy_are_the_same(monkeypatch):
                         b"$GLGSV,1,1,02,65,10,20,30,70,,,*00", b"$GAGSV,1,1,01,05,10,20,30,7*00", b""])  # fmt: skip
     n_gsv, refused = _decoded_alike(monkeypatch, "GSV", extra)
     assert n_gsv > 5_000 and refused >= 2
+
+
+@needs_compiled
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 3), st.integers(0, 2), st.integers(1, 4), st.integers(-1, 3)), max_size=60))
+def test_gsv_report_kept_per_satellite_compiled_and_numpy_are_the_same(rows):
+    """The GSV report kept for each satellite of an epoch (the lowest signal id after the last report without one, the
+    last of equals) picked in one compiled pass equals the numpy picking, on any order of reports within epochs."""
+    from tollcli.readers.nmea import bulk_epochs
+
+    rows = sorted(rows, key=lambda r: r[0])  # epochs in line order; within them, the reports as drawn
+    e, const, svid, signal = (np.array([r[k] for r in rows], np.int64) for k in range(4))
+    code = const * 1024 + svid
+    compiled = bulk_epochs._gsv_reports(e, code, signal)
+    assert np.array_equal(compiled, bulk_epochs._gsv_reports_numpy(e, code, signal))
+    if e.size:  # each satellite of each epoch keeps exactly one report
+        assert np.array_equal(np.unique(e[compiled] * 4096 + code[compiled]), np.unique(e * 4096 + code))
+        assert compiled.size == np.unique(e * 4096 + code).size
+
+
+@needs_compiled
+def test_gsv_reports_out_of_epoch_order_fall_back_to_numpy():
+    """Rows whose epochs go back (never from the reader, which numbers epochs in line order) are left to numpy."""
+    from tollcli.readers.nmea import bulk_epochs
+
+    chosen = np.empty(3, np.uint8)
+    e, code, signal = np.array([1, 0, 0]), np.array([1, 1, 2]), np.array([0, 1, 0])
+    assert kernels.compiled.gsv_reports(e, code, signal, chosen) is False
+    assert np.array_equal(bulk_epochs._gsv_reports(e, code, signal), bulk_epochs._gsv_reports_numpy(e, code, signal))

@@ -38,7 +38,8 @@ def test_the_closed_form_gives_the_direct_solves_verdicts(seed):
         p_sat = 1e-3 if trial % 3 == 0 else 1e-5  # 1e-3: pairs of satellites are monitored too
         H, sigma, mask, r, geometry, dy = random_epochs(rng, 6, n_slots, n_clocks, lone=trial % 5 == 0, flat=trial % 13 == 0)
         y = r if trial % 2 else np.where(mask, dy, 0.0)  # post-fit residuals, or the pre-fit ones (the same separations)
-        args = (H, sigma, mask, y, clock_columns(H, mask), geometry, 5e-5, 5e-3, p_sat, 1e-8)
+        p_const = 1e-4 if trial % 4 == 1 else 1e-8  # 1e-4 (ARAIM's for a constellation without a commitment): monitored
+        args = (H, sigma, mask, y, clock_columns(H, mask), geometry, 5e-5, 5e-3, p_sat, p_const)
         closed, direct = solution_separation(*args), solution_separation(*args, closed_form=False)
         assert np.array_equal(closed.n_modes, direct.n_modes) and np.array_equal(closed.enough, direct.enough)
         assert np.array_equal(closed.p_nm, direct.p_nm)
@@ -53,6 +54,44 @@ def test_the_closed_form_gives_the_direct_solves_verdicts(seed):
             assert abs(closed.max_ratio[e] - direct.max_ratio[e]) <= 1e-6 * direct.max_ratio[e]
         compared += int(ok.sum())
     assert compared > 200
+
+
+@pytest.mark.parametrize("p_const", [1e-8, 1e-4])
+def test_constellation_subsets_no_mode_monitors_are_not_solved_and_change_nothing(monkeypatch, p_const):
+    """A constellation's subset is solved only where its mode is monitored or one of its satellites is alone in it
+    (p_const 1e-8: almost nowhere): the result is bit for bit the one with every constellation's subset solved."""
+    import tollcli.integrity.solution_separation as ss
+
+    rng = np.random.default_rng(11)
+    original_terms, original_one = ss._subset_terms, ss._one_constellation
+    solved = {"skipping": 0, "every": 0}
+    run = ["skipping"]
+
+    def counting(*args):  # (c, n_const, g, weighted, n_used, has, at, group, Ah, var, r, rows, k, out)
+        solved[run[0]] += len(args[11])
+        return original_one(*args)
+
+    def every(*args):  # the constellations' monitoring dropped: every subset solved at every epoch
+        return original_terms(*args[:-1], None)
+
+    monkeypatch.setattr(ss, "_one_constellation", counting)
+    for trial in range(40):
+        H, sigma, mask, r, geometry, _ = random_epochs(rng, 30, int(rng.integers(5, 30)), int(rng.integers(2, 4)),
+                                                       lone=trial % 3 == 0, flat=False)  # fmt: skip
+        args = (H, sigma, mask, r, clock_columns(H, mask), geometry, 5e-5, 5e-3, 1e-5, p_const)
+        run[0] = "skipping"
+        skipping = ss.solution_separation(*args)
+        run[0] = "every"
+        with monkeypatch.context() as m:
+            m.setattr(ss, "_subset_terms", every)
+            full = ss.solution_separation(*args)
+        for field in ss.SeparationResult.__dataclass_fields__:
+            a, b = getattr(skipping, field), getattr(full, field)
+            assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), (trial, field)
+    if p_const == 1e-8:  # only the constellations of lone satellites were solved, at their epochs
+        assert 0 < solved["skipping"] < solved["every"] / 3
+    else:  # monitored: each constellation wherever it is used beside another (not where it is absent or alone)
+        assert 0.9 * solved["every"] < solved["skipping"] < solved["every"]
 
 
 def test_a_fault_is_found_on_the_faulty_satellite():

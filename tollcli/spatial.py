@@ -8,6 +8,7 @@ WGS-84 ↔ metric transforms (pyproj transformers made once per thread).
 from __future__ import annotations
 
 import math
+import re
 import threading
 
 import numpy as np
@@ -153,7 +154,11 @@ def local_frame(lon_deg: float) -> str:
 
 
 def _transformer(crs: str, inverse: bool = False):
-    """WGS-84 lon/lat → ``crs`` (or back), made once per thread (building one costs milliseconds)."""
+    """WGS-84 lon/lat → ``crs`` (or back), made once per thread (building one costs milliseconds).
+
+    A :func:`local_frame` on another meridian than one already built is made from that one's PROJ pipeline with the
+    meridian changed (0.1 ms instead of the 13 ms of a search of PROJ's database: a drive across a country meets a
+    frame per degree of longitude) — the very pipeline the search gives, so the same coordinates to the last bit."""
     from pyproj import Transformer
 
     cache = _TRANSFORMERS.__dict__.setdefault("by_crs", {})
@@ -161,12 +166,30 @@ def _transformer(crs: str, inverse: bool = False):
     if key not in cache:
         from pyproj.exceptions import CRSError
 
+        local = _LOCAL_FRAME.fullmatch(crs)
+        template = _TRANSFORMERS.__dict__.setdefault("local_pipelines", {}).get(inverse) if local else None
+        if template is not None:
+            cache[key] = Transformer.from_pipeline(template.format(meridian=local.group(1)))
+            return cache[key]
         src, dst = ("EPSG:4326", crs) if not inverse else (crs, "EPSG:4326")
         try:
             cache[key] = Transformer.from_crs(src, dst, always_xy=True)
         except CRSError:
             raise DataError(f"unknown coordinate reference system {crs!r}") from None
+        if local:
+            _learn_local_pipeline(cache[key].definition, local.group(1), inverse)
     return cache[key]
+
+
+#: the frames :func:`local_frame` writes, their meridian captured
+_LOCAL_FRAME = re.compile(r"\+proj=tmerc \+lat_0=0 \+lon_0=(-?\d+) \+k=1 \+x_0=0 \+y_0=0 \+ellps=WGS84 \+units=m \+no_defs")
+
+
+def _learn_local_pipeline(definition: str, meridian: str, inverse: bool) -> None:
+    """Keep a local frame's PROJ pipeline as a template for the other meridians, where its meridian appears once."""
+    if definition.count(f"lon_0={meridian} ") != 1 or "{" in definition or "}" in definition:
+        return
+    _TRANSFORMERS.__dict__["local_pipelines"][inverse] = definition.replace(f"lon_0={meridian} ", "lon_0={meridian} ")
 
 
 def wgs84_to(crs: str):

@@ -145,8 +145,18 @@ def adjugate_inverse(s: np.ndarray, position_diag: np.ndarray) -> tuple[np.ndarr
     return s_inv, singular
 
 
-def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geometry:
-    """WLS gain, redundancy, slopes and degrees of freedom for every epoch."""
+@dataclass
+class Gain:
+    """The WLS gain of a batch of epochs alone (what a covariance needs; :class:`Geometry` has these and more)."""
+
+    A: np.ndarray  # (E, U, N) WLS gain, zero columns for empty slots
+    singular: np.ndarray  # (E,) bool: the normal matrix cannot be inverted
+    n_meas: np.ndarray  # (E,) measurements
+    weight: np.ndarray  # (E, N) 1/σ², 0 for empty slots
+
+
+def _gain_terms(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray):
+    """The mask of usable measurements, their weights, H masked, the active unknowns, the gain and singularity."""
     mask = mask & np.isfinite(sigma_m) & (sigma_m > 0)
     weight = np.where(mask, 1.0 / np.where(mask, sigma_m, 1.0) ** 2, 0.0)
     Hm = np.where(mask[..., None], H, 0.0)
@@ -156,7 +166,18 @@ def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geomet
     idx = np.arange(G.shape[-1])
     G[:, idx, idx] += ~active  # an inactive unknown is decoupled, not singular
     Ginv, singular = _inverse_psd(G)
-    A = Ginv @ HwT
+    return mask, weight, Hm, active, Ginv @ HwT, singular
+
+
+def wls_gain(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Gain:
+    """The WLS gain of every epoch, as :func:`wls_geometry` computes it (the same numbers), without the rest."""
+    mask, weight, _, _, A, singular = _gain_terms(H, sigma_m, mask)
+    return Gain(A, singular, mask.sum(axis=1), weight)
+
+
+def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geometry:
+    """WLS gain, redundancy, slopes and degrees of freedom for every epoch."""
+    mask, weight, Hm, active, A, singular = _gain_terms(H, sigma_m, mask)
     leverage = (Hm * A.transpose(0, 2, 1)).sum(axis=-1)
     redundancy = np.where(mask, 1.0 - leverage, 0.0)
     n_meas = mask.sum(axis=1)

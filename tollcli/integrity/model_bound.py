@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from tollcli.gnss.sigma_models import urban_sigma_m
-from tollcli.gnss.wls import Geometry
+from tollcli.gnss.wls import Gain, Geometry
 from tollcli.integrity.sources import k_h
 
 #: σ (m) of the worst satellite a receiver can use under the nominal model (5° elevation, low latitude, single
@@ -21,8 +21,8 @@ from tollcli.integrity.sources import k_h
 NOMINAL_WORST_SIGMA_M = 27.6
 
 
-def sigma_major_m(geometry: Geometry, sigma_m: np.ndarray) -> np.ndarray:
-    """σ_major (m) per epoch of a batched WLS geometry under σ (E, N); NaN where singular or empty."""
+def sigma_major_m(geometry: Geometry | Gain, sigma_m: np.ndarray) -> np.ndarray:
+    """σ_major (m) per epoch of a batched WLS geometry (or its gain alone) under σ (E, N); NaN where singular or empty."""
     A = geometry.A[:, :2, :]
     var = np.where(geometry.weight > 0, np.nan_to_num(sigma_m), 0.0) ** 2
     cov = np.einsum("eun,en,evn->euv", A, var, A)
@@ -31,7 +31,7 @@ def sigma_major_m(geometry: Geometry, sigma_m: np.ndarray) -> np.ndarray:
     return np.where(geometry.singular | (geometry.n_meas == 0), np.nan, d_major)
 
 
-def model_hpl_m(geometry: Geometry, sigma_m: np.ndarray, p_md: float) -> np.ndarray:
+def model_hpl_m(geometry: Geometry | Gain, sigma_m: np.ndarray, p_md: float) -> np.ndarray:
     """K_H(P_MD) · σ_major per epoch (m)."""
     return k_h(p_md) * sigma_major_m(geometry, sigma_m)
 

@@ -23,7 +23,7 @@ import pandas as pd
 
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.receiver_outputs import GST_RMS_NOTES
-from tollcli.gnss.wls import Geometry, post_fit_residuals, wls_geometry, wsse
+from tollcli.gnss.wls import Geometry, post_fit_residuals, wls_gain, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
 from tollcli.integrity.kalman_hit import hpl_sbas_m
 from tollcli.integrity.raim import (
@@ -221,7 +221,7 @@ def model_hpl(meas: Measurements, geometry: Geometry, p_md: float) -> np.ndarray
         sigma = np.where(meas.mask & ~open_sky[:, None], np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)),
                          meas.sigma_m)  # fmt: skip
     same = sigma is meas.sigma_m or np.array_equal(np.where(meas.mask, sigma, 0.0), np.where(meas.mask, meas.sigma_m, 0.0))
-    own = geometry if same else wls_geometry(meas.H, sigma, meas.mask)
+    own = geometry if same else wls_gain(meas.H, sigma, meas.mask)  # its covariance only: the gain
     hpl = model_hpl_m(own, sigma, p_md)
     if meas.receiver is not None and meas.receiver.hdop is not None:
         unreported = ~meas.satellites_reported if meas.satellites_reported is not None else np.ones(hpl.shape, bool)

@@ -169,15 +169,18 @@ def _separation_block(H, sigma_m, mask, dy_m, clock_index, geometry: Geometry, p
     present = np.concatenate([used, np.zeros((n_epochs, n_const), bool), used[:, i] & used[:, j] & pairs_needed[:, None]], axis=1)
     const_used = np.stack([(used & (const == c)).any(axis=1) for c in range(n_const)], axis=1)
     present[:, n_slots : n_slots + n_const] = const_used & (const_used.sum(axis=1, keepdims=True) >= 2)
-    terms = _subset_terms if closed_form else _subset_terms_direct
-    solvable, cov_ss, cov_k, sep = terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m)
-    sigma_0 = _major_of(_cov_h(geometry.A, var))
-    sigma_k = _major_of(cov_k)
-    sigma_ss = _major_of(cov_ss)
     kind = np.repeat([0, 1, 2], [n_slots, n_const, i.size])  # single satellite, constellation, pair of satellites
     prior = np.array([p_sat, p_const, p_sat**2])[kind][None, :] * present
     share = p_md / (2.0 * np.maximum(present.sum(axis=1), 1))[:, None]
     monitored = present & (prior > share)
+    if closed_form:  # a subset no mode monitors is not solved: nothing below reads its terms
+        solvable, cov_ss, cov_k, sep = _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m,
+                                                     monitored[:, n_slots : n_slots + n_const])  # fmt: skip
+    else:
+        solvable, cov_ss, cov_k, sep = _subset_terms_direct(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m)
+    sigma_0 = _major_of(_cov_h(geometry.A, var))
+    sigma_k = _major_of(cov_k)
+    sigma_ss = _major_of(cov_ss)
     enough = ~(monitored & ~solvable).any(axis=1) & (geometry.dof >= 1) & ~geometry.singular
     sigma_k = np.where(monitored, sigma_k, 1.0)
     sigma_ss = np.where(monitored, sigma_ss, 0.0)
@@ -238,11 +241,16 @@ def _subset_terms_direct(H, sigma_m, used, var, const, n_const, geometry, i, j, 
     return solvable, _cov_h(dA, var[:, None, :]), _cov_h(A_k, var[:, None, :]), sep
 
 
-def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m):
+def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m, const_monitored=None):
     """Per epoch and subset (slots, constellations, pairs): solvable, the separation's horizontal covariance, the subset
     solution's horizontal covariance and the separation (east, north) — a satellite or a pair left out by the low-rank
     update of the all-in-view solution (no solve per subset), a constellation (and a subset the update cannot take:
     one leaving a clock without measurements) by solving it.
+
+    ``const_monitored`` (E, C): the epochs whose constellation subsets a mode monitors (None: every one). A
+    constellation's subset is solved there and where one of its satellites is alone in it (that satellite's subset is
+    the constellation's); elsewhere its terms stay zero and unsolvable: nothing reads them (a constellation fault is
+    rarely monitored — p_const 1e-8 is below its share of P_MD — so most epochs solve none).
 
     Leaving out S, with M = I − H·A, r = M·y the all-in-view residuals and R = M[S,S]:
     A_S − A = −A[:,S]·R⁻¹·M[S,:], the separation −A[:,S]·R⁻¹·r[S], its covariance A[:,S]·Σ_S·R⁻ᵀ·A[:,S]ᵀ (MΣ is
@@ -320,7 +328,11 @@ def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m):
         redo_pairs = np.zeros(0, np.int64)
     # --- whole constellations, from their own normal matrices; a lone satellite's subset is its constellation's
     drops = []
-    if _constellation_terms(Hm, weight, used, const, n_const, Ah, var, r, n_slots, solvable, cov_ss, cov_k, sep):
+    needed = np.ones((n_epochs, n_const), bool) if const_monitored is None else const_monitored.copy()
+    if lone.any():
+        e, s = np.nonzero(lone)
+        needed[e, const[e, s]] = True
+    if _constellation_terms(Hm, weight, used, const, n_const, Ah, var, r, n_slots, solvable, cov_ss, cov_k, sep, needed):
         if lone.any():
             e, s = np.nonzero(lone)
             k = n_slots + const[e, s]
@@ -351,12 +363,14 @@ def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m):
     return solvable, cov_ss, cov_k, sep
 
 
-def _constellation_terms(Hm, weight, used, const, n_const, Ah, var, r, n_slots, solvable, cov_ss, cov_k, sep) -> bool:
+def _constellation_terms(Hm, weight, used, const, n_const, Ah, var, r, n_slots, solvable, cov_ss, cov_k, sep,
+                         needed: np.ndarray | None = None) -> bool:  # fmt: skip
     """The terms of every constellation's subset (into the arrays, at ``n_slots + c``), as :func:`wls_geometry` would
     solve it, from the constellations' own sums (:func:`clock_group_terms`): without c, the Schur complement of the
     normal matrix's clock block is S = Σ_{c'≠c} S_c' and a kept measurement's horizontal gain is
     A[:2, n] = S⁻¹[:2]·w_n·(h_n − h̄_c(n)) — a 3×3 inverse per epoch and subset, not a U×U one and the N-wide
-    products. False (nothing written) where H's clocks are not one-hot: the caller solves."""
+    products. ``needed`` (E, C): the epochs and constellations to solve (None: all; each epoch's terms are the same
+    whichever others are solved with it). False (nothing written) where H's clocks are not one-hot: the caller solves."""
     n_epochs = Hm.shape[0]
     if n_const == 0 or n_epochs == 0:
         return True
@@ -364,27 +378,43 @@ def _constellation_terms(Hm, weight, used, const, n_const, Ah, var, r, n_slots, 
     group = np.where(used, const, -1)
     if clock_groups(Hm, w) is None or n_const > Hm.shape[-1] - 3:
         return False
+    rows = np.arange(n_epochs) if needed is None else np.flatnonzero(needed.any(axis=1))
+    if rows.size == 0:
+        return True
+    if rows.size < n_epochs:  # the epochs some constellation's subset is needed at, alone
+        Hm, w, group, used, Ah, var, r = Hm[rows], w[rows], group[rows], used[rows], Ah[rows], var[rows], r[rows]
+        needed = needed[rows]
     g = clock_group_terms(Hm, w, group, n_const)
     weighted = g.centred * w[..., None]  # (E, N, 3)
     n_used = used.sum(axis=1)
     has = g.total > 0  # (E, C) clocks with measurements
-    idx = np.arange(3)
     for c in range(n_const):  # a few constellations
-        others = np.arange(n_const) != c
-        S = g.scatter[:, others].sum(axis=1)
-        active = g.nonzero[:, others].any(axis=1)  # (E, 3) the position unknowns the subset still has
-        S[:, idx, idx] += ~active  # an inactive unknown is decoupled, not singular (as wls_geometry)
-        s_inv, singular = adjugate_inverse(S, g.squares[:, others].sum(axis=1) + ~active)
-        keep = (group != c)[..., None]
-        A_h = s_inv[:, :2, :] @ np.where(keep, weighted, 0.0).transpose(0, 2, 1)  # (E, 2, N) the subset's gain
-        dA = A_h - Ah
-        k = n_slots + c
-        n_unknowns = active.sum(axis=1) + has[:, others].sum(axis=1)
-        solvable[:, k] = ~singular & (n_used - (group == c).sum(axis=1) - n_unknowns >= 0)
-        cov_ss[:, k] = _cov_h(dA, var)
-        cov_k[:, k] = _cov_h(A_h, var)
-        sep[:, k] = np.einsum("ean,en->ea", dA, r)
+        at = np.arange(rows.size) if needed is None else np.flatnonzero(needed[:, c])
+        if at.size:
+            _one_constellation(c, n_const, g, weighted[at], n_used[at], has[at], at, group[at], Ah[at], var[at], r[at],
+                               rows[at], n_slots + c, (solvable, cov_ss, cov_k, sep))  # fmt: skip
     return True
+
+
+def _one_constellation(c, n_const, g, weighted, n_used, has, at, group, Ah, var, r, rows, k, out) -> None:
+    """Constellation ``c``'s subset at epochs ``rows`` of the block (``at``: the same epochs among ``g``'s), into
+    column ``k`` of ``out`` (solvable, cov_ss, cov_k, sep)."""
+    solvable, cov_ss, cov_k, sep = out
+    g_scatter, g_nonzero, g_squares = g.scatter[at], g.nonzero[at], g.squares[at]
+    idx = np.arange(3)
+    others = np.arange(n_const) != c
+    S = g_scatter[:, others].sum(axis=1)
+    active = g_nonzero[:, others].any(axis=1)  # (E, 3) the position unknowns the subset still has
+    S[:, idx, idx] += ~active  # an inactive unknown is decoupled, not singular (as wls_geometry)
+    s_inv, singular = adjugate_inverse(S, g_squares[:, others].sum(axis=1) + ~active)
+    keep = (group != c)[..., None]
+    A_h = s_inv[:, :2, :] @ np.where(keep, weighted, 0.0).transpose(0, 2, 1)  # (E, 2, N) the subset's gain
+    dA = A_h - Ah
+    n_unknowns = active.sum(axis=1) + has[:, others].sum(axis=1)
+    solvable[rows, k] = ~singular & (n_used - (group == c).sum(axis=1) - n_unknowns >= 0)
+    cov_ss[rows, k] = _cov_h(dA, var)
+    cov_k[rows, k] = _cov_h(A_h, var)
+    sep[rows, k] = np.einsum("ean,en->ea", dA, r)
 
 
 def clock_columns(H: np.ndarray, mask: np.ndarray) -> np.ndarray:

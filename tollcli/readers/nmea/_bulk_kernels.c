@@ -469,6 +469,62 @@ done:
     return result;
 }
 
+/* gsv_reports(e, code, signal, chosen) -> True, or False when the rows are not in epoch order (the caller's numpy path)
+ *
+ * Which GSV satellite rows (int64 e: the epoch, code: constellation·1024 + number below 16·1024, signal: the signal id,
+ * -1 none; in line order) stand for their satellite in their epoch, as the reference assembler keeps them: going
+ * through an epoch's reports in order, a report replaces the kept one of its satellite when its signal id is lower
+ * or equal, or the kept one has none. chosen: uint8, one per row, set here (1: the kept report). */
+static PyObject *gsv_reports(PyObject *self, PyObject *args) {
+    Py_buffer b_e, b_code, b_signal, b_chosen;
+    if (!PyArg_ParseTuple(args, "y*y*y*w*", &b_e, &b_code, &b_signal, &b_chosen)) return NULL;
+    PyObject *result = NULL;
+    const Py_ssize_t m = b_e.len / 8;
+    int64_t *kept = NULL, *touched = NULL;
+    if (b_code.len / 8 != m || b_signal.len / 8 != m || b_chosen.len != m) {
+        PyErr_SetString(PyExc_ValueError, "gsv_reports: sizes do not match");
+        goto done;
+    }
+    enum { CODES = 16 * 1024 };
+    kept = PyMem_Malloc(CODES * sizeof(int64_t));
+    touched = PyMem_Malloc((m > 0 ? m : 1) * sizeof(int64_t));
+    if (kept == NULL || touched == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    const int64_t *e = b_e.buf, *code = b_code.buf, *signal = b_signal.buf;
+    uint8_t *chosen = b_chosen.buf;
+    int ordered = 1;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t c = 0; c < CODES; c++) kept[c] = -1;
+    Py_ssize_t n_touched = 0;
+    for (Py_ssize_t i = 0; i < m; i++) {
+        chosen[i] = 0;
+        if (code[i] < 0 || code[i] >= CODES || (i > 0 && e[i] < e[i - 1])) { ordered = 0; break; }
+        if (i > 0 && e[i] != e[i - 1]) {  /* a new epoch: its satellites start again */
+            for (Py_ssize_t t = 0; t < n_touched; t++) kept[touched[t]] = -1;
+            n_touched = 0;
+        }
+        int64_t k = kept[code[i]];
+        if (k < 0) {
+            kept[code[i]] = i;
+            touched[n_touched++] = code[i];
+            chosen[i] = 1;
+        } else if (signal[i] <= signal[k] || signal[k] < 0) {
+            chosen[k] = 0;
+            kept[code[i]] = i;
+            chosen[i] = 1;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    result = ordered ? Py_True : Py_False;
+    Py_INCREF(result);
+done:
+    PyMem_Free(kept); PyMem_Free(touched);
+    PyBuffer_Release(&b_e); PyBuffer_Release(&b_code); PyBuffer_Release(&b_signal); PyBuffer_Release(&b_chosen);
+    return result;
+}
+
 /* time_of_day(buf, start, end, tod, ok): hhmmss[.sss] fields → seconds after midnight
  * (float64, NaN when empty or bad) and ok (uint8: empty or good). The rules of
  * bulk_fields.time_of_day_s_numpy: six leading digits, hh <= 23, mm <= 59, the seconds
@@ -573,6 +629,7 @@ static PyMethodDef methods[] = {
     {"decimal", decimal, METH_VARARGS, "Read decimal fields (see bulk_fields.decimal)."},
     {"gsa_slots", gsa_slots, METH_VARARGS, "Read the satellite slots of GSA lines (see bulk_sentences.gsa)."},
     {"gsv_groups", gsv_groups, METH_VARARGS, "Read the satellite groups of GSV lines (see bulk_sentences.gsv)."},
+    {"gsv_reports", gsv_reports, METH_VARARGS, "The GSV report kept per satellite and epoch (see bulk_epochs._gsv_reports)."},
     {"field_decimal", field_decimal, METH_VARARGS, "Read field k of lines as decimals (see BlockLines.field_decimals)."},
     {NULL, NULL, 0, NULL},
 };

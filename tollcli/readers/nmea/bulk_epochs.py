@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from tollcli.readers.nmea import kernels
 from tollcli.readers.nmea.assembler import FLOAT_COLUMNS
 from tollcli.readers.nmea.bulk_picks import (
     first_finite,
@@ -71,8 +72,21 @@ def _gsv_reports(e: np.ndarray, code: np.ndarray, signal: np.ndarray) -> np.ndar
     As the reference assembler, which goes through the reports in order and replaces the kept one
     when the new signal id is lower or equal, or the kept one has none (-1): the kept report is,
     after the last report without a signal id, the last one with the lowest signal id (the report
-    without one itself when it is the last).
+    without one itself when it is the last). In one compiled pass where the kernels are built (a receiver
+    reporting each satellite's signals apart, as a dual-frequency one does, gives every satellite several rows),
+    else sorted and grouped here (:func:`_gsv_reports_numpy`, the reference the test compares the kernel with).
     """
+    gsv_reports = getattr(kernels.compiled, "gsv_reports", None)
+    if gsv_reports is not None and e.size:
+        chosen = np.empty(e.size, np.uint8)
+        as_int = [np.ascontiguousarray(x, np.int64) for x in (e, code, signal)]
+        if gsv_reports(*as_int, chosen):
+            return np.flatnonzero(chosen)
+    return _gsv_reports_numpy(e, code, signal)
+
+
+def _gsv_reports_numpy(e: np.ndarray, code: np.ndarray, signal: np.ndarray) -> np.ndarray:
+    """:func:`_gsv_reports` with numpy: the rows sorted by epoch and satellite, each group's kept row picked at once."""
     m = e.size
     if m == 0:
         return np.zeros(0, np.int64)
