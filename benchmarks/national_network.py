@@ -17,7 +17,8 @@ every command in a fresh process (wall time, peak RSS):
 
 Ratios are printed against the first size (10 000 sections): the warm ``process`` must stay within 1.3× of it, the
 first within 2× of the warm one at the same size; and against ``pynmea2.parse`` alone on the same drive (the
-reader benchmark's baseline, timed right after each size's warm ``process``): at most 0.5×. The invoices of every size are compared with the first one for
+reader benchmark's baseline, timed right after each size's warm ``process``, and again in two pairs, each warm
+``process`` then ``pynmea2.parse`` right after it): at most 0.5×. The invoices of every size are compared with the first one for
 the segments both networks share (the 10 000-section network is a part of every larger one).
 """
 
@@ -27,6 +28,7 @@ import argparse
 import json
 import math
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -36,6 +38,9 @@ from pathlib import Path
 
 from process_throughput import UBLOX_SPEED, roads, timed, ublox_drive  # noqa: E402  (benchmarks/ is on sys.path)
 from reader_throughput import plain_pynmea2  # noqa: E402
+
+#: warm process / pynmea2.parse ratios timed back to back per size
+PAIRS = 2
 
 TARIFF = Path(__file__).resolve().parents[1] / "geoobjects" / "example-tariff.toml"
 TOLLCLI = [sys.executable, "-m", "tollcli"]
@@ -128,6 +133,8 @@ def run_size(n: int, work: Path, drive: Path, batch_logs: list[Path], env0: dict
     out["first"] = timed([*process, "-o", str(folder / "invoice-first.json")], env)
     out["warm"] = min(timed([*process, "-o", str(folder / "invoice.json")], env) for _ in range(2))
     out["pynmea2"] = plain_pynmea2(drive)
+    # the same ratio timed in pairs, each warm process then pynmea2 right after it (a shared machine's speed drifts)
+    out["pairs"] = [timed([*process, "-o", str(folder / "invoice-pair.json")], env)[0] / plain_pynmea2(drive) for _ in range(PAIRS)]
     out["invoice"] = json.loads((folder / "invoice.json").read_text())
     out["first_same"] = (folder / "invoice.json").read_bytes() == (folder / "invoice-first.json").read_bytes()
     batch = [*TOLLCLI, "batch", *map(str, batch_logs), "--geo", str(geo_file), "--tariff", str(TARIFF), "-o", str(folder / "batch"),
@@ -175,7 +182,8 @@ def main() -> None:
                 t, m = r[key]
                 print(f"  {label:22s} {t:7.2f} s  peak RSS {m:6.0f} MB   ({t / base[key][0]:.2f}× the {base['sections']:,}-section time)")
             print(f"  first / warm process: {r['first'][0] / r['warm'][0]:.2f} (invoices {'byte-identical' if r['first_same'] else 'DIFFER'})")
-            print(f"  pynmea2.parse alone on the drive: {r['pynmea2']:.2f} s; warm process / pynmea2: {r['warm'][0] / r['pynmea2']:.2f}")
+            print(f"  pynmea2.parse alone on the drive: {r['pynmea2']:.2f} s; warm process / pynmea2: {r['warm'][0] / r['pynmea2']:.2f}; "
+                  f"in {PAIRS} pairs timed back to back: {', '.join(f'{x:.2f}' for x in r['pairs'])}, median {statistics.median(r['pairs']):.2f}")  # fmt: skip
             print(f"  batch, 2 workers:     {r['batch']['seconds']:7.2f} s  ({r['batch']['seconds'] / base['batch']['seconds']:.2f}×); per worker "
                   + "; ".join(f"peak RSS {v[0]:.0f} MB of which the store's pages {v[2]:.0f} MB" for v in w)
                   + f"; the store's pages in both at once: RSS {r['batch']['store_together'][0]:.0f} MB, PSS "

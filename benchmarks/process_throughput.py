@@ -16,7 +16,8 @@ of ``../shared/data/gpsd/``, epoch by epoch, as :func:`real_patterns.drive` repl
 24×GSV GLL GST ZDA GBS, its GST with an RMS field that is no range RMS (10⁵ "m") and 2.3/3.5/4.0 m σ's, its
 GBS (the receiver's RAIM, no failed satellite), no GRS; the share of the segments under the track that are
 charged, the parallel roads (300 m apart) charged, the findings, and the time ``pynmea2.parse`` alone needs
-for the file are printed beside.
+for the file are printed beside; then ``--pairs`` (3) ratios of a warm ``process`` to ``pynmea2.parse`` timed right
+after it, and their median (the two seconds apart, not minutes: a shared machine's speed drifts).
 ``--mix satellites-only``: the same 25 m/s drive with the sentences of a real SiRF IV receiver that writes GGA RMC GSA
 GSV only (``bu353s4.log``): the ``model`` level; with ``--environment open`` (open country declared) it is charged, and
 so it is with ``--declare open`` (the geo-objects built with ``geoobjects build --environment motorway=open``: the
@@ -34,6 +35,7 @@ import argparse
 import json
 import math
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -120,6 +122,16 @@ def ublox_drive(path: Path, n_epochs: int) -> None:
     real_patterns.drive(real_patterns.DATA / UBLOX_LOG, path, n_epochs, track)
 
 
+def paired_ratios(process: list[str], env: dict, log: Path, pairs: int) -> list[float]:
+    """``pairs`` ratios of a warm ``process`` to ``pynmea2.parse`` of ``log`` timed right after it: the two measured
+    within seconds of each other, so a machine whose speed drifts over minutes (a shared host) moves both alike."""
+    ratios = []
+    for _ in range(pairs):
+        t_proc, _ = timed(process, env)
+        ratios.append(t_proc / plain_pynmea2(log))
+    return ratios
+
+
 def timed(cmd: list[str], env: dict | None = None) -> tuple[float, float]:
     """Wall time (s) and peak RSS (MB) of a command in a fresh process."""
     code = ("import resource, subprocess, sys, time\n"
@@ -140,6 +152,7 @@ def main() -> None:
     parser.add_argument("--environment", default="auto", help="tollcli's --environment (satellites-only: open declares open country)")
     parser.add_argument("--declare", choices=("open", "urban"), default=None,
                         help="build the geo-objects with the motorways declared open or urban (geoobjects build --environment motorway=...)")
+    parser.add_argument("--pairs", type=int, default=3, help="warm process / pynmea2.parse ratios timed back to back (0: none)")
     parser.add_argument("--bias-m", type=float, default=0.0, help="ubx mix: add this to one used satellite's prRes for 60 s mid-drive")
     args = parser.parse_args()
     n_epochs = int(args.hours * 3600)
@@ -220,6 +233,10 @@ def main() -> None:
             t_py = plain_pynmea2(log)
             print(f"pynmea2.parse alone on the same file: {t_py:6.2f} s; ratio process / pynmea2: {t_proc / t_py:.2f} "
                   f"(on one thread {t_one / t_py:.2f}); tollcli epochs {n_lines / t_read:,.0f} lines/s")  # fmt: skip
+            if args.pairs:
+                ratios = paired_ratios([*process, "-o", str(Path(tmp) / "invoice-pair.json")], env, log, args.pairs)
+                print(f"paired, each warm process then pynmea2.parse right after it ({args.pairs} pairs): ratios "
+                      f"{', '.join(f'{r:.2f}' for r in ratios)}; median {statistics.median(ratios):.2f}")  # fmt: skip
         memory = []
         for hours in sorted(args.memory_hours):
             n = int(hours * 3600)
