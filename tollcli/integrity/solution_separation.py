@@ -328,13 +328,12 @@ def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m, c
         redo_pairs = np.zeros(0, np.int64)
     # --- whole constellations, from their own normal matrices; a lone satellite's subset is its constellation's
     drops = []
+    lone_e, lone_s = np.nonzero(lone)  # a lone satellite's subset is its constellation's: solved at its epochs
     needed = np.ones((n_epochs, n_const), bool) if const_monitored is None else const_monitored.copy()
-    if lone.any():
-        e, s = np.nonzero(lone)
-        needed[e, const[e, s]] = True
+    needed[lone_e, const[lone_e, lone_s]] = True
     if _constellation_terms(Hm, weight, used, const, n_const, Ah, var, r, n_slots, solvable, cov_ss, cov_k, sep, needed):
-        if lone.any():
-            e, s = np.nonzero(lone)
+        if lone_e.size:
+            e, s = lone_e, lone_s
             k = n_slots + const[e, s]
             solvable[e, s], cov_ss[e, s], cov_k[e, s], sep[e, s] = solvable[e, k], cov_ss[e, k], cov_k[e, k], sep[e, k]
         solve = used & ~update & ~lone
