@@ -162,3 +162,31 @@ def test_a_gga_only_log_is_model_level_and_a_gsa_without_satellites_insufficient
     tables = read_nmea(no_used)
     out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
     assert (out["raim_status"] == "insufficient").all()
+
+
+@pytest.mark.parametrize("dtype", ["string[pyarrow]", object])
+@pytest.mark.parametrize("with_missing", [False, True])
+def test_constellation_codes_name_the_rows_as_factorizing_their_names_does(dtype, with_missing):
+    """The constellation of each used row, coded from the whole column (the reader's Arrow strings coded at once),
+    names the same constellation in the same (name) order as ``pandas.factorize`` of just those rows' names."""
+    from tollcli.gnss.nmea_measurements import _compact, _constellation_codes
+
+    rng = np.random.default_rng(5)
+    names = np.array(["GPS", "Galileo", "BeiDou", "GLONASS", "QZSS"], dtype=object)
+    values = names[rng.integers(0, 5, 400)]
+    if with_missing:
+        values[rng.integers(0, 400, 20)] = None
+    column = pd.Series(values, dtype=dtype)
+    rows = np.sort(rng.choice(400, 150, replace=False))
+    codes, got = _compact(*_constellation_codes(column, rows))
+    want_codes, want = _compact(*pd.factorize(column.to_numpy(dtype=object)[rows], sort=True, use_na_sentinel=False))
+    np.testing.assert_array_equal(codes, want_codes)
+    assert [None if pd.isna(n) else n for n in got] == [None if pd.isna(n) else n for n in want]
+
+
+def test_angle_lookup_takes_epochs_in_any_order():
+    from tollcli.gnss.nmea_measurements import _lookup
+
+    keys, values = np.array([3, 1, 7, 5]), np.array([30.0, 10.0, 70.0, 50.0])
+    np.testing.assert_array_equal(_lookup(keys, values, np.array([5, 2, 3, 7, 9, 1])), [50.0, np.nan, 30.0, 70.0, np.nan, 10.0])
+    np.testing.assert_array_equal(_lookup(np.sort(keys), np.sort(values), np.array([5, 2, 3])), [50.0, np.nan, 30.0])

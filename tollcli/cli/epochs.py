@@ -11,6 +11,7 @@ from tollcli.cli import options as opt
 from tollcli.cli.console import note, progress
 from tollcli.errors import UsageError
 from tollcli.io.log_run import LogRun
+from tollcli.io.prefetch import read_ahead
 from tollcli.io.writers import TableWriter, format_for
 from tollcli.readers.navigation import iter_epoch_tables
 from tollcli.readers.nmea import ReadStats
@@ -53,12 +54,14 @@ def epochs(
     sat_writer = TableWriter(satellites, _sat_format(satellites, out_fmt)) if satellites else None
     with epoch_writer, (sat_writer or _Null()):
         with progress(f"reading {log}", quiet, log=log) as advance, LogRun(log, hashed=False) as run:  # the log opened once, not hashed: no invoice names it
-            for chunk in iter_epoch_tables(run, strict=strict, date=date.date() if date else None, stats=stats, engine=reader):
-                epochs = chunk.epoch_columns
-                epoch_writer.write(epochs)
-                if sat_writer is not None:
-                    sat_writer.write(chunk.satellite_columns)
-                advance(len(epochs), int(epochs["line"].max()) if len(epochs) else None)
+            tables = iter_epoch_tables(run, strict=strict, date=date.date() if date else None, stats=stats, engine=reader)
+            with read_ahead(tables) as chunks:  # the next chunk read while this one is written
+                for chunk in chunks:
+                    epochs = chunk.epoch_columns
+                    epoch_writer.write(epochs)
+                    if sat_writer is not None:
+                        sat_writer.write(chunk.satellite_columns)
+                    advance(len(epochs), int(epochs["line"].max()) if len(epochs) else None)
         check_usable(stats)
         if stats.epochs == 0:
             from tollcli.readers.nmea.tables import epoch_columns, satellite_columns

@@ -71,6 +71,17 @@ def _first_of_each(epoch: np.ndarray, constellation: np.ndarray, svid: np.ndarra
     return np.sort(first)
 
 
+def _constellation_codes(constellation: pd.Series, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The constellation codes of ``rows`` and the names they index (sorted; names no row has may be among them:
+    :func:`_compact` drops them). The reader's Arrow strings are coded whole, without making a Python string of every
+    row; a column with a missing name is coded as ``pandas.factorize`` codes objects (a missing name last, as NaN)."""
+    array = constellation.array
+    if isinstance(array, pd.arrays.ArrowStringArray) and not constellation.hasnans:
+        codes, names = pd.factorize(array, sort=True)
+        return codes[rows], np.asarray(names, dtype=object)
+    return pd.factorize(constellation.to_numpy(dtype=object)[rows], sort=True, use_na_sentinel=False)
+
+
 def _compact(code: np.ndarray, names) -> tuple[np.ndarray, np.ndarray]:
     """Codes renumbered over the names still present (kept in their order)."""
     present = np.flatnonzero(np.bincount(code, minlength=len(names))) if code.size else np.zeros(0, np.int64)
@@ -81,12 +92,13 @@ def _compact(code: np.ndarray, names) -> tuple[np.ndarray, np.ndarray]:
 
 def _lookup(keys: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndarray:
     """``values`` at the place of each ``wanted`` key in ``keys`` (unique), NaN where absent."""
-    order = np.argsort(keys, kind="stable")
-    pos = np.minimum(np.searchsorted(keys[order], wanted), max(keys.size - 1, 0))
     if not keys.size:
         return np.full(wanted.shape, np.nan)
-    hit = keys[order][pos] == wanted
-    return np.where(hit, values[order][pos], np.nan)
+    if not (keys[1:] > keys[:-1]).all():  # the reader's epoch numbers are in order: no sort needed
+        order = np.argsort(keys, kind="stable")
+        keys, values = keys[order], values[order]
+    pos = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)
+    return np.where(keys[pos] == wanted, values[pos], np.nan)
 
 
 def fill_angles(satellites: pd.DataFrame, epochs: pd.DataFrame, carry: AngleCarry | None = None,
@@ -174,17 +186,21 @@ def nmea_measurements(
     """Padded RAIM inputs for every row of ``epochs`` (``carry``: GSV angles from earlier chunks)."""
     n_epochs = len(epochs)
     satellites = fill_angles(satellites, epochs, carry)
-    used = satellites[satellites["used"].to_numpy(dtype=bool)]
-    used = used[np.isfinite(used["elev_deg"]) & np.isfinite(used["azim_deg"])]
+    elev_all, azim_all = satellites["elev_deg"].to_numpy(float), satellites["azim_deg"].to_numpy(float)
+    take = np.flatnonzero(satellites["used"].to_numpy(dtype=bool) & np.isfinite(elev_all) & np.isfinite(azim_all))
     # constellation names coded once, in name order (a receiver clock per constellation, in name order)
-    code_all, names = pd.factorize(used["constellation"].to_numpy(dtype=object), sort=True, use_na_sentinel=False)
-    first = _first_of_each(used["epoch"].to_numpy(np.int64), code_all, used["svid"].to_numpy(np.int64))
-    used, code_all = used.iloc[first], code_all[first]  # = drop_duplicates on the three
+    code_all, names = _constellation_codes(satellites["constellation"], take)
+    sat_epoch = satellites["epoch"].to_numpy()
+    first = _first_of_each(sat_epoch[take].astype(np.int64), code_all, satellites["svid"].to_numpy()[take].astype(np.int64))
+    take, code_all = take[first], code_all[first]  # = drop_duplicates on the three
     epoch_ids = epochs["epoch"].to_numpy()
-    row = np.searchsorted(epoch_ids, used["epoch"].to_numpy())
-    keep = (row < n_epochs) & (epoch_ids[np.minimum(row, max(n_epochs - 1, 0))] == used["epoch"].to_numpy()) if n_epochs else np.zeros(len(used), bool)
+    used_epoch = sat_epoch[take]
+    row = np.searchsorted(epoch_ids, used_epoch)
+    keep = (row < n_epochs) & (epoch_ids[np.minimum(row, max(n_epochs - 1, 0))] == used_epoch) if n_epochs else np.zeros(take.size, bool)
     order = np.flatnonzero(keep)[np.argsort(row[keep], kind="stable")]
-    used, row, clock = used.iloc[order], row[order], code_all[order]
+    take, row, clock = take[order], row[order], code_all[order]
+    used = {c: satellites[c].to_numpy(float)[take] for c in ("cn0_dbhz", "residual_m")}
+    used.update(elev_deg=elev_all[take], azim_deg=azim_all[take], svid=satellites["svid"].to_numpy()[take])
     slot, n_slots = slots(row, n_epochs)
     shape = (n_epochs, n_slots)
 
@@ -193,17 +209,17 @@ def nmea_measurements(
         const = pd.Categorical.from_codes(clock, categories=pd.Index(names, dtype=object))
     else:
         const = names[clock] if len(names) else np.empty(0, object)
-    elev = pad(used["elev_deg"].to_numpy(float), row, slot, shape, np.nan)
-    azim = pad(used["azim_deg"].to_numpy(float), row, slot, shape, np.nan)
+    elev_used, azim_used, cn0_used = used["elev_deg"], used["azim_deg"], used["cn0_dbhz"]
+    elev = pad(elev_used, row, slot, shape, np.nan)
+    azim = pad(azim_used, row, slot, shape, np.nan)
     clock_pad = pad(clock.astype(np.int64), row, slot, shape, -1)
-    mask = pad(np.ones(len(used), dtype=bool), row, slot, shape, False)
+    mask = pad(np.ones(take.size, dtype=bool), row, slot, shape, False)
     H = observation_matrix(elev, azim, clock_pad, len(names))
 
     lat = epochs["lat_deg"].to_numpy(float)[row]
     lon = epochs["lon_deg"].to_numpy(float)[row]
     sig = sigma_for(
-        sigma_model, elev_deg=used["elev_deg"].to_numpy(float), cn0_dbhz=used["cn0_dbhz"].to_numpy(float),
-        constellation=const, lat_deg=np.nan_to_num(lat), lon_deg=np.nan_to_num(lon), sigma_const_m=sigma_m, nominal=nominal,
+        sigma_model, elev_deg=elev_used, cn0_dbhz=cn0_used, constellation=const, lat_deg=np.nan_to_num(lat), lon_deg=np.nan_to_num(lon), sigma_const_m=sigma_m, nominal=nominal,
     )  # fmt: skip
     quality = epochs["fix_quality"].to_numpy()[row] if "fix_quality" in epochs else np.zeros(row.size, np.int64)
     sbas = np.isin(quality, CORRECTED_QUALITIES) & (sigma_model == "nominal")  # a corrected fix (DGNSS/SBAS, RTK)
@@ -211,23 +227,23 @@ def nmea_measurements(
         from dataclasses import replace as _with
 
         corrected = sigma_for(
-            sigma_model, elev_deg=used["elev_deg"].to_numpy(float)[sbas], cn0_dbhz=used["cn0_dbhz"].to_numpy(float)[sbas],
+            sigma_model, elev_deg=elev_used[sbas], cn0_dbhz=cn0_used[sbas],
             constellation=np.asarray(const)[sbas], lat_deg=np.nan_to_num(lat[sbas]), lon_deg=np.nan_to_num(lon[sbas]),
             sigma_const_m=sigma_m, nominal=_with(nominal or NominalModel(), iono="sbas"),
         )  # fmt: skip
         sig = np.array(sig, dtype=float, copy=True)
         sig[sbas] = corrected
     sigma = pad(sig, row, slot, shape, np.nan)
-    residual = pad(used["residual_m"].to_numpy(float), row, slot, shape, np.nan)
-    labels = pad(sv_labels(const, used["svid"].to_numpy()), row, slot, shape, "")
+    residual = pad(used["residual_m"], row, slot, shape, np.nan)
+    labels = pad(sv_labels(const, used["svid"]), row, slot, shape, "")
 
     have_grs = mask.any(axis=1) & ~(mask & ~np.isfinite(residual)).any(axis=1)
     receiver = receiver_outputs(epochs, carry.rms if carry is not None else None)
     weight_sum = np.where(mask, 1.0 / np.where(mask, sigma, 1.0) ** 2, 0.0).sum(axis=1)
     gst_stat = np.where(~have_grs & np.isfinite(receiver.gst_rms_m), receiver.gst_rms_m**2 * weight_sum, np.nan)
     source = np.where(have_grs, "grs", np.where(np.isfinite(gst_stat), "gst", "none")).astype(object)
-    reported = np.isin(epoch_ids, satellites["epoch"].to_numpy()) if n_epochs else np.zeros(0, bool)
+    reported = np.isin(epoch_ids, sat_epoch) if n_epochs else np.zeros(0, bool)
     return Measurements(H, sigma, mask, labels, residual_m=np.where(have_grs[:, None], residual, np.nan),
                         test_stat_override=gst_stat, test_stat_source=source, satellites_reported=reported,
-                        receiver=receiver, cn0_dbhz=pad(used["cn0_dbhz"].to_numpy(float), row, slot, shape, np.nan),
+                        receiver=receiver, cn0_dbhz=pad(cn0_used, row, slot, shape, np.nan),
                         corrected_fix=corrected_fixes(epochs))  # fmt: skip

@@ -285,7 +285,7 @@ class TableWriter:
 
         if isinstance(df, Columns):
             table = df.to_arrow()
-            if self._schema is not None:
+            if self._schema is not None and not table.schema.equals(self._schema):  # a cast imports pyarrow.compute
                 table = table.cast(self._schema)
         else:
             table = pa.Table.from_pandas(df, preserve_index=False, schema=self._schema)
