@@ -12,9 +12,10 @@ many of those were further off than the bound they were declared against — MI 
   model), with their truth.
 
 Settings: the trajectory estimator of pseudorange logs (``--positioning smoothed`` and ``filtered``; ``auto``, the
-default, smooths a log with odometry and leaves the others' snapshot positions to the RAIM) with the largest error
-over HPL among its valid epochs, and two simulated city drives with odometry (10 000 epochs each, written once into
-``integrity_truth/sim/``: fault-free, and with a satellite fault and an outage) for it; on snapshot positions, the
+default, smooths every log long enough to measure its noise) with the largest error over HPL among its valid epochs,
+and two simulated city drives with odometry (10 000 epochs each, written once into ``integrity_truth/sim/``:
+fault-free, and with a satellite fault and an outage) for it — Berlin and these two also without their odometry
+(their ``odom3`` lines dropped into ``integrity_truth/sim/``: the GNSS-only motion model); on snapshot positions, the
 RAIM modes (``ss`` the default, ``etc`` and ``classic`` the papers'), with and without FDE, under
 ``--environment auto`` (the default: σ widened as the residuals require) and ``open`` (the papers' nominal
 model throughout); and the ``model`` level — HPL = K_H·σ_major of the geometry, no fault detection — under the
@@ -64,6 +65,7 @@ class Drive:
     sigma_model: str = "nominal"
     hals: tuple[float, ...] = (50.0, 30.0)
     positionings: tuple[str, ...] | None = None  # only the settings of these positionings (None: all)
+    labels: tuple[str, ...] | None = None  # only the settings of these labels (None: all)
 
 
 def drives() -> list[Drive]:
@@ -71,6 +73,8 @@ def drives() -> list[Drive]:
     berlin = os.path.join(SHARED, "smartloc", "Berlin_Potsdamer_Platz_")
     if os.path.exists(berlin + "Input.txt"):
         out.append(Drive("Berlin Potsdamer Platz (u-blox)", berlin + "Input.txt", "librsf", berlin + "GT.txt"))
+        out.append(Drive("Berlin Potsdamer Platz without odometry (u-blox, GNSS only)", without_odometry(berlin + "Input.txt", "berlin"),
+                         "librsf", berlin + "GT.txt", labels=GNSS_ONLY_SETTINGS, positionings=("smoothed", "filtered", "snapshot")))  # fmt: skip
     pixel4 = os.path.join(SHARED, "gsdc2021")
     if os.path.exists(os.path.join(pixel4, "Pixel4_derived.csv")):
         for model in ("nominal", "input"):
@@ -81,6 +85,10 @@ def drives() -> list[Drive]:
         out.append(Drive("GSDC 2022 (standing)", os.path.join(g22, "device_gnss.csv"), "device-gnss",
                          os.path.join(g22, "ground_truth.csv")))  # fmt: skip
     out += city_drives() + city_drives(SENSOR_FAULT_SIMULATIONS)
+    for drive in city_drives():
+        name = drive.name.split(" (")[0]
+        out.append(Drive(f"{name} without odometry (libRSF, GNSS only, 10 000 epochs)", without_odometry(drive.log, name.split()[-1]),
+                         "librsf", drive.truth, labels=GNSS_ONLY_SETTINGS, positionings=("smoothed", "filtered", "snapshot")))  # fmt: skip
     for name in ("rural-clean", "urban-clean", "rural-fault", "urban-fault"):
         d = os.path.join(ROOT, "samples", "sim", name)
         out.append(Drive(f"simulated {name} (pseudoranges, one clock)", os.path.join(d, "drive-derived.csv"), "gsdc-derived",
@@ -101,6 +109,21 @@ CITY_SIMULATIONS = (("city-clean", ("--seed", "11")),
 #: 0.02 rad/s (1.1 °/s) off — not used to choose settings (``trajectory_settings.py``), only to show what they give
 SENSOR_FAULT_SIMULATIONS = (("city-odometer", ("--seed", "13", "--sensor-fault-at", "600,1400", "--odometer-step", "0.1")),
                             ("city-gyro", ("--seed", "14", "--sensor-fault-at", "600,1400", "--gyro-step", "0.02")))  # fmt: skip
+
+
+#: the settings a drive without its odometry is run with: the trajectory's and the snapshot RAIM's default
+GNSS_ONLY_SETTINGS = ("smoothed trajectory", "filtered trajectory (forward only)", "ss (default)")
+
+
+def without_odometry(log: str, name: str) -> str:
+    """The libRSF log with its ``odom3`` lines dropped, written into ``integrity_truth/sim/`` (not kept in git)."""
+    out = os.path.join(OUT, "sim", f"{name}-without-odometry.txt")
+    if not os.path.exists(out):
+        os.makedirs(os.path.dirname(out), exist_ok=True)
+        with open(log) as src, open(out + ".part", "w") as dst:
+            dst.writelines(line for line in src if not line.startswith("odom3"))
+        os.replace(out + ".part", out)
+    return out
 
 
 def city_drives(simulations=CITY_SIMULATIONS) -> list[Drive]:
@@ -141,13 +164,13 @@ def counts(err: np.ndarray, valid: np.ndarray, hpl: np.ndarray, hal: float) -> d
                 "max_hpe_valid_m": float(np.max(err[v])) if v.any() else float("nan")}  # fmt: skip
 
 
-def has_odometry(drive: Drive) -> bool:
-    """The log has odometry over half its epochs (``--positioning auto`` then smooths it)."""
-    if drive.kind != "librsf":
+def smoothed_by_default(drive: Drive) -> bool:
+    """``--positioning auto`` smooths the log (a pseudorange log long enough for a trajectory)."""
+    if drive.kind == "nmea":
         return False
-    from tollcli.integrity.trajectory_inputs import epochs_have_odometry
+    from tollcli.integrity.trajectory import with_trajectory
 
-    return epochs_have_odometry(measurements(drive)[0])
+    return with_trajectory(*measurements(drive), "auto")[2] == "smoothed"
 
 
 def run_setting(drive: Drive, truth: pd.DataFrame, mode: str, fde: bool, environment: str, hal: float, positioning: str = "snapshot"):
@@ -270,8 +293,8 @@ def main(argv: list[str] | None = None) -> int:
                   "|---|---:|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
         extra_png: list[str] = []
         settings = [row for row in SETTINGS if (drive.kind != "nmea" or row[4] == "snapshot")
-                    and (drive.positionings is None or row[4] in drive.positionings)]  # fmt: skip
-        default = "smoothed trajectory" if has_odometry(drive) else "ss (default)"  # --positioning auto
+                    and (drive.positionings is None or row[4] in drive.positionings) and (drive.labels is None or row[0] in drive.labels)]  # fmt: skip
+        default = "smoothed trajectory" if smoothed_by_default(drive) else "ss (default)"  # --positioning auto
         for hal in drive.hals:
             for label, mode, fde, environment, positioning in settings:
                 table, err, valid = run_setting(drive, truth, mode, fde, environment, hal, positioning)

@@ -1,20 +1,26 @@
 """How the trajectory estimator's settings were fixed: on the simulator's city drives first, then the real drive.
 
-    python benchmarks/trajectory_settings.py            # ≈ 3 min (simulates the two city drives once, as integrity_truth.py)
+    python benchmarks/trajectory_settings.py            # ≈ 1 min (simulates the two city drives once, as integrity_truth.py)
 
-The motion model's one free setting is the lateral slip, a random walk of the position beside what the odometer and
-the gyro say (``MotionNoise.position_m2ps``). It is swept on the simulated city drives with odometry (10 000 epochs
-each: fault-free, and with a 100 m satellite fault and an outage; ``integrity_truth.CITY_SIMULATIONS``); the value
-with the smallest 95th-percentile error over both, among those with no misleading epoch, is the default. Then the
-real Berlin drive is run with every value, to show what the choice gives there (it is not chosen on it).
-Columns: horizontal error p50 / p95 / max (m), share of epochs with HPL ≤ 50 m and ≤ 30 m, misleading epochs
-(error > HPL), the largest error / HPL.
+Two settings are free; each is swept on the simulated city drives (10 000 epochs each: fault-free, and with a 100 m
+satellite fault and an outage; ``integrity_truth.CITY_SIMULATIONS``) and the value with the smallest worst
+95th-percentile error over them, among those with no misleading epoch, is the default:
+
+1. the C/N0 mask (``trajectory.MIN_CN0_DBHZ``: none, 25, 30, 35 dB-Hz), over the drives with their odometry and
+   without it (their ``odom3`` lines dropped: the GNSS-only motion model), the lateral slip at its default;
+2. the lateral slip, a random walk of the position beside what the odometer and the gyro say
+   (``MotionNoise.position_m2ps``), over the drives with odometry, at the chosen mask.
+
+Then the real Berlin drive is run with every value, with and without its odometry, to show what the choice gives
+there (it is not chosen on it). Columns: horizontal error p50 / p95 / max (m), share of epochs with HPL ≤ 50 m and
+≤ 30 m, misleading epochs (error > HPL), the largest error / HPL.
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import tempfile
 
 import numpy as np
 
@@ -25,20 +31,30 @@ sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
 from integrity_truth import city_drives  # noqa: E402
 
 from tollcli.gnss.librsf_positions import librsf_epochs  # noqa: E402
-from tollcli.integrity.trajectory import estimate_trajectory  # noqa: E402
+from tollcli.integrity.trajectory import MIN_CN0_DBHZ, estimate_trajectory  # noqa: E402
 from tollcli.integrity.trajectory_filter import MotionNoise  # noqa: E402
 from tollcli.integrity.trajectory_inputs import trajectory_inputs  # noqa: E402
 from tollcli.integrity.truth_check import errors_against_truth  # noqa: E402
 from tollcli.readers.librsf import librsf_truth, read_librsf  # noqa: E402
 
+MASKS_DBHZ = (0.0, 25.0, 30.0, 35.0)
 SLIPS_M2PS = (0.003, 0.01, 0.03, 0.1, 0.3)
 BERLIN = os.path.join(ROOT, "..", "shared", "data", "smartloc", "Berlin_Potsdamer_Platz_")
+DEFAULT_SLIP = MotionNoise().position_m2ps
 
 
-def figures(log: str, truth: str, slip: float) -> dict:
+def without_odometry(log: str, folder: str) -> str:
+    """The log with its ``odom3`` lines dropped (written once into ``folder``)."""
+    out = os.path.join(folder, os.path.basename(os.path.dirname(log)) + "-" + os.path.basename(log))
+    with open(log) as src, open(out, "w") as dst:
+        dst.writelines(line for line in src if not line.startswith("odom3"))
+    return out
+
+
+def figures(log: str, truth: str, slip: float, mask: float) -> dict:
     epochs, meas = librsf_epochs(read_librsf(log))
     inp = trajectory_inputs(epochs, meas)
-    traj = estimate_trajectory(inp, "smoothed", MotionNoise(position_m2ps=slip))
+    traj = estimate_trajectory(inp, "smoothed", MotionNoise(position_m2ps=slip), min_cn0_dbhz=mask)
     lat, lon, _ = inp.enu2geodetic(traj.enu_m)
     err, _ = errors_against_truth(epochs.assign(lat_deg=lat, lon_deg=lon), librsf_truth(truth), tolerance_s=0.2)
     hpl = traj.hpl_m
@@ -46,26 +62,55 @@ def figures(log: str, truth: str, slip: float) -> dict:
             "v50": np.mean(hpl <= 50), "v30": np.mean(hpl <= 30), "MI": int(np.sum(err > hpl)), "ratio": np.nanmax(err / hpl)}  # fmt: skip
 
 
-def row(name: str, slip: float, f: dict) -> str:
-    return (f"| {name} | {slip:g} | {f['p50']:.1f} / {f['p95']:.1f} / {f['max']:.1f} | {100 * f['v50']:.1f} % / {100 * f['v30']:.1f} % | "
-            f"{f['MI']} | {f['ratio']:.2f} |")  # fmt: skip
+def row(name: str, mask: float, slip: float, f: dict) -> str:
+    return (f"| {name} | {mask:g} | {slip:g} | {f['p50']:.1f} / {f['p95']:.1f} / {f['max']:.1f} | "
+            f"{100 * f['v50']:.1f} % / {100 * f['v30']:.1f} % | {f['MI']} | {f['ratio']:.2f} |")  # fmt: skip
+
+
+def choose(runs: list[tuple[str, str, str]], values, figure) -> float:
+    """The value with the smallest worst p95 over ``runs`` among those with no misleading epoch (printing each)."""
+    score = {}
+    for value in values:
+        for name, log, truth in runs:
+            f = figure(log, truth, value)
+            print(figure.row(name, value, f), flush=True)
+            score.setdefault(value, []).append(np.inf if f["MI"] else f["p95"])
+    return min(values, key=lambda v: max(score[v]))
 
 
 def main() -> int:
-    print("| drive | lateral slip m²/s | error p50 / p95 / max m | HPL ≤ 50 / ≤ 30 m | MI | largest error/HPL |")
-    print("|---|---:|---|---:|---:|---:|")
-    score = {}
-    for drive in city_drives():
-        for slip in SLIPS_M2PS:
-            f = figures(drive.log, drive.truth, slip)
-            print(row(drive.name.split(" (")[0], slip, f), flush=True)
-            score.setdefault(slip, []).append(np.inf if f["MI"] else f["p95"])
-    chosen = min(SLIPS_M2PS, key=lambda s: max(score[s]))
-    print(f"\nchosen on the simulator: lateral slip {chosen:g} m²/s (smallest worst p95 with no misleading epoch)\n")
-    if os.path.exists(BERLIN + "Input.txt"):
-        for slip in SLIPS_M2PS:
-            print(row("Berlin Potsdamer Platz" + (" (chosen)" if slip == chosen else ""), slip,
-                      figures(BERLIN + "Input.txt", BERLIN + "GT.txt", slip)), flush=True)  # fmt: skip
+    header = "| drive | C/N0 mask dB-Hz | lateral slip m²/s | error p50 / p95 / max m | HPL ≤ 50 / ≤ 30 m | MI | largest error/HPL |"
+    with tempfile.TemporaryDirectory() as tmp:
+        sims = [(d.name.split(" (")[0], d.log, d.truth) for d in city_drives()]
+        both = [(n, log, t) for n, log, t in sims] + [(n + ", no odometry", without_odometry(log, tmp), t) for n, log, t in sims]
+
+        def by_mask(log, truth, mask):
+            return figures(log, truth, DEFAULT_SLIP, mask)
+
+        by_mask.row = lambda name, mask, f: row(name, mask, DEFAULT_SLIP, f)
+        print("C/N0 mask, on the simulated city drives with and without odometry:\n")
+        print(header + "\n|---|---:|---:|---|---:|---:|---:|")
+        mask = choose(both, MASKS_DBHZ, by_mask)
+        print(f"\nchosen on the simulator: C/N0 mask {mask:g} dB-Hz (the estimator's MIN_CN0_DBHZ is {MIN_CN0_DBHZ:g})\n")
+
+        def by_slip(log, truth, slip):
+            return figures(log, truth, slip, mask)
+
+        by_slip.row = lambda name, slip, f: row(name, mask, slip, f)
+        print("Lateral slip, on the simulated city drives with odometry, at that mask:\n")
+        print(header + "\n|---|---:|---:|---|---:|---:|---:|")
+        slip = choose(sims, SLIPS_M2PS, by_slip)
+        print(f"\nchosen on the simulator: lateral slip {slip:g} m²/s (the default is {DEFAULT_SLIP:g})\n")
+        if os.path.exists(BERLIN + "Input.txt"):
+            print("The real Berlin drive with every value (not chosen on it):\n")
+            print(header + "\n|---|---:|---:|---|---:|---:|---:|")
+            no_odometry = without_odometry(BERLIN + "Input.txt", tmp)
+            for m in MASKS_DBHZ:
+                for name, log in (("Berlin Potsdamer Platz", BERLIN + "Input.txt"), ("Berlin, no odometry", no_odometry)):
+                    print(row(name + (" (chosen)" if m == mask else ""), m, DEFAULT_SLIP, figures(log, BERLIN + "GT.txt", DEFAULT_SLIP, m)), flush=True)
+            for s in SLIPS_M2PS:
+                print(row("Berlin Potsdamer Platz" + (" (chosen)" if s == slip else ""), mask, s,
+                          figures(BERLIN + "Input.txt", BERLIN + "GT.txt", s, mask)), flush=True)  # fmt: skip
     return 0
 
 

@@ -77,11 +77,6 @@ def has_odometry(speed_mps: np.ndarray) -> bool:
     return bool(speed_mps.size > 1 and np.isfinite(speed_mps[1:]).mean() >= 0.5)
 
 
-def epochs_have_odometry(epochs: pd.DataFrame) -> bool:
-    """:func:`has_odometry` of an epoch table's ``odometer_speed_mps`` (none: no)."""
-    return "odometer_speed_mps" in epochs and has_odometry(epochs["odometer_speed_mps"].to_numpy(float))
-
-
 def has_pseudoranges(meas: Measurements) -> bool:
     """The measurements carry what the estimator needs (a pseudorange log's)."""
     return meas.sat_ecef_m is not None and meas.pr_m is not None and meas.clock_index is not None

@@ -96,7 +96,8 @@ class ChargeSettings:
     require_authenticated: bool = False
     #: where a pseudorange log's positions come from (integrity.trajectory.POSITIONINGS): smoothed (forward and
     #: backward over the whole log), filtered (forward only), snapshot (each epoch alone, the RAIM's) or auto (smoothed
-    #: with odometry, else snapshot); recorded for pseudorange logs only (a navigation log's positions are its receiver's)
+    #: where the log can carry a trajectory); recorded for pseudorange logs only (a navigation log's positions are its
+    #: receiver's)
     positioning: str = "auto"
 
 
