@@ -84,8 +84,8 @@ def drives() -> list[Drive]:
     if os.path.exists(os.path.join(g22, "device_gnss.csv")):
         out.append(Drive("GSDC 2022 (standing)", os.path.join(g22, "device_gnss.csv"), "device-gnss",
                          os.path.join(g22, "ground_truth.csv")))  # fmt: skip
-    out += city_drives() + city_drives(SENSOR_FAULT_SIMULATIONS)
-    for drive in city_drives():
+    out += city_drives() + city_drives(SENSOR_FAULT_SIMULATIONS) + town_drives()
+    for drive in city_drives() + town_drives():
         name = drive.name.split(" (")[0]
         out.append(Drive(f"{name} without odometry (libRSF, GNSS only, 10 000 epochs)", without_odometry(drive.log, name.split()[-1]),
                          "librsf", drive.truth, labels=GNSS_ONLY_SETTINGS, positionings=("smoothed", "filtered", "snapshot")))  # fmt: skip
@@ -113,6 +113,35 @@ SENSOR_FAULT_SIMULATIONS = (("city-odometer", ("--seed", "13", "--sensor-fault-a
 
 #: the settings a drive without its odometry is run with: the trajectory's and the snapshot RAIM's default
 GNSS_ONLY_SETTINGS = ("smoothed trajectory", "filtered trajectory (forward only)", "ss (default)")
+
+
+#: simulated town drives (``tollcli simulate --route helsinki.osm.pbf --tour``: shortest paths to random places of
+#: Helsinki's streets, corners rounded to 10 m and taken at up to 2 m/s² sideways, a 20 s stop every 90 s, city
+#: reflections, odometry; 2 000 s at 5 Hz): the drives whose motion is a town's — turns, braking, pulling away —
+#: on which the GNSS-only motion model's white acceleration is chosen (``trajectory_settings.py``)
+TOWN_SIMULATIONS = (("town-clean", ("--seed", "21")),
+                    ("town-fault", ("--seed", "22", "--fault-at", "600", "--fault-bias", "100", "--fault-duration", "60",
+                                    "--jam-at", "1200", "--jam-duration", "60", "--jam-db", "40")))  # fmt: skip
+HELSINKI = os.path.join(SHARED, "osm", "helsinki.osm.pbf")
+
+
+def town_drives(simulations=TOWN_SIMULATIONS) -> list[Drive]:
+    """The simulated town drives, written once into ``benchmarks/integrity_truth/sim/`` (none without the map)."""
+    import subprocess
+
+    if not os.path.exists(HELSINKI):
+        return []
+    stops = ",".join(str(90 * k) for k in range(1, 23))
+    out = []
+    for name, extra in simulations:
+        folder = os.path.join(OUT, "sim", name)
+        if not os.path.exists(os.path.join(folder, "truth-librsf.txt")):
+            subprocess.run([sys.executable, "-m", "tollcli", "simulate", "--route", HELSINKI, "--from", "60.1710,24.9440", "--tour", "25000",
+                            "--turn-radius", "10", "--stop-at", stops, "--stop-duration", "20", "--nlos", "--odometry",
+                            "--duration", "2000", "--rate", "5", *extra, "-o", folder, "-q"], check=True)  # fmt: skip
+        out.append(Drive(f"simulated {name} (libRSF, odometry, 10 000 epochs, Helsinki streets)", os.path.join(folder, "drive-librsf.txt"),
+                         "librsf", os.path.join(folder, "truth-librsf.txt"), positionings=("smoothed", "filtered")))  # fmt: skip
+    return out
 
 
 def without_odometry(log: str, name: str) -> str:

@@ -41,16 +41,23 @@ def _command(ctx: typer.Context) -> str:
     return " ".join(words + ["-o", shlex.quote(str(ctx.params["output"]))])
 
 
-def _route_lines(route: str, via: str | None, path_from: str | None, path_to: str | None) -> list:
-    """The lines to drive: a GeoJSON route (optionally --via ids) or an OpenStreetMap one (--via ways, --from/--to)."""
+def _route_lines(route: str, via: str | None, path_from: str | None, path_to: str | None, tour_m: float | None = None,
+                 seed: int = 0) -> list:  # fmt: skip
+    """The lines to drive: a GeoJSON route (optionally --via ids) or an OpenStreetMap one (--via ways, --from/--to,
+    --from and --tour)."""
     from tollcli.geoobjects.osm import is_osm
 
     if not is_osm(route):
-        if path_from:
-            raise UsageError("--from/--to need an OpenStreetMap --route (.osm.pbf, .osm)")
+        if path_from or tour_m:
+            raise UsageError("--from/--to and --tour need an OpenStreetMap --route (.osm.pbf, .osm)")
         return load_route(route, via.split(",") if via else None)
-    from tollcli.simulate.osm_route import route_by_ways, shortest_route
+    from tollcli.simulate.osm_route import route_by_ways, shortest_route, tour
 
+    if tour_m:
+        start = _floats(path_from, "--from") if path_from else []
+        if len(start) != 2 or path_to or via:
+            raise UsageError("--tour starts at --from LAT,LON, without --to or --via")
+        return tour(route, (start[0], start[1]), tour_m, seed=seed)
     if path_from:
         ends = [_floats(p, name) for p, name in ((path_from, "--from"), (path_to, "--to"))]
         if any(len(e) != 2 for e in ends):
@@ -72,6 +79,8 @@ def simulate(
     via: Annotated[Optional[str], typer.Option("--via", help="Comma-separated road ids of --route to drive, in order (OpenStreetMap: way ids).")] = None,
     path_from: Annotated[Optional[str], typer.Option("--from", help="LAT,LON: with an OpenStreetMap --route, drive the shortest path from here to --to.")] = None,
     path_to: Annotated[Optional[str], typer.Option("--to", help="LAT,LON: the end of the shortest path (with --from).")] = None,
+    tour_m: Annotated[Optional[float], typer.Option("--tour", help="With an OpenStreetMap --route and --from: drive shortest paths to random places of the map (each at least 600 m away; --seed picks them) until this many metres, a town drive.", min=1.0)] = None,
+    turn_radius: Annotated[Optional[float], typer.Option("--turn-radius", help="With --route: round its corners to arcs of this radius (m) and slow for them, turning at up to 2 m/s² sideways (braking and pulling away at 1.5 m/s²); without it the vehicle takes corners at full speed.", min=1.0)] = None,
     geo: Annotated[Optional[str], typer.Option("--geo", help="Geo-objects: the truth then lists those really driven.")] = None,
     env: Annotated[str, typer.Option("--env", help="Street environment (paper 001 Table I): urban, rural or open.")] = "urban",
     constellations: Annotated[str, typer.Option("--constellations", help="Nominal constellations: gps, galileo or gps,galileo.")] = "gps,galileo",
@@ -129,15 +138,18 @@ def simulate(
         raise UsageError(f"--iono {iono!r}: single, sbas or iono-free")
     if fault_sv and not (fault_sv[:1].upper() in "GE" and fault_sv[1:].isdigit()):
         raise UsageError(f"--fault-sv {fault_sv!r}: like G05 or E11")
-    if (path_from is None) != (path_to is None) or (path_from and (via or not route)):
+    if not tour_m and ((path_from is None) != (path_to is None) or (path_from and (via or not route))):
         raise UsageError("--from and --to go together, with an OpenStreetMap --route and without --via")
+    if (tour_m or turn_radius) and not route:
+        raise UsageError("--tour and --turn-radius need a --route")
     if sensor_fault_at and not odometry:
         raise UsageError("--sensor-fault-at injects faults into the odometry: give --odometry too")
     stops = [(at, stop_duration) for at in _floats(stop_at, "--stop-at")] if stop_at else []
     if any(at < 0 for at, _ in stops):
         raise UsageError(f"--stop-at {stop_at!r}: times from the start, s ≥ 0")
     if route:
-        trajectory = along_route(_route_lines(route, via, path_from, path_to), speed, rate, duration, stops=stops)
+        trajectory = along_route(_route_lines(route, via, path_from, path_to, tour_m, seed), speed, rate, duration, stops=stops,
+                                 turn_radius_m=turn_radius)  # fmt: skip
     else:
         lat_lon = _floats(start, "--start")
         if len(lat_lon) != 2 or not (-90 <= lat_lon[0] <= 90 and -180 <= lat_lon[1] <= 180):

@@ -65,8 +65,10 @@ class MotionNoise:
     up_m2ps: float = 0.01  # height random walk
     clock_m2ps: float = 0.5  # receiver clock random walk
     drift_m2ps3: float = 2.0  # clock drift random walk
-    acceleration_m2ps3: float = 4.0
-    gyro_bias_rad2ps3: float = 1e-8  # the gyro bias's random walk  # without odometry: white acceleration (constant-velocity model)
+    # without odometry: the white acceleration of the constant-velocity model, chosen on the simulator's town drives
+    # (turns at up to 2 m/s² sideways, braking and pulling away at 1.5 m/s²: benchmarks/trajectory_settings.py)
+    acceleration_m2ps3: float = 2.0
+    gyro_bias_rad2ps3: float = 1e-8  # the gyro bias's random walk
 
 
 @dataclass
