@@ -11,7 +11,7 @@ import subprocess
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import SHARED_DATA, run_cli
+from conftest import SHARED_DATA, run_cli, shared
 from gpsd_chk import rollover_key
 
 from tollcli.integrity.raim import RaimParams
@@ -149,3 +149,13 @@ def test_malformed_reports_are_counted_and_strict_names_the_line(tmp_path):
     assert (table["integrity_source"] == "grs").all()  # SKY prRes: the residual test
     proc = run_cli("integrity", str(log), "--strict", "-q", "-o", str(tmp_path / "i.csv"))
     assert proc.returncode == 1 and "gpspipe.json:4: not a gpsd JSON report" in proc.stderr.decode()
+
+
+def test_a_binary_log_given_directly_is_refused_naming_the_way_to_read_it(tmp_path):
+    """A SiRF binary log given to ``integrity`` as it is: a one-line error (exit 1, no traceback) that names the file
+    and the command that reads it through gpsd — which does (when gpsdecode is installed) give epochs."""
+    log = shared("gpsd", "sirf2.log")
+    proc = run_cli("integrity", str(log), "-o", str(tmp_path / "e.csv"), "-q")
+    err = proc.stderr.decode()
+    assert proc.returncode == 1 and err.count("\n") == 1 and "Traceback" not in err
+    assert f"gpsdecode < {log} | tollcli integrity -" in err and not (tmp_path / "e.csv").exists()
