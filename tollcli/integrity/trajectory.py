@@ -58,9 +58,9 @@ FALLBACK_SIGMA_M = 30.0
 CHI2_1_MEDIAN = 0.4549364231195724
 #: C/N0 (dB-Hz) below which a pseudorange is left out of the trajectory (a C/N0 not reported keeps it): a city's weak
 #: signals are mostly reflections, late by tens of metres for tens of seconds — a bias that down-weighting does not
-#: take out. Chosen on the simulator's city drives, with and without odometry, as the lateral slip was (the mask among
-#: none, 25, 30 and 35 dB-Hz with the smallest worst 95th-percentile error and no misleading epoch:
-#: ``benchmarks/trajectory_settings.py``). The snapshot RAIM keeps every measurement.
+#: take out. Chosen on the simulator's city and town drives, with and without odometry, as the motion noise was (the
+#: mask among none, 25, 30 and 35 dB-Hz with the smallest worst 95th-percentile error, each drive's relative to its
+#: best, and no misleading epoch: ``benchmarks/trajectory_settings.py``). The snapshot RAIM keeps every measurement.
 MIN_CN0_DBHZ = 30.0
 
 
