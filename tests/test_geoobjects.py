@@ -204,16 +204,16 @@ def test_reordered_features_give_the_same_charges(tmp_path):
     assert a["lines"] and a["lines"] == b["lines"] and a["total"] == b["total"] and a["not_charged"] == b["not_charged"]
 
 
-def test_a_1000_km_network_across_three_utm_zones_keeps_ground_distances(tmp_path):
-    """A motorway of 1 000 km along 45° N from 122.6° W (UTM zones 10, 11, 12) in 10 km sections with a free road
-    60 m (ground) to the north: every section is built in its own frame, its HAL is 30 m ± 0.02 m, and the buffer's
-    half-width measured on the ellipsoid at the middle of each section is HAL ± 0.02 m — where one UTM zone for the
-    file is 0.4 % off at the far end."""
+def test_a_520_km_network_across_three_utm_zones_keeps_ground_distances(tmp_path):
+    """A motorway of 520 km along 45° N from 120.3° W across the whole of UTM zone 11 (zones 10, 11, 12) in 10 km
+    sections with a free road 60 m (ground) to the north: every section is built in its own frame, its HAL is
+    30 m ± 0.02 m, and the buffer's half-width measured on the ellipsoid at the middle of each section is HAL ± 0.02 m —
+    where one UTM zone for the file is over 0.4 % off at the far end."""
     from pyproj import Geod
 
     geod = Geod(ellps="WGS84")
-    lat0, lon0 = 45.0, -122.6
-    n = 100
+    lat0, lon0 = 45.0, -120.3
+    n = 52
     line = geod.fwd_intermediate(lon0, lat0, 90.0, npts=n + 1, del_s=10_000.0, initial_idx=0, terminus_idx=0, return_back_azimuth=True)
     lons, lats = np.array(line.lons), np.array(line.lats)
     # the free road: each vertex 60 m to the north of the motorway's vertex (ground distance, on the ellipsoid)
@@ -228,7 +228,7 @@ def test_a_1000_km_network_across_three_utm_zones_keeps_ground_distances(tmp_pat
     path.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
     assert int((lons[-1] + 180) // 6) + 1 - (int((lons[0] + 180) // 6) + 1) == 2  # three zones
     doc = build_geoobjects(str(path))
-    assert len(doc["features"]) == n and len({f["properties"]["crs_metric"] for f in doc["features"]}) >= 10
+    assert len(doc["features"]) == n and len({f["properties"]["crs_metric"] for f in doc["features"]}) >= 6
     widths = []
     for k, f in enumerate(doc["features"]):
         p = f["properties"]
@@ -266,4 +266,4 @@ def test_a_1000_km_network_across_three_utm_zones_keeps_ground_distances(tmp_pat
     invoice = json.loads((drive / "inv.json").read_text())
     assert [line["geoobject"] for line in invoice["lines"]] == everything
     assert {(line["length_km"], line["rate_per_km"], line["fee"]) for line in invoice["lines"]} == {("10.000", "0.198", "1.98")}
-    assert invoice["total"] == "198.00"
+    assert invoice["total"] == "102.96"
