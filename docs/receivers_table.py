@@ -92,7 +92,8 @@ def log_row(log: Path) -> dict | None:
 
     data = log.read_bytes()
     kind = sniff_format(str(log))
-    chunks = _integrity(log, kind)
+    # a binary protocol: gpsd's own JSON of it (its regression output), not what this machine's gpsdecode makes of it
+    chunks = [] if kind == "gpsd-binary" else _integrity(log, kind)
     if not any(c.table["lat_deg"].notna().any() for c in chunks) and log.with_name(log.name + ".chk").exists():
         chunks, kind = _integrity(log.with_name(log.name + ".chk"), "gpsd-json"), "gpsd-json (gpsd's)"
     if not chunks:
@@ -165,8 +166,9 @@ def render(folder: Path = DATA) -> str:
         "suite, BSD-2-Clause), each read as `tollcli` recognises it (`format`: NMEA, u-blox NAV messages); a log "
         "whose own protocol gives no position (SiRF, Trimble TSIP, Javad GREIS, Garmin, Motorola Oncore, iTalk, "
         "Zodiac binary) is read through gpsd's JSON of it — its regression output, what `gpspipe -w` gives "
-        "(`gpsdecode < log | tollcli integrity -` does the same where gpsdecode decodes positions: u-blox, SiRF; "
-        "not Trimble TSIP). `tests/test_receivers_doc.py` fails when this file is stale. Settings: "
+        "(`tollcli` runs gpsdecode on such a log itself where it is installed, as `gpsdecode < log | tollcli integrity -` "
+        "does, where gpsdecode decodes positions: SiRF, GREIS, Oncore, …; not Trimble TSIP; this table reads gpsd's "
+        "own output so that it does not depend on the version of gpsdecode installed). `tests/test_receivers_doc.py` fails when this file is stale. Settings: "
         "`tollcli integrity` defaults (solution separation, environment auto, HAL 50 m, P_MD 5e-5, "
         "`--integrity-sources auto`); findings as `tollcli findings` (car). Sources: `grs` (residual test on GRS, "
         "NAV-SAT or SKY prRes), `gbs` (the receiver's own RAIM), `gst` (its error ellipse, or u-blox hAcc / NAV-PL; "

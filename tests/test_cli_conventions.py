@@ -6,6 +6,7 @@ import csv
 import io
 import json
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -155,7 +156,7 @@ def test_batch_runs_from_an_invoice(tmp_path):
 EXPECTED_KINDS = {("android", "pixel6.nmea"): "nmea", ("android", "pixel6.23o"): "rinex",
                   ("android", "pixel6_gnsslogger.txt"): "gnsslogger", ("gsdc2022", "device_gnss.csv"): "device-gnss",
                   ("gsdc2021", "Pixel4_derived.csv"): "gsdc-derived", ("smartloc", "Berlin_Potsdamer_Platz_Input.txt"): "librsf",
-                  ("gpsd", "ublox-neo-m8t.log"): "ubx", ("gpsd", "sirf2.log"): "unknown"}  # fmt: skip
+                  ("gpsd", "ublox-neo-m8t.log"): "ubx", ("gpsd", "sirf2.log"): "gpsd-binary" if shutil.which("gpsdecode") else "unknown"}  # fmt: skip
 
 
 def test_info_on_every_shared_file():

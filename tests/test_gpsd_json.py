@@ -11,7 +11,7 @@ import subprocess
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import SHARED_DATA, run_cli, shared
+from conftest import REPO, SHARED_DATA, run_cli, shared
 from gpsd_chk import rollover_key
 
 from tollcli.integrity.raim import RaimParams
@@ -151,11 +151,73 @@ def test_malformed_reports_are_counted_and_strict_names_the_line(tmp_path):
     assert proc.returncode == 1 and "gpspipe.json:4: not a gpsd JSON report" in proc.stderr.decode()
 
 
-def test_a_binary_log_given_directly_is_refused_naming_the_way_to_read_it(tmp_path):
-    """A SiRF binary log given to ``integrity`` as it is: a one-line error (exit 1, no traceback) that names the file
-    and the command that reads it through gpsd — which does (when gpsdecode is installed) give epochs."""
+def test_a_binary_log_without_gpsdecode_is_refused_naming_the_way_to_read_it(tmp_path):
+    """A SiRF binary log given to ``integrity`` on a machine without gpsdecode: a one-line error (exit 1, no
+    traceback) that names the file, the package to install and the pipe that reads it."""
+    import sys
+
     log = shared("gpsd", "sirf2.log")
+    bare = tmp_path / "bin"  # a PATH with python and nothing else
+    bare.mkdir()
+    (bare / "python").symlink_to(sys.executable)
+    proc = subprocess.run([sys.executable, "-m", "tollcli", "integrity", str(log), "-o", str(tmp_path / "e.csv"), "-q"],
+                          capture_output=True, env={"PATH": str(bare), "NO_COLOR": "1"}, cwd=REPO, timeout=120)  # fmt: skip
+    err = proc.stderr.decode()
+    assert proc.returncode == 1 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert f"gpsdecode < {log} | tollcli integrity -" in err and "gpsd-clients" in err and not (tmp_path / "e.csv").exists()
+
+
+@pytest.mark.skipif(GPSDECODE is None, reason="gpsdecode not installed (Debian: apt-get install gpsd-clients)")
+@pytest.mark.parametrize("name", ["sirf2.log", "greis-binary.log", "oncore-binary.log", "zodiac.log"])
+def test_a_binary_log_is_read_through_gpsdecode_as_the_pipe_reads_it(tmp_path, name):
+    """A binary log gpsd decodes, given as it is (or gzipped), gives the very table the pipe ``gpsdecode < LOG |
+    tollcli integrity -`` gives, and says it was decoded (and by which version)."""
+    import gzip
+
+    log = shared("gpsd", name)
+    piped = subprocess.run([GPSDECODE], stdin=log.open("rb"), capture_output=True, check=True).stdout
+    via_pipe = run_cli("integrity", "-", "-o", str(tmp_path / "pipe.csv"), "-q", "--json", stdin=piped)
+    direct = run_cli("integrity", str(log), "-o", str(tmp_path / "direct.csv"), "-q", "--json")
+    assert via_pipe.returncode == direct.returncode == 0, direct.stderr
+    assert (tmp_path / "direct.csv").read_bytes() == (tmp_path / "pipe.csv").read_bytes()
+    summary = json.loads(direct.stdout)
+    assert summary["decoded_by"].startswith("gpsdecode ") and summary["format"] == "gpsd-binary" and summary["epochs"] > 0
+    assert "decoded_by" not in json.loads(via_pipe.stdout)
+    packed = tmp_path / f"{name}.gz"
+    packed.write_bytes(gzip.compress(log.read_bytes(), mtime=0))
+    assert run_cli("integrity", str(packed), "-o", str(tmp_path / "gz.csv"), "-q").returncode == 0
+    assert (tmp_path / "gz.csv").read_bytes() == (tmp_path / "direct.csv").read_bytes()
+
+
+@pytest.mark.skipif(GPSDECODE is None, reason="gpsdecode not installed (Debian: apt-get install gpsd-clients)")
+def test_a_binary_log_gpsdecode_reads_nothing_of_says_so(tmp_path):
+    """Trimble TSIP logs: gpsdecode gives no report without a live receiver; a one-line error says so."""
+    log = shared("gpsd", "trimble-smt-360.log")
     proc = run_cli("integrity", str(log), "-o", str(tmp_path / "e.csv"), "-q")
     err = proc.stderr.decode()
-    assert proc.returncode == 1 and err.count("\n") == 1 and "Traceback" not in err
-    assert f"gpsdecode < {log} | tollcli integrity -" in err and not (tmp_path / "e.csv").exists()
+    assert proc.returncode == 1 and err.count("\n") == 1 and "gpsdecode found no report" in err, err
+
+
+@pytest.mark.skipif(GPSDECODE is None, reason="gpsdecode not installed (Debian: apt-get install gpsd-clients)")
+def test_an_invoice_of_a_decoded_log_records_the_decoder_and_verifies(tmp_path):
+    """``process`` of a GREIS binary log: the invoice hashes the binary file (what ``sha256sum`` says), records the
+    gpsdecode that read it, and ``verify`` reproduces it; an invoice claiming another gpsdecode version does not."""
+    import hashlib
+
+    from tollcli.charging.invoice import content_sha256
+
+    log = shared("gpsd", "greis-binary.log")
+    geo, tariff = str(REPO / "geoobjects" / "example-geoobjects.geojson"), str(REPO / "geoobjects" / "example-tariff.toml")
+    out = tmp_path / "inv.json"
+    r = run_cli("process", str(log), "--geo", geo, "--tariff", tariff, "-o", str(out), "-q")
+    assert r.returncode == 0, r.stderr
+    invoice = json.loads(out.read_text())
+    assert invoice["inputs"]["log_sha256"] == hashlib.sha256(log.read_bytes()).hexdigest()
+    assert invoice["inputs"]["log_decoded_by"].startswith("gpsdecode ")
+    assert run_cli("verify", str(out), "-q").returncode == 0
+    invoice["inputs"]["log_decoded_by"] = "gpsdecode 0.1"
+    invoice["content_sha256"] = content_sha256(invoice)
+    forged = tmp_path / "other.json"
+    forged.write_text(json.dumps(invoice, sort_keys=True, indent=1))
+    r = run_cli("verify", str(forged), "-q")
+    assert r.returncode == 1 and b"log_decoded_by" in r.stderr, r.stderr

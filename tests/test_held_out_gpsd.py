@@ -61,8 +61,8 @@ def test_every_gpsd_log_through_info_and_process_on_a_network_around_its_own_tra
         code, err = run_main("process", str(log), "--geo", str(tmp_path / "geo.geojson"), "--tariff", tariff, "-o",
                              str(tmp_path / "i.json"), "-q")  # fmt: skip
         assert code in (0, 1) and err.count("\n") <= 1, (log.name, err)  # 1: "give --date" for a log without dates
-        if code:
-            assert "give --date" in err, (log.name, err)
+        if code:  # or a binary log gpsdecode dates after today (its GPS week-number rollover guessed wrong)
+            assert "give --date" in err or ("after today" in err and "gpsdecode" in err), (log.name, err)
             continue
         processed += 1
         invoice = json.loads((tmp_path / "i.json").read_text())

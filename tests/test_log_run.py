@@ -84,7 +84,8 @@ def test_every_command_that_reads_a_log_opens_it_once(tmp_path):
     part = tmp_path / "part.ubx"  # its first 400 kB (a binary log cut mid-message): the commands take a second, not three
     with open(recording, "rb") as fh:
         part.write_bytes(fh.read(400_000))
-    for log in (str(NMEA), str(part)):
+    binary = [str(shared("gpsd", "greis-binary.log"))] if shutil.which("gpsdecode") else []  # its bytes fed to gpsdecode
+    for log in (str(NMEA), str(part), *binary):
         invoice = tmp_path / "inv.json"
         assert _opens(tmp_path, log, "process", log, "--geo", GEO, "--tariff", TARIFF, "-q", "-o", str(invoice)) == 1, log
         assert _opens(tmp_path, log, "verify", str(invoice), "-q") == 1, log

@@ -137,6 +137,8 @@ def integrity(
                "fde": fde, "sigma_model": sigma_model, "environment_setting": environment,
                "environments": {k[1] or "unknown": n for k, n in sorted(counts.items()) if k[0] == "environment"},
                "skipped_lines": counts["skipped", "lines"]}  # fmt: skip
+    if run.decoded_by:  # a binary protocol, read as gpsd reports it
+        summary.update(format="gpsd-binary", decoded_by=run.decoded_by)
     if kind == "gpsd-json" and not set(sources) & {"grs", "pseudorange"}:  # what gpsd's JSON lost of the receiver's evidence
         from tollcli.job.receiver_notes import GPSD_DROPPED
 

@@ -14,7 +14,8 @@ ENVIRONMENTS = ("auto", "open", "urban")
 INTEGRITY_LEVELS = ("auto", "residual", "receiver", "covariance", "model")
 SIGMA_MODELS = ("nominal", "urban", "rural", "constant", "input")
 IONO_MODELS = ("single", "sbas", "iono-free")
-INPUT_KINDS = ("auto", "nmea", "ubx-nav", "gpsd-json", "rtklib-pos", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
+INPUT_KINDS = ("auto", "nmea", "ubx-nav", "gpsd-json", "gpsd-binary", "rtklib-pos", "gsdc-derived", "rinex", "gnsslogger", "device-gnss",
+               "ubx", "librsf")  # fmt: skip
 POLICIES = ("raim", "raim+speed", "raim+mm", "all")
 POSITIONINGS = ("auto", "smoothed", "filtered", "snapshot")
 
@@ -44,7 +45,7 @@ def require_json(output: str) -> str:
     if not is_stream(output) and not output.lower().endswith(".json"):
         raise UsageError(f"{output}: this command writes JSON: name the file .json (or - for stdout)")
     return output
-InputFormat = Annotated[Literal[INPUT_KINDS], typer.Option("--input-format", help="Input: auto, nmea, ubx-nav (u-blox NAV-PVT/SOL/POSLLH, NAV-SAT/SVINFO with prRes, NAV-DOP, NAV-PL, HNR-PVT), gpsd-json (gpspipe -w, gpsdecode: TPV, SKY, GST), rtklib-pos (RTKLIB .pos solutions: Q, sdn/sde/sdne), gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX), librsf (libRSF text: smartLoc pseudorange3/odom3).")]
+InputFormat = Annotated[Literal[INPUT_KINDS], typer.Option("--input-format", help="Input: auto, nmea, ubx-nav (u-blox NAV-PVT/SOL/POSLLH, NAV-SAT/SVINFO with prRes, NAV-DOP, NAV-PL, HNR-PVT), gpsd-json (gpspipe -w, gpsdecode: TPV, SKY, GST), gpsd-binary (a binary protocol gpsd decodes — SiRF, GREIS, Oncore, Zodiac, …: read through gpsdecode, which must be installed), rtklib-pos (RTKLIB .pos solutions: Q, sdn/sde/sdne), gsdc-derived (GSDC 2021), rinex (observation file), gnsslogger (Android GnssLogger Raw), device-gnss (GSDC 2022/2023 device_gnss.csv), ubx (u-blox RXM-RAWX), librsf (libRSF text: smartLoc pseudorange3/odom3).")]
 Nav = Annotated[Optional[list[str]], typer.Option("--nav", help="Navigation file, RINEX 2 or 3 (GPS, Galileo, BeiDou, GLONASS): the orbits for rinex and gnsslogger input; replaces the file's own satellites for device-gnss and ubx. Repeatable: several files are read as one (a day's files of each system, consecutive days).")]
 
 

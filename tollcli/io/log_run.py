@@ -21,6 +21,7 @@ import gzip
 import hashlib
 import io
 import os
+import re
 import sys
 import tempfile
 import zlib
@@ -82,6 +83,24 @@ class LogRun:
         self._handed = False
         self._replay: str | None = None
         self.kind = self._sniff() if kind == "auto" else kind
+        #: the program that decoded a binary protocol into what the readers read (``gpsdecode 3.25``), else None
+        self.decoded_by: str | None = None
+        self._decoder = None
+        if self.kind == "gpsd-binary":
+            self._decode(explicit=kind != "auto")
+
+    def _decode(self, explicit: bool) -> None:
+        """A binary protocol gpsd knows: its reports through ``gpsdecode`` (:mod:`tollcli.io.gpsdecode`), read as gpsd
+        JSON. Without gpsdecode, a sniffed log is read as NMEA as before (whose error says how to read it)."""
+        from tollcli.io.gpsdecode import decoded, gpsdecode_path, gpsdecode_version
+
+        program = gpsdecode_path()
+        if program is None and not explicit:
+            self.kind = "nmea"
+            return
+        self._stream, self._decoder = decoded(self._stream, self.name)  # type: ignore[assignment]
+        self.decoded_by = gpsdecode_version(program) if program else None
+        self.kind = "gpsd-json"
 
     # -- what consumers take ----------------------------------------------------------------------
     def stream(self) -> BinaryIO:
@@ -124,13 +143,18 @@ class LogRun:
 
     @contextlib.contextmanager
     def named_errors(self):
-        """Errors of consumers of the replay name the log, not the temporary copy."""
+        """Errors of consumers of the replay name the log, not the temporary copy; a decoded log's line is the
+        decoder's report."""
         try:
             yield
         except TollError as exc:
-            if self._replay is None or not exc.args or self._replay not in str(exc.args[0]):
+            said = str(exc.args[0]) if exc.args else ""
+            named = said.replace(self._replay, self.name) if self._replay is not None else said
+            if self.decoded_by:  # a line of a decoded log is one of the decoder's reports, not of the binary file
+                named = re.sub(rf"^{re.escape(self.name)}:(\d+):", lambda m: f"{self.name}: {self.decoded_by}'s report {m[1]}:", named)
+            if named == said:
                 raise
-            raise type(exc)(str(exc.args[0]).replace(self._replay, self.name), *exc.args[1:]) from None
+            raise type(exc)(named, *exc.args[1:]) from None
 
     @property
     def bytes_stored(self) -> int:
@@ -142,6 +166,8 @@ class LogRun:
         """SHA-256 of the log's bytes as stored; reads what no consumer read (a reader that stopped early)."""
         if self._hashing.digest is None:
             raise ValueError(f"{self.name}: opened without hashing")
+        if self._decoder is not None:  # the feeder reads the log: let it finish (the reports read away)
+            self._decoder.drain()
         while self._buffered.read(COPY_BYTES):
             pass
         return self._hashing.digest.hexdigest()

@@ -146,7 +146,8 @@ def _not_json(constant: str):
 
 
 #: the input formats (``--format``): ``auto`` is :func:`sniff_format`
-INPUT_KINDS = ("auto", "nmea", "ubx-nav", "gpsd-json", "rtklib-pos", "gsdc-derived", "rinex", "gnsslogger", "device-gnss", "ubx", "librsf")
+INPUT_KINDS = ("auto", "nmea", "ubx-nav", "gpsd-json", "gpsd-binary", "rtklib-pos", "gsdc-derived", "rinex", "gnsslogger", "device-gnss",
+               "ubx", "librsf")  # fmt: skip
 #: a u-blox RXM-RAWX frame's first bytes (sync chars, class 0x02, id 0x15)
 UBX_RAWX = b"\xb5\x62\x02\x15"
 #: the first bytes of u-blox frames that carry the receiver's position (NAV-PVT, NAV-SOL, NAV-POSLLH, HNR-PVT)
@@ -160,7 +161,8 @@ def sniff_format(log: str) -> str:
     ``# Raw,`` header line), ``ubx`` (a u-blox ``RXM-RAWX`` frame in the first 64 KiB: raw measurements),
     ``ubx-nav`` (a u-blox NAV-PVT, NAV-SOL, NAV-POSLLH or HNR-PVT frame, wherever it starts: after text,
     comments or NMEA), ``rtklib-pos`` (an RTKLIB solution file's ``%`` header), ``librsf`` (a ``pseudorange3``/``odom3``/``point3`` line first), ``gpsd-json`` (a
-    gpsd report as the first line that is no comment, or a TPV line), else ``nmea``."""
+    gpsd report as the first line that is no comment, or a TPV line), ``gpsd-binary`` (a binary protocol without NMEA:
+    read through gpsd's ``gpsdecode``, :mod:`tollcli.io.gpsdecode`), else ``nmea``."""
     if log == "-":
         try:  # a pipe's first bytes, left for the reader (``gpspipe -w | tollcli integrity -``)
             head = sys.stdin.buffer.peek(SNIFF_BYTES)[:SNIFF_BYTES]  # type: ignore[attr-defined]
@@ -200,7 +202,28 @@ def format_of_head(head: bytes) -> str:
         return "librsf"
     if _first_line(head).startswith(b'{"class"') or b'\n{"class":"TPV"' in head:
         return "gpsd-json"
+    if _binary_without_nmea(head):
+        return "gpsd-binary"
     return "nmea"
+
+
+#: the share of bytes that are not text above which a log with no NMEA sentence is a binary protocol
+BINARY_SHARE = 0.3
+
+
+def _binary_without_nmea(head: bytes) -> bool:
+    """A binary protocol: after the ``#`` comment lines (gpsd's test logs start with some), at least 64 bytes, over
+    :data:`BINARY_SHARE` of them not text, and no NMEA sentence (a receiver that mixes NMEA in is read as NMEA)."""
+    body = head
+    while body.startswith(b"#"):
+        body = body.split(b"\n", 1)[1] if b"\n" in body else b""
+    if len(body) < 64 or _NMEA_SENTENCE.search(body):
+        return False
+    text = len(body) - len(body.translate(None, _TEXT_BYTES))
+    return 1.0 - text / len(body) > BINARY_SHARE
+
+
+_TEXT_BYTES = bytes([9, 10, 13, *range(32, 127)])
 
 
 def _first_line(head: bytes) -> bytes:

@@ -120,6 +120,7 @@ def charge_city_log(log: str, geo: str, tariff_path: str, settings, nav=None, ep
             if stats is not None:
                 check_usable(stats)
         log_sha256 = run.sha256
+        decoded_by = run.decoded_by
     if epoch_table is not None:
         epoch_table.append(pd.concat(kept, ignore_index=True) if kept else pd.DataFrame({"time_utc": []}))
     table = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame(columns=["obj", "t_s", "status", "valid", "evidence", "distance_m"])
@@ -129,6 +130,8 @@ def charge_city_log(log: str, geo: str, tariff_path: str, settings, nav=None, ep
               "geoobjects_sha256": net.source_sha256, "tariff_sha256": file_sha256(tariff_path)}  # fmt: skip
     if log != "-":
         inputs["log_sha256"] = log_sha256
+    if decoded_by:  # a binary protocol read through gpsd's decoder: another version may read other positions
+        inputs["log_decoded_by"] = decoded_by
     if isinstance(nav, str):
         inputs.update(nav=printable_path(nav), nav_sha256=file_sha256(nav))
     elif nav is not None:

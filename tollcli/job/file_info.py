@@ -23,8 +23,9 @@ from tollcli.readers.nmea import ReadStats
 #: what each pseudorange kind needs besides the log to be solved
 NEEDS = {"rinex": "a navigation file (--nav) for an observation file", "gnsslogger": "a navigation file (--nav)",
          "ubx": "RXM-SFRBX navigation data in the log, or --nav", "device-gnss": "", "gsdc-derived": "", "librsf": ""}
-UNKNOWN_HINT = ("no NMEA sentence nor any other kind tollcli reads; a binary protocol gpsd decodes (SiRF, TSIP, "
-                "GREIS, …) is read through it: gpsdecode < FILE | tollcli integrity -")
+UNKNOWN_HINT = ("no NMEA sentence nor any other kind tollcli reads; a binary protocol gpsd decodes (SiRF, GREIS, "
+                "Oncore, …) is read through gpsd's gpsdecode: tollcli runs it where it is installed (Debian: gpsd-clients), "
+                "or pipe: gpsdecode < FILE | tollcli integrity -")
 #: the integrity levels, strictest first, and the evidence each needs
 LEVEL_EVIDENCE = (("residual", "residuals"), ("receiver", "receiver_raim"), ("covariance", "error_ellipse"),
                   ("model", "satellites"))
@@ -59,9 +60,17 @@ def file_info(path: str, min_hal_m: float = 25.0, nav: str | list[str] | None = 
                 "integrity_sources_used": (doc.get("parameters") or {}).get("integrity_sources_used")}
     with LogRun(path) as run:  # the log opened once: counted and read from the same copy of its bytes
         kind = run.kind
-        replay = run.replay_path()
+        try:
+            replay = run.replay_path()
+        except DataError as exc:  # a binary protocol gpsdecode reads nothing of: what info says, not an error of info's
+            if not run.decoded_by:
+                raise
+            return {"file": path, "kind": "gpsd-binary", "decoded_by": run.decoded_by, "messages": {}, "problem": str(exc),
+                    "bytes": os.path.getsize(path) if path != "-" and os.path.isfile(path) else run.bytes_stored}  # fmt: skip
         out: dict = {"file": path, "kind": kind,
                      "bytes": os.path.getsize(path) if path != "-" and os.path.isfile(path) else run.bytes_stored}  # fmt: skip
+        if run.decoded_by:  # a binary protocol, read as gpsd reports it
+            out.update(kind="gpsd-binary", decoded_by=run.decoded_by)
         with run.named_errors():
             out["messages"] = message_counts(replay, kind)
         if kind == "nmea" and not out["messages"]:  # what is nothing else is read as NMEA: here there is none

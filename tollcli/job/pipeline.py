@@ -252,11 +252,14 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         policy, table, details, found, period = charger.finish()
         step_s = charger.step_s
         log_sha256 = run.sha256
+        decoded_by = run.decoded_by
     inputs = {"log": printable_path(log), "geoobjects": printable_path(geo), "tariff": printable_path(tariff),
               "geoobjects_sha256": geo_objects.source_sha256 or file_sha256(geo), "tariff_sha256": file_sha256(tariff),
               "geoobjects_store_sha256": geo_objects.store_sha256}  # fmt: skip
     if log != "-":  # (a log read from stdin cannot be found again: its invoice records no digest to verify against)
         inputs["log_sha256"] = log_sha256
+    if decoded_by:  # a binary protocol read through gpsd's decoder: another version may read other positions
+        inputs["log_decoded_by"] = decoded_by
     if isinstance(nav, str):
         inputs.update(nav=printable_path(nav), nav_sha256=file_sha256(nav))
     elif nav is not None:  # several navigation files, read as one

@@ -225,7 +225,8 @@ def check_usable(stats: ReadStats) -> None:
         if stats.protocol != "NMEA sentences":
             raise DataError(f"{stats.source}: no {stats.protocol} in {stats.lines} lines or frames{hint}")
         raise DataError(f"{stats.source}: no NMEA sentences in {stats.lines} lines (not an NMEA log? a binary protocol gpsd decodes — "
-                        f"SiRF, Trimble TSIP, Javad GREIS, … — is read through it: gpsdecode < {stats.source} | tollcli integrity -){hint}")  # fmt: skip
+                        f"SiRF, Javad GREIS, Oncore, … — is read through gpsd's gpsdecode: tollcli runs it where it is installed "
+                        f"(Debian: gpsd-clients), or pipe: gpsdecode < {stats.source} | tollcli integrity -){hint}")  # fmt: skip
     if stats.epochs == 0:
         if stats.protocol != "NMEA sentences":
             raise DataError(f"{stats.source}: {stats.sentences} {stats.protocol} but no epoch with a position")
