@@ -112,3 +112,32 @@ def test_a_differential_fix_gets_the_corrected_ionospheres_sigma():
     mask = autonomous.mask
     assert (differential.sigma_m[mask] < autonomous.sigma_m[mask]).all()
     assert np.nanmin(differential.sigma_m) <= expected[0] + 5 and np.nanmax(differential.sigma_m) < 5.0
+
+
+def test_satellites_reported_without_their_angles_are_bounded_by_the_hdop_as_if_none_were(tmp_path):
+    """gpsd reports a Javad GREIS receiver's satellites without elevations: no geometry to bound, so the receiver's
+    HDOP bounds the fix (the ``model`` level), as it does a fix whose satellites are not reported at all — the same
+    bound and verdict when the satellite lists are taken out (metamorphic), and never ``insufficient`` for want of
+    angles the receiver did not give. (They were ``insufficient`` at every epoch before.)"""
+    from conftest import shared
+
+    chk = shared("gpsd", "greis-binary.log.chk")
+    bare = tmp_path / "bare.json"
+    lines = []
+    for line in chk.read_text(encoding="utf-8").splitlines():
+        if line.startswith('{"class":"SKY"'):
+            report = json.loads(line)
+            report.pop("satellites", None)
+            line = json.dumps(report)
+        lines.append(line)
+    bare.write_text("\n".join(lines) + "\n")
+
+    def table(path):
+        chunks = list(iter_integrity(str(path), "gpsd-json", RaimParams()))
+        return pd.concat([c.table for c in chunks], ignore_index=True)
+
+    given, without = table(chk), table(bare)
+    assert (given["raim_status"] != "insufficient").all() and (given["integrity_source"] == "model").sum() >= 40
+    assert given["hpl_model_m"].notna().sum() >= 40
+    np.testing.assert_array_equal(given["hpl_model_m"].to_numpy(float), without["hpl_model_m"].to_numpy(float))
+    assert given["raim_status"].tolist() == without["raim_status"].tolist()

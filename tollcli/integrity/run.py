@@ -107,7 +107,7 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
         source = np.where(np.isfinite(t), "pseudorange" if meas.dy_m is not None else "grs", "none").astype(object)
     status = detection.status.copy()
     status[probable_false_alarms(status, detection.test_stat, detection.dof, detection.p_fa, params.p_fa)] = PROBABLE_FALSE_ALARM
-    if meas.satellites_reported is not None:  # a receiver that reports no satellites at all (GGA/RMC only): nothing
+    if meas.satellites_reported is not None:  # a receiver that reports no satellites with their angles (GGA/RMC only): nothing
         status[~meas.satellites_reported & (geometry.n_meas == 0)] = STATUSES.index("unmonitored")  # to monitor, not "too few"
     hpl_model = hal_free.model_hpl_m if hal_free is not None and hal_free.model_hpl_m is not None else model_hpl(meas, geometry, params.p_md)
     verdicts, extra = _source_verdicts(meas, status, source, detection.hal_m, params, hpl_model)
