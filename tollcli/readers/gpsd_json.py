@@ -31,6 +31,7 @@ import json
 import math
 import os
 from collections.abc import Iterator
+from functools import lru_cache
 from typing import BinaryIO
 
 import numpy as np
@@ -54,22 +55,39 @@ _QUALITY = {2: 2, 3: 4, 4: 5, 5: 6}
 
 def _float(report: dict, *names: str) -> float:
     """The first of ``names`` that is a number, as a float (NaN: none is; a report with an integer too large for one
-    was skipped as malformed: :func:`_damaged`)."""
+    was skipped as malformed: :func:`_damaged`). The values are ``json.loads``'s: exactly int, float or bool."""
     for name in names:
         value = report.get(name)
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
+        kind = type(value)
+        if kind is float:
+            return value
+        if kind is int:
             return float(value)
     return math.nan
 
 
+def _number(value) -> float:
+    """A JSON value as a float when it is a number (NaN otherwise: text, a bool, null, missing)."""
+    kind = type(value)
+    if kind is float:
+        return value
+    return float(value) if kind is int else math.nan
+
+
 def _small_int(value) -> int | None:
-    """``value`` if it is an integer an id or a count can be (|value| < 2³¹), else None."""
-    return value if isinstance(value, int) and not isinstance(value, bool) and -(2**31) < value < 2**31 else None
+    """``value`` if it is an integer an id or a count can be (|value| < 2³¹), else None (a bool is not one)."""
+    return value if type(value) is int and -(2**31) < value < 2**31 else None
 
 
 def _time_ms(text) -> int | None:
+    """Milliseconds since 1970 of a report's ISO time (None: no time, or not one in 1980–2200)."""
     if not isinstance(text, str) or len(text) < 19:
         return None
+    return _parsed_ms(text)
+
+
+@lru_cache(maxsize=256)  # a cycle's TPV, SKY and GST carry one time: parsed once
+def _parsed_ms(text: str) -> int | None:
     try:
         ms = int(np.datetime64(text.rstrip("Z"), "ms").astype(np.int64))
     except (ValueError, OverflowError):
@@ -77,18 +95,27 @@ def _time_ms(text) -> int | None:
     return ms if PLAUSIBLE_MS[0] <= ms < PLAUSIBLE_MS[1] else None
 
 
+class _TooLarge(ValueError):
+    """An integer in a report beyond 64 bits: no receiver writes one."""
+
+
+def _checked_int(text: str) -> int:
+    """A JSON integer, refused (:class:`_TooLarge`) beyond 64 bits."""
+    value = int(text)
+    if not -(2**63) <= value < 2**63:
+        raise _TooLarge(text[:30])
+    return value
+
+
+#: the reports' decoder: every integer checked as it is read (``json.loads`` with a decoder made once)
+_DECODER = json.JSONDecoder(parse_int=_checked_int)
+#: why a report with an integer beyond 64 bits is skipped
+TOO_LARGE = "a number too large for any field"
+
+
 def _damaged(report) -> str:
-    """Why a report cannot be a receiver's ('' when it can): an integer too large for 64 bits anywhere in it, or a
-    time outside 1980–2200."""
-    stack = [report]
-    while stack:
-        value = stack.pop()
-        if isinstance(value, dict):
-            stack.extend(value.values())
-        elif isinstance(value, list):
-            stack.extend(value)
-        elif isinstance(value, int) and not isinstance(value, bool) and not -(2**63) <= value < 2**63:
-            return "a number too large for any field"
+    """Why a report cannot be a receiver's ('' when it can): a time outside 1980–2200 (an integer too large for 64
+    bits anywhere in it is refused as it is read: :data:`_DECODER`)."""
     text = report.get("time") if isinstance(report, dict) else None
     if isinstance(text, str) and len(text) >= 19 and _time_ms(text) is None:
         try:
@@ -121,18 +148,19 @@ def _tpv_fields(r: dict) -> dict:
 def _sky_satellites(r: dict) -> list[tuple]:
     out = []
     for s in r.get("satellites") or ():
-        if not isinstance(s, dict):
+        if type(s) is not dict:
             continue
-        gnss, svid, prn = _small_int(s.get("gnssid")), _small_int(s.get("svid")), _small_int(s.get("PRN"))
+        get = s.get
+        gnss, svid, prn = _small_int(get("gnssid")), _small_int(get("svid")), _small_int(get("PRN"))
         if gnss is not None and svid is not None:
             name = GNSS_NAME.get(gnss, "unknown")
         elif prn is not None:
             name, svid = by_number(prn)
         else:
             continue
-        el, az, ss = _float(s, "el"), _float(s, "az"), _float(s, "ss")
-        used = s.get("used") is True
-        residual = _float(s, "prRes") if used else math.nan
+        el, az, ss = _number(get("el")), _number(get("az")), _number(get("ss"))
+        used = get("used") is True
+        residual = _number(get("prRes")) if used else math.nan
         known = math.isfinite(el) and -90 <= el <= 90 and math.isfinite(az)
         out.append((name, int(svid), el if known else math.nan, az % 360.0 if known else math.nan,
                     ss if ss > 0 else math.nan, used, residual, prn if prn is not None else -1))  # fmt: skip
@@ -165,8 +193,11 @@ def iter_gpsd_json_tables(source: str | os.PathLike | BinaryIO, *, strict: bool 
                     stats.unused += 1
                 continue
             try:
-                report = json.loads(text)
+                report = _DECODER.decode(text)
                 kind = report["class"]
+            except _TooLarge:  # a field no receiver writes: the report is malformed, skipped and counted
+                skip_malformed(stats, line_no, TOO_LARGE, strict)
+                continue
             except (ValueError, KeyError, TypeError, RecursionError) as exc:
                 skip_malformed(stats, line_no, f"not a gpsd JSON report ({type(exc).__name__})", strict)
                 continue
