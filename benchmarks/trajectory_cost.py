@@ -9,7 +9,7 @@ drive of 10 000 epochs (``tollcli simulate --nlos --odometry --duration 2000 --r
 log, the median over the rounds of the snapshot WLS (reader + solver, ``pseudorange_epochs``) and of the estimator on
 its output, their ratio, and the estimator's epochs per second (it makes 7 passes over the log: a forward pass to
 scale the noise, forward and backward, then two rounds of noise from the residuals with both again; the two passes
-of a pair run on two threads). Then the same for the pure-Python twin of the compiled kernel (what an install without
+of a pair run on two threads); and the estimator's peak memory (``tracemalloc``), in covariance matrices per epoch. Then the same for the pure-Python twin of the compiled kernel (what an install without
 a C compiler runs) on the log's first ``--twin-epochs`` epochs, with the compiled kernel on the same epochs beside it.
 """
 
@@ -22,6 +22,7 @@ import statistics
 import subprocess
 import sys
 import time
+import tracemalloc
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
@@ -30,6 +31,7 @@ from tollcli.gnss.pseudorange_inputs import pseudorange_epochs  # noqa: E402
 from tollcli.gnss.sigma_models import NominalModel  # noqa: E402
 from tollcli.integrity import trajectory_filter  # noqa: E402
 from tollcli.integrity.trajectory import estimate_trajectory  # noqa: E402
+from tollcli.integrity.trajectory_filter import MOTION_STATES  # noqa: E402
 from tollcli.integrity.trajectory_inputs import trajectory_inputs  # noqa: E402
 
 BERLIN = os.path.join(ROOT, "..", "shared", "data", "smartloc", "Berlin_Potsdamer_Platz_Input.txt")
@@ -76,6 +78,15 @@ def main() -> int:
         print(f"{os.path.basename(os.path.dirname(log)) if 'sim' in log else os.path.basename(log)}: {n} epochs; "
               f"snapshot {t_snap:.3f} s, estimator {t_est:.3f} s: ratio {t_est / t_snap:.2f}; {n / t_est:,.0f} epochs/s "
               f"(odometry: {traj.odometry})")  # fmt: skip
+        inp = trajectory_inputs(epochs, meas)
+        _ = inp.kernel_arrays  # (the inputs' own arrays, made before)
+        tracemalloc.start()
+        estimate_trajectory(inp, "smoothed")
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        s = MOTION_STATES + inp.n_clocks
+        print(f"  memory: the estimator's peak {peak / 1e6:.1f} MB = {peak / n / (8 * s * s):.1f} covariance matrices "
+              f"({s}×{s}) per epoch")  # fmt: skip
         if compiled and args.twin_epochs:
             short = _stretch(trajectory_inputs(epochs, meas), min(args.twin_epochs, n))
             t_fast, _ = _timed(lambda: estimate_trajectory(short, "smoothed"), args.rounds)

@@ -101,6 +101,23 @@ def test_pass_is_the_twins_bit_for_bit(berlin, monkeypatch, case):
 
 
 @needs_kernel
+@pytest.mark.parametrize("keep", [("post",), ("prior",), ()])
+def test_a_pass_keeping_half_its_states_keeps_them_as_a_whole_pass_does(berlin, monkeypatch, keep):
+    """A pass asked to keep only its posteriors (or its priors, or neither) gives those, and everything else it
+    gives, to the bit of a pass that keeps both — compiled and twin — and the others not at all (None: memory a long
+    log does not spend)."""
+    inp, odometry = _cases(berlin)["jump"]
+    sigma2 = np.where(inp.mask, 8.0**2, 900.0)
+    start_f, _ = _starts(inp, odometry, MOTION_STATES)
+    whole = run_pass(inp, sigma2, 1, *start_f, odometry)
+    compiled, twin = _both(monkeypatch, lambda: run_pass(inp, sigma2, 1, *start_f, odometry, keep=keep))
+    for half in (compiled, twin):
+        for name in FIELDS:
+            kept = name not in ("prior_x", "prior_p", "post_x", "post_p") or name.split("_")[0] in keep
+            assert (_same(getattr(half, name), getattr(whole, name)) if kept else getattr(half, name) is None), (keep, name)
+
+
+@needs_kernel
 def test_combination_and_residuals_are_the_twins_bit_for_bit(berlin, monkeypatch):
     inp, odometry = _cases(berlin)["late clock"]
     sigma2 = np.where(inp.mask, 8.0**2, 900.0)

@@ -28,7 +28,7 @@
 
 typedef struct {
     Py_ssize_t n_epochs, n_slots;
-    int n_states, n_clocks, odometry, direction, iterations, lost_min;
+    int n_states, n_clocks, odometry, direction, iterations, lost_min, keep_prior, keep_post;
     double omega, c_mps, cauchy, relinearise;
     const double *t, *sat, *pr, *sigma2, *robust2, *speed, *yaw, *forward, *left, *origin, *rot, *noise;
     const uint8_t *mask;
@@ -311,17 +311,19 @@ static int check(Py_buffer *b, Py_ssize_t items, Py_ssize_t itemsize, const char
 
 /* run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left, origin, rot, noise, start_x, start_p,
  *          prior_x, prior_p, post_x, post_p, z, w, started, relocked,
- *          direction, odometry, n_clocks, iterations, lost_min, omega, c_mps, cauchy, relinearise)
+ *          direction, odometry, n_clocks, iterations, lost_min, keep_prior, keep_post, omega, c_mps, cauchy, relinearise)
+ * keep_prior / keep_post 0: the priors / posteriors are not kept (their arrays empty; a pass's other half is what the
+ * combination reads: the forward posteriors, the backward priors).
  * Arrays as trajectory_pass_twin.run_pass takes them; outputs filled in place (those of epochs not visited left). */
 static PyObject *run_pass(PyObject *self, PyObject *args) {
     Py_buffer in[N_IN], out[N_OUT];
     Pass c;
     memset(in, 0, sizeof(in));
     memset(out, 0, sizeof(out));
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*w*w*w*w*w*w*w*w*iiiiidddd", &in[0], &in[1], &in[2],
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*w*w*w*w*w*w*w*w*iiiiiiidddd", &in[0], &in[1], &in[2],
                           &in[3], &in[4], &in[5], &in[6], &in[7], &in[8], &in[9], &in[10], &in[11], &in[12], &in[13],
                           &in[14], &in[15], &out[0], &out[1], &out[2], &out[3], &out[4], &out[5], &out[6], &out[7],
-                          &c.direction, &c.odometry, &c.n_clocks, &c.iterations, &c.lost_min, &c.omega, &c.c_mps,
+                          &c.direction, &c.odometry, &c.n_clocks, &c.iterations, &c.lost_min, &c.keep_prior, &c.keep_post, &c.omega, &c.c_mps,
                           &c.cauchy, &c.relinearise))
         return NULL;
     PyObject *result = NULL;
@@ -339,8 +341,8 @@ static PyObject *run_pass(PyObject *self, PyObject *args) {
         !check(&in[7], E, 8, "speed") || !check(&in[8], E, 8, "yaw") || !check(&in[9], E, 8, "forward") ||
         !check(&in[10], E, 8, "left") || !check(&in[11], 3, 8, "origin") || !check(&in[12], 9, 8, "rot") ||
         !check(&in[13], N_NOISE, 8, "noise") || !check(&in[14], S, 8, "start_x") || !check(&in[15], S * S, 8, "start_p") ||
-        !check(&out[0], E * S, 8, "prior_x") || !check(&out[1], E * S * S, 8, "prior_p") ||
-        !check(&out[2], E * S, 8, "post_x") || !check(&out[3], E * S * S, 8, "post_p") || !check(&out[4], E * N, 8, "z") ||
+        !check(&out[0], c.keep_prior ? E * S : 0, 8, "prior_x") || !check(&out[1], c.keep_prior ? E * S * S : 0, 8, "prior_p") ||
+        !check(&out[2], c.keep_post ? E * S : 0, 8, "post_x") || !check(&out[3], c.keep_post ? E * S * S : 0, 8, "post_p") || !check(&out[4], E * N, 8, "z") ||
         !check(&out[5], E * N, 8, "w") || !check(&out[6], E * c.n_clocks, 1, "started") ||
         !check(&out[7], E, 1, "relocked"))
         goto done;
@@ -380,8 +382,10 @@ static PyObject *run_pass(PyObject *self, PyObject *args) {
         int n = 0;
         for (Py_ssize_t j = 0; j < N; j++) if (c.mask[k * N + j]) used[n++] = (int)j;
         if (n) start_clocks(&c, x, p, started, k, used, n, wk.rng, wk.u, values);
-        memcpy(prior_x + k * S, x, sizeof(double) * S);
-        memcpy(prior_p + k * nn, p, sizeof(double) * nn);
+        if (c.keep_prior) {
+            memcpy(prior_x + k * S, x, sizeof(double) * S);
+            memcpy(prior_p + k * nn, p, sizeof(double) * nn);
+        }
         memcpy(started_all + k * c.n_clocks, started, c.n_clocks);
         if (n) {
             int ok = update(&c, x, p, k, used, n, xq, pq, &wk);
@@ -389,7 +393,7 @@ static PyObject *run_pass(PyObject *self, PyObject *args) {
             for (int i = 0; i < n; i++) low += wk.w[i] < 0.5;
             if (ok && n >= c.lost_min && 2 * low > n) { /* the pass has lost the vehicle */
                 widen(p, S, c.odometry);
-                memcpy(prior_p + k * nn, p, sizeof(double) * nn);
+                if (c.keep_prior) memcpy(prior_p + k * nn, p, sizeof(double) * nn);
                 relocked[k] = 1;
                 update(&c, x, p, k, used, n, xq, pq, &wk);
             }
@@ -397,8 +401,10 @@ static PyObject *run_pass(PyObject *self, PyObject *args) {
             memcpy(p, pq, sizeof(double) * nn);
             for (int i = 0; i < n; i++) { z_all[k * N + used[i]] = wk.z[i]; w_all[k * N + used[i]] = wk.w[i]; }
         }
-        memcpy(post_x + k * S, x, sizeof(double) * S);
-        memcpy(post_p + k * nn, p, sizeof(double) * nn);
+        if (c.keep_post) {
+            memcpy(post_x + k * S, x, sizeof(double) * S);
+            memcpy(post_p + k * nn, p, sizeof(double) * nn);
+        }
         previous = k;
     }
     Py_END_ALLOW_THREADS

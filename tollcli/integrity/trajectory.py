@@ -99,21 +99,23 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
     sigma = np.where(inp.mask & np.isfinite(inp.sigma_m) & (inp.sigma_m > 0), inp.sigma_m, FALLBACK_SIGMA_M)
     sigma2 = sigma**2
     start_f, start_b = _starts(inp, odometry, m)
-    forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise)
+    forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise, keep=("post",))  # (the combination reads no prior of it)
     kept = forward.weight >= 0.5
     if kept.any():
         sigma2 = sigma2 * max(1.0, float(np.median(forward.z[kept] ** 2)) / CHI2_1_MEDIAN)
+        forward = None  # (let go before the next two passes are made)
         forward, backward = run_both(inp, sigma2, start_f, start_b, odometry, noise)
     else:
-        backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise)
+        backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise, keep=("prior",))
     table, factor, rho = np.full(1, np.nan), 1.0, np.ones(1)
     bins, n_bins, _by = noise_bins(inp.cn0_dbhz, inp.elev_deg, inp.mask)
     sv_code = pd.factorize(inp.sv.ravel(), sort=True)[0].reshape(inp.sv.shape)  # labels as numbers, in their order
     for round_ in range(NOISE_ROUNDS):
-        x, _p = _combined(forward, backward)  # the noise measured at the smoothed trajectory, whichever positioning
+        x = _combined(forward, backward)[0]  # the noise measured at the smoothed trajectory, whichever positioning
         res = postfit_residuals(inp, x, m)
         table = sigma_by_bin(res, bins, n_bins, inp.mask)
         kept = inp.mask & (np.minimum(forward.weight, backward.weight) >= 0.5)
+        forward = backward = None  # (their covariances, most of the memory, let go before the next two are made)
         factor, rho = correlation_inflation(np.clip(res / table[bins], -5.0, 5.0), sv_code, kept)  # the kept, not the outliers
         white2 = np.where(inp.mask, table[bins] ** 2, FALLBACK_SIGMA_M**2)
         sigma2 = white2 * max(factor, 1.0)

@@ -74,12 +74,13 @@ class MotionNoise:
 @dataclass
 class FilterPass:
     """One pass's states per epoch (E, S), their covariances (E, S, S), and each measurement's normalised innovation
-    and Cauchy weight (E, N; NaN/0 for empty slots)."""
+    and Cauchy weight (E, N; NaN/0 for empty slots). The priors or the posteriors are None where the pass was asked
+    not to keep them (:func:`run_pass`)."""
 
-    prior_x: np.ndarray
-    prior_p: np.ndarray
-    post_x: np.ndarray
-    post_p: np.ndarray
+    prior_x: np.ndarray | None
+    prior_p: np.ndarray | None
+    post_x: np.ndarray | None
+    post_p: np.ndarray | None
     z: np.ndarray
     weight: np.ndarray
     odometry: bool
@@ -92,7 +93,8 @@ MOTION_STATES = 6
 
 
 def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start_x: np.ndarray, start_p: np.ndarray,
-             odometry: bool, noise: MotionNoise = MotionNoise(), robust_sigma2_m2: np.ndarray | None = None) -> FilterPass:  # fmt: skip
+             odometry: bool, noise: MotionNoise = MotionNoise(), robust_sigma2_m2: np.ndarray | None = None,
+             keep: tuple[str, ...] = ("prior", "post")) -> FilterPass:  # fmt: skip
     """The filter over every epoch, forward (``direction`` 1) or backward (-1), from ``start_x``/``start_p`` at the
     first epoch it visits (its clocks are started from that epoch's measurements).
 
@@ -100,24 +102,36 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
     variance its innovation is normalised by for the Cauchy weight — the white part of the error, so that a variance
     inflated for time correlation does not hide a fault from the robust loss.
 
+    ``keep``: which of the states per epoch are kept, ``prior`` and ``post`` (the others are not: a long log's
+    covariances are most of the estimator's memory, and the combination reads only the forward posteriors and the
+    backward priors).
+
     The pass itself is the compiled kernel (``_trajectory_kernel.c``) where it was built, else its Python twin
     (:mod:`tollcli.integrity.trajectory_pass_twin`): the same bits either way."""
     robust = sigma2_m2 if robust_sigma2_m2 is None else robust_sigma2_m2
     n_epochs, n_slots = inp.mask.shape
     n_states = MOTION_STATES + inp.n_clocks
-    out = FilterPass(np.empty((n_epochs, n_states)), np.empty((n_epochs, n_states, n_states)),  # every epoch written
-                     np.empty((n_epochs, n_states)), np.empty((n_epochs, n_states, n_states)),
-                     np.full((n_epochs, n_slots), np.nan), np.zeros((n_epochs, n_slots)), odometry,
-                     np.zeros((n_epochs, inp.n_clocks), np.uint8), np.zeros(n_epochs, np.uint8))  # fmt: skip
+    keep_prior, keep_post = "prior" in keep, "post" in keep
+
+    def states(kept: bool) -> tuple[np.ndarray, np.ndarray]:  # every epoch written, or nothing
+        e = n_epochs if kept else 0
+        return np.empty((e, n_states)), np.empty((e, n_states, n_states))
+
+    out = FilterPass(*states(keep_prior), *states(keep_post), np.full((n_epochs, n_slots), np.nan), np.zeros((n_epochs, n_slots)),
+                     odometry, np.zeros((n_epochs, inp.n_clocks), np.uint8), np.zeros(n_epochs, np.uint8))  # fmt: skip
     t, sat, pr, mask, clock, speed, yaw, forward, left, origin, rot = inp.kernel_arrays
     args = (t, sat, pr, mask, clock, _c64(sigma2_m2), _c64(robust), speed, yaw, forward, left, origin, rot,
             np.array([getattr(noise, f) for f in NOISE_FIELDS], np.float64), _c64(start_x), _c64(start_p),
             out.prior_x, out.prior_p, out.post_x, out.post_p, out.z, out.weight, out.started, out.relocked,
-            int(direction), int(bool(odometry)), int(inp.n_clocks), ITERATIONS, LOST_LOCK_MIN, OMEGA_EARTH_RADPS, C_MPS,
-            CAUCHY_C, RELINEARISE_M)  # fmt: skip
+            int(direction), int(bool(odometry)), int(inp.n_clocks), ITERATIONS, LOST_LOCK_MIN, int(keep_prior), int(keep_post),
+            OMEGA_EARTH_RADPS, C_MPS, CAUCHY_C, RELINEARISE_M)  # fmt: skip
     kernel = _kernel()
     (kernel.run_pass if kernel is not None else run_pass_twin)(*args)
     out.started, out.relocked = out.started.astype(bool), out.relocked.astype(bool)
+    if not keep_prior:
+        out.prior_x = out.prior_p = None
+    if not keep_post:
+        out.post_x = out.post_p = None
     return out
 
 
@@ -128,10 +142,10 @@ def _c64(a: np.ndarray) -> np.ndarray:
 def run_both(inp: TrajectoryInputs, sigma2_m2: np.ndarray, start_f, start_b, odometry: bool, noise: MotionNoise = MotionNoise(),
              robust_sigma2_m2: np.ndarray | None = None) -> tuple[FilterPass, FilterPass]:  # fmt: skip
     """The forward and the backward pass (:func:`run_pass`; ``start_f``/``start_b``: each one's (x, P) at its first
-    epoch). The two are independent: with the compiled kernel (which lets go of the interpreter) they run at once on
+    epoch), the forward keeping its posteriors and the backward its priors (what the combination reads). The two are independent: with the compiled kernel (which lets go of the interpreter) they run at once on
     two threads, each writing only its own arrays, so the result is the same as one after the other."""
-    def one(direction, start):
-        return run_pass(inp, sigma2_m2, direction, *start, odometry, noise, robust_sigma2_m2)
+    def one(direction, start):  # what the combination reads: the forward posteriors, the backward priors
+        return run_pass(inp, sigma2_m2, direction, *start, odometry, noise, robust_sigma2_m2, keep=("post",) if direction > 0 else ("prior",))
 
     if _kernel() is None or inp.mask.shape[0] < PARALLEL_MIN_EPOCHS:
         return one(1, start_f), one(-1, start_b)

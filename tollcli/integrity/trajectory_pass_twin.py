@@ -267,7 +267,7 @@ def _widen(p, ns, odometry):
 
 def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left, origin, rot, noise, start_x, start_p,
              prior_x, prior_p, post_x, post_p, z_all, w_all, started_all, relocked,
-             direction, odometry, n_clocks, iterations, lost_min, omega, c_mps, cauchy, relinearise):  # fmt: skip
+             direction, odometry, n_clocks, iterations, lost_min, keep_prior, keep_post, omega, c_mps, cauchy, relinearise):  # fmt: skip
     """The kernel's ``run_pass``: the inputs as contiguous arrays (``sat`` (E, N, 3), ``mask`` uint8, ``clock``
     int64), the outputs filled in place."""
     n_epochs, n_slots = pr.shape
@@ -280,7 +280,8 @@ def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left
     tt = t.tolist()
     x, p = start_x.tolist(), start_p.ravel().tolist()
     started = [0] * n_clocks
-    prior_p2, post_p2 = prior_p.reshape(n_epochs, ns * ns), post_p.reshape(n_epochs, ns * ns)
+    prior_p2 = prior_p.reshape(n_epochs, ns * ns) if keep_prior else None
+    post_p2 = post_p.reshape(n_epochs, ns * ns) if keep_post else None
     previous = -1
     for step in range(n_epochs):
         k = step if direction > 0 else n_epochs - 1 - step
@@ -289,19 +290,22 @@ def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left
         used = np.flatnonzero(mask[k]).tolist()
         if used:
             _start_clocks(c, x, p, started, k, used)
-        prior_x[k], prior_p2[k] = x, p
+        if keep_prior:
+            prior_x[k], prior_p2[k] = x, p
         started_all[k] = started
         if used:
             ok, xq, pq, z, w = _update(c, x, p, k, used)
             low = sum(1 for v in w if v < 0.5)
             if ok and len(used) >= lost_min and 2 * low > len(used):
                 _widen(p, ns, odometry)
-                prior_p2[k] = p
+                if keep_prior:
+                    prior_p2[k] = p
                 relocked[k] = 1
                 _, xq, pq, z, w = _update(c, x, p, k, used)
             x, p = xq, pq
             z_all[k, used], w_all[k, used] = z, w
-        post_x[k], post_p2[k] = x, p
+        if keep_post:
+            post_x[k], post_p2[k] = x, p
         previous = k
 
 
