@@ -127,7 +127,6 @@ def log_row(log: Path) -> dict | None:
 NO_EVIDENCE = {
     "april6_2019.log": "RMC only: no satellites, no DOP",
     "firefly-II.log": "GGA with an empty quality field (its HDOP is not read) + RMC + ZDA: no satellites",
-    "greis-test2.log": "gpsd reports its satellites without elevations (no geometry) and no DOP for this GREIS test log",
     "magellan-ec10.log": "RMC + RMB only: no satellites, no DOP",
     "meinberg-gps164.log": "RMC only: no satellites, no DOP",
     "saab-r4.log": "GGA without satellites or HDOP (an AIS transponder's position)",

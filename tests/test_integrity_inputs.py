@@ -146,22 +146,35 @@ def test_gsdc_bad_rows_do_not_raise(tmp_path):
     assert (out["raim_status"].iloc[2:] == "valid").all()
 
 
-def test_a_gga_only_log_is_model_level_and_a_gsa_without_satellites_insufficient(tmp_path):
-    """No satellites reported at all: the HDOP bound only (no charge under the urban σ); satellites reported but too
-    few used: insufficient."""
+def test_a_gga_only_log_is_model_level_and_a_gsa_with_too_few_satellites_insufficient(tmp_path):
+    """No satellites reported at all: the HDOP bound only (no charge under the urban σ). Satellites in view (GSV)
+    but none said to be used (no GSA): no geometry of the fix either, so the same HDOP bound, to the bit
+    (metamorphic). Three used satellites with their angles: a geometry too small to check, insufficient."""
     from conftest import SAMPLES
 
+    from tollcli.readers.nmea.compose import gsa
+
+    def raim(name, keep, edit=lambda line: line):
+        path = tmp_path / name
+        path.write_text("\n".join(e for e in (edit(line) for line in lines if line[3:6] in keep) if e) + "\n")
+        tables = read_nmea(path)
+        return run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
+
     lines = (SAMPLES / "straight-drive.nmea").read_text().splitlines()
-    gga_only = tmp_path / "gga.nmea"
-    gga_only.write_text("\n".join(line for line in lines if line[3:6] in ("GGA", "RMC")) + "\n")
-    tables = read_nmea(gga_only)
-    out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
-    assert len(out) == 180 and (out["raim_status"] == "unavailable").all() and (out["integrity_source"] == "model").all()
-    no_used = tmp_path / "gsv.nmea"
-    no_used.write_text("\n".join(line for line in lines if line[3:6] in ("GGA", "RMC", "GSV")) + "\n")
-    tables = read_nmea(no_used)
-    out = run_raim(nmea_measurements(tables.epochs, tables.satellites), RaimParams("etc"))
-    assert (out["raim_status"] == "insufficient").all()
+    gga_only = raim("gga.nmea", ("GGA", "RMC"))
+    assert len(gga_only) == 180 and (gga_only["raim_status"] == "unavailable").all()
+    assert (gga_only["integrity_source"] == "model").all()
+    in_view = raim("gsv.nmea", ("GGA", "RMC", "GSV"))
+    assert in_view["raim_status"].tolist() == gga_only["raim_status"].tolist()
+    np.testing.assert_array_equal(in_view["hpl_model_m"].to_numpy(float), gga_only["hpl_model_m"].to_numpy(float))
+
+    def three_used(line):  # the GPS GSA names three of its satellites; the Galileo GSA is left out
+        if line.startswith("$GNGSA"):
+            return gsa([3, 7, 9], 9.9, 9.9, 9.9, system_id=1) if line.endswith(",1*01") else None
+        return line
+
+    three = raim("three.nmea", ("GGA", "RMC", "GSV", "GSA"), three_used)
+    assert (three["n_used"] == 3).all() and (three["raim_status"] == "insufficient").all()
 
 
 @pytest.mark.parametrize("dtype", ["string[pyarrow]", object])

@@ -30,7 +30,7 @@ class Measurements:
     dy_m: np.ndarray | None = None  # (E, N) pre-fit residuals at the linearisation point (pseudoranges)
     test_stat_override: np.ndarray | None = None  # (E,) a statistic from elsewhere (GST approximation), NaN = none
     test_stat_source: np.ndarray | None = None  # (E,) 'grs', 'gst' (a plausible GST RMS), 'pseudorange', 'none'
-    satellites_reported: np.ndarray | None = None  # (E,) the receiver reported satellites with their angles (NMEA GSV); None: n/a
+    satellites_reported: np.ndarray | None = None  # (E,) the receiver reported its satellites (NMEA GSA/GSV); None: n/a
     receiver: ReceiverOutputs | None = None  # the receiver's own integrity outputs (NMEA GBS, GST)
     cn0_dbhz: np.ndarray | None = None  # (E, N) carrier-to-noise density of each measurement (NaN: not reported)
     #: (E, N) the σ the ``model`` bound uses: the σ of the environment the residuals measured, the urban σ where

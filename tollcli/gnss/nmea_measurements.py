@@ -242,9 +242,7 @@ def nmea_measurements(
     weight_sum = np.where(mask, 1.0 / np.where(mask, sigma, 1.0) ** 2, 0.0).sum(axis=1)
     gst_stat = np.where(~have_grs & np.isfinite(receiver.gst_rms_m), receiver.gst_rms_m**2 * weight_sum, np.nan)
     source = np.where(have_grs, "grs", np.where(np.isfinite(gst_stat), "gst", "none")).astype(object)
-    # the satellites' geometry reported: a satellite with its angles (one without them, as gpsd gives a GREIS
-    # receiver's, tells no geometry: the receiver's HDOP bounds that fix, as it does a fix with no satellites at all)
-    reported = np.isin(epoch_ids, sat_epoch[np.isfinite(elev_all) & np.isfinite(azim_all)]) if n_epochs else np.zeros(0, bool)
+    reported = np.isin(epoch_ids, sat_epoch) if n_epochs else np.zeros(0, bool)
     return Measurements(H, sigma, mask, labels, residual_m=np.where(have_grs[:, None], residual, np.nan),
                         test_stat_override=gst_stat, test_stat_source=source, satellites_reported=reported,
                         receiver=receiver, cn0_dbhz=pad(cn0_used, row, slot, shape, np.nan),

@@ -38,7 +38,7 @@ def model_hpl_m(geometry: Geometry | Gain, sigma_m: np.ndarray, p_md: float) -> 
 
 def hdop_hpl_m(hdop: np.ndarray, p_md: float, open_sky: np.ndarray) -> np.ndarray:
     """K_H(P_MD) · HDOP · σ_worst per epoch (m): the model bound of a fix whose satellites' geometry is not reported
-    (no satellites, or none with its angles).
+    (no satellites, none used, or none with its angles: :func:`tollcli.integrity.run.no_geometry`).
 
     σ_major ≤ HDOP · max σᵢ (the covariance under equal σ's, scaled by the largest); σ_worst is
     :data:`NOMINAL_WORST_SIGMA_M` where ``open_sky``, its urban σ elsewhere. NaN where there is no HDOP."""

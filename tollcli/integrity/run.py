@@ -107,7 +107,7 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
         source = np.where(np.isfinite(t), "pseudorange" if meas.dy_m is not None else "grs", "none").astype(object)
     status = detection.status.copy()
     status[probable_false_alarms(status, detection.test_stat, detection.dof, detection.p_fa, params.p_fa)] = PROBABLE_FALSE_ALARM
-    if meas.satellites_reported is not None:  # a receiver that reports no satellites with their angles (GGA/RMC only): nothing
+    if meas.satellites_reported is not None:  # a receiver that reports no satellites at all (GGA/RMC only): nothing
         status[~meas.satellites_reported & (geometry.n_meas == 0)] = STATUSES.index("unmonitored")  # to monitor, not "too few"
     hpl_model = hal_free.model_hpl_m if hal_free is not None and hal_free.model_hpl_m is not None else model_hpl(meas, geometry, params.p_md)
     verdicts, extra = _source_verdicts(meas, status, source, detection.hal_m, params, hpl_model)
@@ -224,9 +224,16 @@ def model_hpl(meas: Measurements, geometry: Geometry, p_md: float) -> np.ndarray
     own = geometry if same else wls_gain(meas.H, sigma, meas.mask)  # its covariance only: the gain
     hpl = model_hpl_m(own, sigma, p_md)
     if meas.receiver is not None and meas.receiver.hdop is not None:
-        unreported = ~meas.satellites_reported if meas.satellites_reported is not None else np.ones(hpl.shape, bool)
-        hpl = np.where(np.isfinite(hpl) | ~unreported, hpl, hdop_hpl_m(meas.receiver.hdop, p_md, open_sky))
+        hpl = np.where(np.isfinite(hpl) | ~no_geometry(meas), hpl, hdop_hpl_m(meas.receiver.hdop, p_md, open_sky))
     return hpl
+
+
+def no_geometry(meas: Measurements) -> np.ndarray:
+    """Epochs (E,) whose satellites' geometry is not known: none reported, or none used with its angles (gpsd gives a
+    Javad GREIS receiver's satellites without elevations; a GSA names the used ones before the first GSV gives their
+    angles). The receiver's HDOP bounds those fixes (the ``model`` level)."""
+    unreported = ~meas.satellites_reported if meas.satellites_reported is not None else np.ones(meas.mask.shape[0], bool)
+    return unreported | ~meas.mask.any(axis=1)
 
 
 def _allowed(meas: Measurements, params: RaimParams) -> tuple[str, ...]:
@@ -265,10 +272,8 @@ def level_of(meas: Measurements, with_hdop: bool = True) -> str | None:
     gbs = (np.isfinite(r.gbs_sigma_major_m) | (r.gbs_failed_svid >= 0)) if r is not None else np.zeros(n, bool)
     gst = (np.isfinite(r.gst_sigma_major_m) | np.isfinite(r.gst_rms_m)) if r is not None else np.zeros(n, bool)
     model = meas.mask.sum(axis=1) >= 4  # a geometry to bound (or, below, an HDOP)
-    if with_hdop and r is not None and r.hdop is not None and meas.satellites_reported is not None:
-        model |= ~meas.satellites_reported & np.isfinite(r.hdop) & (r.hdop > 0) & (r.hdop < 99)
-    elif with_hdop and r is not None and r.hdop is not None:
-        model |= np.isfinite(r.hdop) & (r.hdop > 0) & (r.hdop < 99)
+    if with_hdop and r is not None and r.hdop is not None:
+        model |= no_geometry(meas) & np.isfinite(r.hdop) & (r.hdop > 0) & (r.hdop < 99)
     anything = np.flatnonzero(residual | gbs | gst | model)
     if not anything.size:
         return None
