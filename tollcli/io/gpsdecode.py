@@ -121,10 +121,9 @@ class DecodedStream(io.RawIOBase):
         super().close()
 
 
-def decoded(source: BinaryIO, name: str) -> tuple[io.BufferedReader, DecodedStream]:
-    """``gpsdecode``'s reports of ``source`` as a buffered stream (with ``peek``), and the decoder under it; a
-    :class:`DataError` when gpsdecode is not installed."""
-    program = gpsdecode_path()
+def decoded(source: BinaryIO, name: str, program: str | None) -> tuple[io.BufferedReader, DecodedStream]:
+    """``program``'s (gpsdecode's) reports of ``source`` as a buffered stream (with ``peek``), and the decoder under
+    it; a :class:`DataError` when there is no gpsdecode (``program`` None)."""
     if program is None:
         raise DataError(f"{name}: a binary receiver protocol that gpsd decodes (SiRF, GREIS, Oncore, …): {INSTALL_HINT}, "
                         f"or pipe its output: gpsdecode < {name} | tollcli integrity -")  # fmt: skip

@@ -98,8 +98,8 @@ class LogRun:
         if program is None and not explicit:
             self.kind = "nmea"
             return
-        self._stream, self._decoder = decoded(self._stream, self.name)  # type: ignore[assignment]
-        self.decoded_by = gpsdecode_version(program) if program else None
+        self._stream, self._decoder = decoded(self._stream, self.name, program)  # type: ignore[assignment]
+        self.decoded_by = gpsdecode_version(program)
         self.kind = "gpsd-json"
 
     # -- what consumers take ----------------------------------------------------------------------

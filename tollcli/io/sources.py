@@ -214,9 +214,9 @@ BINARY_SHARE = 0.3
 def _binary_without_nmea(head: bytes) -> bool:
     """A binary protocol: after the ``#`` comment lines (gpsd's test logs start with some), at least 64 bytes, over
     :data:`BINARY_SHARE` of them not text, and no NMEA sentence (a receiver that mixes NMEA in is read as NMEA)."""
-    body = head
-    while body.startswith(b"#"):
-        body = body.split(b"\n", 1)[1] if b"\n" in body else b""
+    lines = head.split(b"\n")
+    comments = next((i for i, line in enumerate(lines) if not line.startswith(b"#")), len(lines))
+    body = b"\n".join(lines[comments:])
     if len(body) < 64 or _NMEA_SENTENCE.search(body):
         return False
     text = len(body) - len(body.translate(None, _TEXT_BYTES))

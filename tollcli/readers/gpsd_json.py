@@ -53,25 +53,23 @@ SAME_FIX_MS = 50
 _QUALITY = {2: 2, 3: 4, 4: 5, 5: 6}
 
 
+#: the types a number of ``json.loads`` has (a bool is not one)
+_NUMBERS = (float, int)
+
+
 def _float(report: dict, *names: str) -> float:
     """The first of ``names`` that is a number, as a float (NaN: none is; a report with an integer too large for one
-    was skipped as malformed: :func:`_damaged`). The values are ``json.loads``'s: exactly int, float or bool."""
+    was skipped as malformed as it was decoded: :data:`_DECODER`)."""
     for name in names:
         value = report.get(name)
-        kind = type(value)
-        if kind is float:
-            return value
-        if kind is int:
+        if type(value) in _NUMBERS:
             return float(value)
     return math.nan
 
 
 def _number(value) -> float:
     """A JSON value as a float when it is a number (NaN otherwise: text, a bool, null, missing)."""
-    kind = type(value)
-    if kind is float:
-        return value
-    return float(value) if kind is int else math.nan
+    return float(value) if type(value) in _NUMBERS else math.nan
 
 
 def _small_int(value) -> int | None:
