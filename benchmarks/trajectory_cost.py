@@ -1,7 +1,7 @@
 """What the trajectory estimator (``--positioning smoothed``) costs, against reading the same log and solving its
 snapshot positions, in the same run.
 
-    python benchmarks/trajectory_cost.py [--log FILE ...] [--rounds 5] [--twin-epochs 300]
+    python benchmarks/trajectory_cost.py [--log FILE ...] [--rounds 5] [--twin-epochs 300] [--memory [N ...]]
 
 Default logs: the real Berlin drive (``../shared/data/smartloc``, 1 372 epochs with odometry) and a simulated city
 drive of 10 000 epochs (``tollcli simulate --nlos --odometry --duration 2000 --rate 5 --seed 11``, the one
@@ -11,6 +11,9 @@ its output, their ratio, and the estimator's epochs per second (it makes 7 passe
 scale the noise, forward and backward, then two rounds of noise from the residuals with both again; the two passes
 of a pair run on two threads); and the estimator's peak memory (``tracemalloc``), in covariance matrices per epoch. Then the same for the pure-Python twin of the compiled kernel (what an install without
 a C compiler runs) on the log's first ``--twin-epochs`` epochs, with the compiled kernel on the same epochs beside it.
+``--memory``: the estimator's peak memory and speed on the first N epochs (default 10 000, 20 000, 40 000) of a 40 000-epoch
+simulated drive (``--duration 8000``, written once into ``sim/city-long``), swept whole and in chunks
+(:mod:`tollcli.integrity.trajectory_sweep`): whole, the passes' covariances grow with the log; in chunks they do not.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ sys.path.insert(0, ROOT)
 
 from tollcli.gnss.pseudorange_inputs import pseudorange_epochs  # noqa: E402
 from tollcli.gnss.sigma_models import NominalModel  # noqa: E402
-from tollcli.integrity import trajectory_filter  # noqa: E402
+from tollcli.integrity import trajectory_filter, trajectory_sweep  # noqa: E402
 from tollcli.integrity.trajectory import estimate_trajectory  # noqa: E402
 from tollcli.integrity.trajectory_filter import MOTION_STATES  # noqa: E402
 from tollcli.integrity.trajectory_inputs import trajectory_inputs  # noqa: E402
@@ -38,13 +41,43 @@ BERLIN = os.path.join(ROOT, "..", "shared", "data", "smartloc", "Berlin_Potsdame
 SIMULATED = os.path.join(ROOT, "benchmarks", "integrity_truth", "sim", "city-clean")
 
 
-def simulated_drive() -> str:
-    """The 10 000-epoch simulated city drive with odometry, written once."""
-    log = os.path.join(SIMULATED, "drive-librsf.txt")
+def simulated_drive(folder: str = SIMULATED, duration_s: int = 2000) -> str:
+    """A simulated city drive with odometry at 5 Hz, written once into ``folder`` (default: the 10 000-epoch one)."""
+    log = os.path.join(folder, "drive-librsf.txt")
     if not os.path.exists(log):
-        subprocess.run([sys.executable, "-m", "tollcli", "simulate", "--nlos", "--odometry", "--duration", "2000", "--rate", "5",
-                        "--seed", "11", "-o", SIMULATED, "-q"], check=True)  # fmt: skip
+        subprocess.run([sys.executable, "-m", "tollcli", "simulate", "--nlos", "--odometry", "--duration", str(duration_s), "--rate",
+                        "5", "--seed", "11", "-o", folder, "-q"], check=True)  # fmt: skip
     return log
+
+
+#: a 40 000-epoch drive (8 000 s at 5 Hz) for ``--memory``: written once (≈ 80 s)
+LONG = os.path.join(ROOT, "benchmarks", "integrity_truth", "sim", "city-long")
+
+
+def memory_by_length(lengths: list[int]) -> None:
+    """The estimator's peak memory (tracemalloc, beyond its inputs) on the first ``lengths`` epochs of the long drive,
+    swept whole and in chunks (trajectory_sweep), and its speed each way."""
+    epochs, meas = pseudorange_epochs(simulated_drive(LONG, 8000), "librsf", None, "nominal", 5.0, NominalModel())
+    full = trajectory_inputs(epochs, meas)
+    print(f"memory by log length (the long simulated drive; chunks of {trajectory_sweep.CHUNK_EPOCHS} epochs; "
+          f"default: whole up to {trajectory_sweep.CHUNKED_FROM_EPOCHS} epochs)")  # fmt: skip
+    threshold = trajectory_sweep.CHUNKED_FROM_EPOCHS
+    for n in lengths:
+        inp = _stretch(full, min(n, full.t_s.size))
+        inputs = sum(a.nbytes for a in inp.kernel_arrays)
+        for mode, chunked_from in (("whole", 1 << 62), ("chunked", 0)):
+            trajectory_sweep.CHUNKED_FROM_EPOCHS = chunked_from
+            t0 = time.perf_counter()
+            estimate_trajectory(inp, "smoothed")
+            seconds = time.perf_counter() - t0
+            tracemalloc.start()
+            estimate_trajectory(inp, "smoothed")
+            peak = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+            m = inp.t_s.size
+            print(f"  {m:6d} epochs {mode:7s}: peak {peak / 1e6:6.1f} MB = {peak / m:5.0f} B/epoch (its inputs {inputs / m:4.0f} "
+                  f"B/epoch); {m / seconds:,.0f} epochs/s")  # fmt: skip
+    trajectory_sweep.CHUNKED_FROM_EPOCHS = threshold
 
 
 def _stretch(inp, n):
@@ -67,6 +100,9 @@ def main() -> int:
     parser.add_argument("--kind", default="librsf")
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--twin-epochs", type=int, default=300)
+    parser.add_argument("--memory", type=int, nargs="*", default=None,
+                        help="also the peak memory on the first N epochs of a 40 000-epoch simulated drive, whole and in chunks "
+                        "(no N: 10000 20000 40000)")  # fmt: skip
     args = parser.parse_args()
     logs = args.log if args.log else [p for p in (BERLIN, simulated_drive()) if os.path.exists(p)]
     compiled = trajectory_filter._kernel() is not None
@@ -96,6 +132,8 @@ def main() -> int:
             m = short.t_s.size
             print(f"  first {m} epochs: compiled {m / t_fast:,.0f} epochs/s, Python twin {m / t_twin:,.0f} epochs/s "
                   f"(×{t_twin / t_fast:.0f})")  # fmt: skip
+    if args.memory is not None:
+        memory_by_length(args.memory or [10_000, 20_000, 40_000])
     return 0
 
 

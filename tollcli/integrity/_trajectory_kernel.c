@@ -306,25 +306,30 @@ static int check(Py_buffer *b, Py_ssize_t items, Py_ssize_t itemsize, const char
     return 1;
 }
 
-#define N_IN 16
+#define N_IN 17
 #define N_OUT 8
 
 /* run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left, origin, rot, noise, start_x, start_p,
- *          prior_x, prior_p, post_x, post_p, z, w, started, relocked,
- *          direction, odometry, n_clocks, iterations, lost_min, keep_prior, keep_post, omega, c_mps, cauchy, relinearise)
+ *          start_started, prior_x, prior_p, post_x, post_p, z, w, started, relocked,
+ *          direction, odometry, n_clocks, iterations, lost_min, keep_prior, keep_post, resume, omega, c_mps, cauchy,
+ *          relinearise)
  * keep_prior / keep_post 0: the priors / posteriors are not kept (their arrays empty; a pass's other half is what the
  * combination reads: the forward posteriors, the backward priors).
+ * start_started (n_clocks bytes): the clock groups started before the first epoch visited. resume 1: the pass goes on
+ * from where another left it — start_x / start_p / start_started are its state after the first epoch visited, which
+ * is not visited again (nothing of it written): the rest is what one pass over the whole would give, bit for bit.
  * Arrays as trajectory_pass_twin.run_pass takes them; outputs filled in place (those of epochs not visited left). */
 static PyObject *run_pass(PyObject *self, PyObject *args) {
     Py_buffer in[N_IN], out[N_OUT];
     Pass c;
     memset(in, 0, sizeof(in));
     memset(out, 0, sizeof(out));
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*w*w*w*w*w*w*w*w*iiiiiiidddd", &in[0], &in[1], &in[2],
+    int resume = 0;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*w*w*w*w*w*w*w*w*iiiiiiiidddd", &in[0], &in[1], &in[2],
                           &in[3], &in[4], &in[5], &in[6], &in[7], &in[8], &in[9], &in[10], &in[11], &in[12], &in[13],
-                          &in[14], &in[15], &out[0], &out[1], &out[2], &out[3], &out[4], &out[5], &out[6], &out[7],
-                          &c.direction, &c.odometry, &c.n_clocks, &c.iterations, &c.lost_min, &c.keep_prior, &c.keep_post, &c.omega, &c.c_mps,
-                          &c.cauchy, &c.relinearise))
+                          &in[14], &in[15], &in[16], &out[0], &out[1], &out[2], &out[3], &out[4], &out[5], &out[6], &out[7],
+                          &c.direction, &c.odometry, &c.n_clocks, &c.iterations, &c.lost_min, &c.keep_prior, &c.keep_post, &resume,
+                          &c.omega, &c.c_mps, &c.cauchy, &c.relinearise))
         return NULL;
     PyObject *result = NULL;
     Py_ssize_t E = in[0].len / 8, N = E ? in[2].len / 8 / E : 0;
@@ -340,7 +345,7 @@ static PyObject *run_pass(PyObject *self, PyObject *args) {
         !check(&in[4], E * N, 8, "clock") || !check(&in[5], E * N, 8, "sigma2") || !check(&in[6], E * N, 8, "robust2") ||
         !check(&in[7], E, 8, "speed") || !check(&in[8], E, 8, "yaw") || !check(&in[9], E, 8, "forward") ||
         !check(&in[10], E, 8, "left") || !check(&in[11], 3, 8, "origin") || !check(&in[12], 9, 8, "rot") ||
-        !check(&in[13], N_NOISE, 8, "noise") || !check(&in[14], S, 8, "start_x") || !check(&in[15], S * S, 8, "start_p") ||
+        !check(&in[13], N_NOISE, 8, "noise") || !check(&in[14], S, 8, "start_x") || !check(&in[15], S * S, 8, "start_p") || !check(&in[16], c.n_clocks, 1, "start_started") ||
         !check(&out[0], c.keep_prior ? E * S : 0, 8, "prior_x") || !check(&out[1], c.keep_prior ? E * S * S : 0, 8, "prior_p") ||
         !check(&out[2], c.keep_post ? E * S : 0, 8, "post_x") || !check(&out[3], c.keep_post ? E * S * S : 0, 8, "post_p") || !check(&out[4], E * N, 8, "z") ||
         !check(&out[5], E * N, 8, "w") || !check(&out[6], E * c.n_clocks, 1, "started") ||
@@ -374,10 +379,15 @@ static PyObject *run_pass(PyObject *self, PyObject *args) {
     wk.rng = wk.b + S; wk.u = wk.rng + slots; wk.z = wk.u + 3 * slots; wk.w = wk.z + slots;
     memcpy(x, in[14].buf, sizeof(double) * S);
     memcpy(p, in[15].buf, sizeof(double) * nn);
+    for (int g = 0; g < c.n_clocks; g++) started[g] = ((const uint8_t *)in[16].buf)[g] != 0;
     Py_BEGIN_ALLOW_THREADS
     Py_ssize_t previous = -1;
     for (Py_ssize_t step = 0; step < E; step++) {
         Py_ssize_t k = c.direction > 0 ? step : E - 1 - step;
+        if (resume && step == 0) { /* the state given is this epoch's posterior: go on from it */
+            previous = k;
+            continue;
+        }
         if (previous >= 0) predict(&c, x, p, fabs(c.t[k] - c.t[previous]), k > previous ? k : previous, fp);
         int n = 0;
         for (Py_ssize_t j = 0; j < N; j++) if (c.mask[k * N + j]) used[n++] = (int)j;

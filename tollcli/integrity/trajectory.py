@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
-from tollcli.integrity.trajectory_filter import MOTION_STATES, FilterPass, MotionNoise, combine, run_both, run_pass
+from tollcli.integrity.trajectory_filter import MOTION_STATES, MotionNoise, run_pass
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 from tollcli.integrity.trajectory_noise import (
     RHO_CUT,
@@ -36,6 +36,8 @@ from tollcli.integrity.trajectory_noise import (
     postfit_residuals,
     sigma_by_bin,
 )
+from tollcli.integrity.trajectory_sweep import OMEGAS, UNKNOWN_M2, fault_test, sigma_major_m, sweep  # noqa: F401  (OMEGAS, UNKNOWN_M2: here as before)
+from tollcli.integrity.trajectory_sweep import combined as _combined  # noqa: F401  (the tests compare its kernel and twin)
 
 #: ``auto``: smoothed, with the log's odometry or without (the GNSS-only motion model): on the simulator's city drives
 #: without odometry the snapshot RAIM let 65–86 misleading epochs through in 10 000 and the GNSS-only trajectory none,
@@ -98,73 +100,47 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
     m = MOTION_STATES
     sigma = np.where(inp.mask & np.isfinite(inp.sigma_m) & (inp.sigma_m > 0), inp.sigma_m, FALLBACK_SIGMA_M)
     sigma2 = sigma**2
+    sigma = None
+    sv_code = np.full(inp.mask.shape, -1, np.int32)  # the measurements' labels as numbers, in the labels' order
+    sv_code[inp.mask] = pd.factorize(inp.sv[inp.mask], sort=True)[0]
     start_f, start_b = _starts(inp, odometry, m)
-    forward = run_pass(inp, sigma2, 1, *start_f, odometry, noise, keep=("post",))  # (the combination reads no prior of it)
-    kept = forward.weight >= 0.5
+    first = run_pass(inp, sigma2, 1, *start_f, odometry, noise, keep=())  # its innovations: the error model's scale
+    kept = first.weight >= 0.5
     if kept.any():
-        sigma2 = sigma2 * max(1.0, float(np.median(forward.z[kept] ** 2)) / CHI2_1_MEDIAN)
-        forward = None  # (let go before the next two passes are made)
-        forward, backward = run_both(inp, sigma2, start_f, start_b, odometry, noise)
-    else:
-        backward = run_pass(inp, sigma2, -1, *start_b, odometry, noise, keep=("prior",))
+        sigma2 = sigma2 * max(1.0, float(np.median(first.z[kept] ** 2)) / CHI2_1_MEDIAN)
+    first = kept = None
+    passes = sweep(inp, sigma2, start_f, start_b, odometry, noise)
     table, factor, rho = np.full(1, np.nan), 1.0, np.ones(1)
     bins, n_bins, _by = noise_bins(inp.cn0_dbhz, inp.elev_deg, inp.mask)
-    sv_code = pd.factorize(inp.sv.ravel(), sort=True)[0].reshape(inp.sv.shape)  # labels as numbers, in their order
     for round_ in range(NOISE_ROUNDS):
-        x = _combined(forward, backward)[0]  # the noise measured at the smoothed trajectory, whichever positioning
-        res = postfit_residuals(inp, x, m)
+        res = postfit_residuals(inp, passes.x, m)  # the noise measured at the smoothed trajectory, whichever positioning
         table = sigma_by_bin(res, bins, n_bins, inp.mask)
-        kept = inp.mask & (np.minimum(forward.weight, backward.weight) >= 0.5)
-        forward = backward = None  # (their covariances, most of the memory, let go before the next two are made)
-        factor, rho = correlation_inflation(np.clip(res / table[bins], -5.0, 5.0), sv_code, kept)  # the kept, not the outliers
+        kept = inp.mask & (passes.weight >= 0.5)
+        passes = None  # (let go before the next sweep is made)
+        z = np.clip(res / table[bins], -5.0, 5.0)
+        res = sigma2 = None
+        factor, rho = correlation_inflation(z, sv_code, kept)  # the kept, not the outliers
+        z = kept = None
         white2 = np.where(inp.mask, table[bins] ** 2, FALLBACK_SIGMA_M**2)
         sigma2 = white2 * max(factor, 1.0)
-        forward, backward = run_both(inp, sigma2, start_f, start_b, odometry, noise, white2)
-    x, p = _combined(forward, backward)
-    major = sigma_major_m(p[:, :2, :2])
+        passes = sweep(inp, sigma2, start_f, start_b, odometry, noise, white2)
+    x, cov = passes.x, passes.cov_en_m2
+    major = sigma_major_m(cov)
     hpl = K_FUSED * major
-    weight = np.minimum(forward.weight, backward.weight)
+    weight = passes.weight
     if positioning == "filtered":  # the forward positions, bounded through the smoothed ones
-        hpl = np.maximum(K_FUSED * sigma_major_m(forward.post_p[:, :2, :2]),
-                         np.hypot(*(forward.post_x[:, :2] - x[:, :2]).T) + hpl)  # fmt: skip
-        x, p, weight = forward.post_x, forward.post_p, forward.weight
-        major = sigma_major_m(p[:, :2, :2])
-    cov = p[:, :2, :2]
+        hpl = np.maximum(K_FUSED * sigma_major_m(passes.forward_cov_en_m2),
+                         np.hypot(*(passes.forward_x[:, :2] - x[:, :2]).T) + hpl)  # fmt: skip
+        x, cov, weight = passes.forward_x, passes.forward_cov_en_m2, passes.forward_weight
+        major = sigma_major_m(cov)
     n_kept = (inp.mask & (weight >= 0.5)).sum(axis=1)
-    test_stat, dof = fault_test(forward, backward)
-    lost = near(inp.t_s, forward.relocked | backward.relocked, LOST_WINDOW_S)
+    test_stat, dof = passes.test_stat, passes.dof
+    lost = near(inp.t_s, passes.relocked, LOST_WINDOW_S)
     below = np.flatnonzero(rho < RHO_CUT)
     lags = int(below[0]) if below.size else rho.size
     step_s = float(np.median(np.diff(inp.t_s))) if inp.t_s.size > 1 else 1.0
     return Trajectory(x[:, :3], cov, major, hpl, n_kept, inp.mask.sum(axis=1) - n_kept, test_stat, dof, lost, table, factor,
                       lags * step_s, positioning, odometry)  # fmt: skip
-
-
-def fault_test(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndarray, np.ndarray]:
-    """The fault test's statistic and degrees of freedom per epoch.
-
-    After the trip (a backward pass): the horizontal disagreement d = x_f − x_b of the forward posterior and the
-    backward prior, against the largest spread it can have whatever the correlation of the two passes' errors
-    (σ_d ≤ σ_f + σ_b along any direction, their semi-major axes): t = |d|² / (σ_f + σ_b)², below χ²₂ with at least its
-    confidence when both are fault-free. A fault that one pass took in and the other did not (a satellite's bias, an
-    odometry step) shows as a disagreement.
-
-    Without a backward pass: the normalised innovations of the measurements the robust loss kept, t = Σ z², χ²_n.
-    """
-    if backward is None:
-        kept = forward.weight >= 0.5
-        z2 = np.where(kept, np.nan_to_num(forward.z) ** 2, 0.0)
-        return z2.sum(axis=1), kept.sum(axis=1)
-    d = forward.post_x[:, :2] - backward.prior_x[:, :2]
-    spread = sigma_major_m(forward.post_p[:, :2, :2]) + sigma_major_m(backward.prior_p[:, :2, :2])
-    t = (d**2).sum(axis=1) / spread**2
-    if not forward.odometry:
-        return t, np.full(t.size, 2)
-    # the headings too: a gyro bias the passes did not model turns them opposite ways (one integrates it forward, the
-    # other backward)
-    d_psi = (forward.post_x[:, 3] - backward.prior_x[:, 3] + np.pi) % (2 * np.pi) - np.pi
-    spread_psi = np.sqrt(forward.post_p[:, 3, 3]) + np.sqrt(backward.prior_p[:, 3, 3])
-    return t + (d_psi / spread_psi) ** 2, np.full(t.size, 3)
 
 
 #: how long before and after an epoch where a pass lost the vehicle (:mod:`tollcli.integrity.trajectory_filter`)
@@ -182,50 +158,6 @@ def near(t_s: np.ndarray, events: np.ndarray, window_s: float) -> np.ndarray:
     before = np.abs(t_s - at[np.clip(i - 1, 0, at.size - 1)])
     after = np.abs(at[np.clip(i, 0, at.size - 1)] - t_s)
     return np.minimum(before, after) <= window_s
-
-
-def sigma_major_m(cov_en_m2: np.ndarray) -> np.ndarray:
-    """The semi-major axis (1σ, m) of horizontal covariances (E, 2, 2)."""
-    a, b, c = cov_en_m2[:, 0, 0], cov_en_m2[:, 1, 1], cov_en_m2[:, 0, 1]
-    return np.sqrt((a + b) / 2 + np.sqrt(((a - b) / 2) ** 2 + c**2))
-
-
-def _combined(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndarray, np.ndarray]:
-    """The forward posterior, or with a backward pass the covariance intersection of the forward posterior and the
-    backward prior at every epoch (ω on a grid of 19, the first with the least horizontal variance: compiled,
-    :func:`tollcli.integrity.trajectory_filter.combine`). A clock group a
-    pass has not started by an epoch gives no information there (its variance set to :data:`UNKNOWN_M2`, its
-    correlations to zero): only the other pass's value of it counts."""
-    if backward is None:
-        return forward.post_x, forward.post_p
-    m = MOTION_STATES
-    xf, pf = forward.post_x, _unknown_clocks(forward.post_p, forward.started, m)
-    xb, pb = backward.prior_x, _unknown_clocks(backward.prior_p, backward.started, m)
-    if forward.odometry:  # headings compared on the same turn
-        xb = xb.copy()
-        xb[:, 3] = xf[:, 3] + (xb[:, 3] - xf[:, 3] + np.pi) % (2 * np.pi) - np.pi
-    return combine(np.nan_to_num(xf), pf, np.nan_to_num(xb), pb, OMEGAS)
-
-
-#: the variance (m²) of a clock a pass has not started: no information
-UNKNOWN_M2 = 1e12
-
-
-#: the weights ω of covariance intersection tried (:func:`_combined`)
-OMEGAS = np.linspace(0.05, 0.95, 19)
-
-
-def _unknown_clocks(p: np.ndarray, started: np.ndarray, m: int) -> np.ndarray:
-    """Covariances (E, S, S) with the clocks not ``started`` (E, C) made unknown: variance UNKNOWN_M2, uncorrelated."""
-    if started.all():
-        return p
-    p = p.copy()
-    for g in np.flatnonzero(~started.all(axis=0)).tolist():  # a few groups
-        rows = ~started[:, g]
-        p[rows, m + g, :] = 0.0
-        p[rows, :, m + g] = 0.0
-        p[rows, m + g, m + g] = UNKNOWN_M2
-    return p
 
 
 def _starts(inp: TrajectoryInputs, odometry: bool, m: int):

@@ -88,13 +88,24 @@ class FilterPass:
     relocked: np.ndarray  # (E,) epochs where the pass had lost the vehicle and its prior was widened (:func:`_widened`)
 
 
+@dataclass(frozen=True)
+class PassState:
+    """A pass's state after an epoch — its posterior (S,), (S, S) and the clock groups it had started (C,) — from which
+    a pass over the epochs beyond goes on (:func:`run_pass`'s ``resume``) as one pass over the whole would."""
+
+    x: np.ndarray
+    p: np.ndarray
+    started: np.ndarray
+
+
 #: states before the clocks: e, n, u, ψ, gyro bias, drift (odometry) or e, n, u, v_e, v_n, drift (without)
 MOTION_STATES = 6
 
 
 def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start_x: np.ndarray, start_p: np.ndarray,
              odometry: bool, noise: MotionNoise = MotionNoise(), robust_sigma2_m2: np.ndarray | None = None,
-             keep: tuple[str, ...] = ("prior", "post")) -> FilterPass:  # fmt: skip
+             keep: tuple[str, ...] = ("prior", "post"), rows: tuple[int, int] | None = None,
+             resume: PassState | None = None) -> FilterPass:  # fmt: skip
     """The filter over every epoch, forward (``direction`` 1) or backward (-1), from ``start_x``/``start_p`` at the
     first epoch it visits (its clocks are started from that epoch's measurements).
 
@@ -106,10 +117,20 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
     covariances are most of the estimator's memory, and the combination reads only the forward posteriors and the
     backward priors).
 
+    ``rows`` (first, end): the pass over those epochs only (its arrays theirs), from ``start_x``/``start_p`` at the first
+    it visits — or, with ``resume``, going on from the state a pass left after the epoch just outside them (``first -
+    1`` forward, ``end`` backward): then the pass's states, innovations and weights are those of one pass over the whole
+    log, bit for bit (tested), and a long log can be swept in chunks (:mod:`tollcli.integrity.trajectory_sweep`).
+
     The pass itself is the compiled kernel (``_trajectory_kernel.c``) where it was built, else its Python twin
     (:mod:`tollcli.integrity.trajectory_pass_twin`): the same bits either way."""
     robust = sigma2_m2 if robust_sigma2_m2 is None else robust_sigma2_m2
-    n_epochs, n_slots = inp.mask.shape
+    first, end = (0, inp.mask.shape[0]) if rows is None else rows
+    if resume is not None:  # the epoch the state is of, visited first and not again
+        first, end = (first - 1, end) if direction > 0 else (first, end + 1)
+        start_x, start_p = resume.x, resume.p
+    span = slice(first, end)
+    n_epochs, n_slots = end - first, inp.mask.shape[1]
     n_states = MOTION_STATES + inp.n_clocks
     keep_prior, keep_post = "prior" in keep, "post" in keep
 
@@ -120,11 +141,12 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
     out = FilterPass(*states(keep_prior), *states(keep_post), np.full((n_epochs, n_slots), np.nan), np.zeros((n_epochs, n_slots)),
                      odometry, np.zeros((n_epochs, inp.n_clocks), np.uint8), np.zeros(n_epochs, np.uint8))  # fmt: skip
     t, sat, pr, mask, clock, speed, yaw, forward, left, origin, rot = inp.kernel_arrays
-    args = (t, sat, pr, mask, clock, _c64(sigma2_m2), _c64(robust), speed, yaw, forward, left, origin, rot,
-            np.array([getattr(noise, f) for f in NOISE_FIELDS], np.float64), _c64(start_x), _c64(start_p),
-            out.prior_x, out.prior_p, out.post_x, out.post_p, out.z, out.weight, out.started, out.relocked,
-            int(direction), int(bool(odometry)), int(inp.n_clocks), ITERATIONS, LOST_LOCK_MIN, int(keep_prior), int(keep_post),
-            OMEGA_EARTH_RADPS, C_MPS, CAUCHY_C, RELINEARISE_M)  # fmt: skip
+    started0 = np.zeros(inp.n_clocks, np.uint8) if resume is None else np.ascontiguousarray(resume.started, np.uint8)
+    args = (t[span], sat[span], pr[span], mask[span], clock[span], _c64(sigma2_m2[span]), _c64(robust[span]), speed[span],
+            yaw[span], forward[span], left[span], origin, rot, np.array([getattr(noise, f) for f in NOISE_FIELDS], np.float64),
+            _c64(start_x), _c64(start_p), started0, out.prior_x, out.prior_p, out.post_x, out.post_p, out.z, out.weight,
+            out.started, out.relocked, int(direction), int(bool(odometry)), int(inp.n_clocks), ITERATIONS, LOST_LOCK_MIN,
+            int(keep_prior), int(keep_post), int(resume is not None), OMEGA_EARTH_RADPS, C_MPS, CAUCHY_C, RELINEARISE_M)  # fmt: skip
     kernel = _kernel()
     (kernel.run_pass if kernel is not None else run_pass_twin)(*args)
     out.started, out.relocked = out.started.astype(bool), out.relocked.astype(bool)
@@ -132,7 +154,18 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
         out.prior_x = out.prior_p = None
     if not keep_post:
         out.post_x = out.post_p = None
+    if resume is not None:  # the epoch resumed from is not this pass's
+        inner = slice(1, None) if direction > 0 else slice(0, -1)
+        for name in ("prior_x", "prior_p", "post_x", "post_p", "z", "weight", "started", "relocked"):
+            value = getattr(out, name)
+            if value is not None:
+                setattr(out, name, value[inner])
     return out
+
+
+def state_after(fp: FilterPass, row: int) -> PassState:
+    """The state ``fp`` (kept its posteriors) left after its epoch ``row`` (an index into its arrays)."""
+    return PassState(fp.post_x[row].copy(), fp.post_p[row].copy(), fp.started[row].copy())
 
 
 def _c64(a: np.ndarray) -> np.ndarray:

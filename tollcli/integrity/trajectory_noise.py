@@ -77,29 +77,45 @@ def sigma_by_cn0(residual_m: np.ndarray, cn0_dbhz: np.ndarray, mask: np.ndarray)
 def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tuple[float, np.ndarray]:
     """The variance factor 1 + 2 Σ ρ(lag) of normalised residuals ``z`` (E, N) and ρ itself (lags in epochs).
 
-    Each measurement label's (``sv``: strings, or numbers in the strings' order) series (its median removed) is one time series; their products at every lag are summed
-    over all series (FFT, zero where a series has no value)."""
+    Each measurement label's (``sv``: strings, or numbers in the strings' order) series (its median removed) is one time
+    series; their products at every lag are summed over all series (FFT, zero where a series has no value). The series
+    are transformed :data:`SERIES_AT_ONCE` at a time and their power spectra summed one after another (the sum of all at
+    once, to the bit): the memory is theirs, not every satellite's times the log's length."""
     n_epochs = z.shape[0]
     ok = mask & np.isfinite(z)
     labels, inverse = _labels(sv[ok])
     if labels.size == 0 or n_epochs < 3:
         return 1.0, np.ones(1)
-    series = np.zeros((labels.size, n_epochs))
-    rows = np.nonzero(ok)[0]
-    series[inverse, rows] = z[ok]
-    counts = np.zeros((labels.size, n_epochs))
-    counts[inverse, rows] = 1.0
-    med = np.array([np.median(series[i, counts[i] > 0]) for i in range(labels.size)])  # one per satellite
-    series = np.where(counts > 0, series - med[:, None], 0.0)
+    rows, values = np.nonzero(ok)[0], z[ok]
+    order = np.argsort(inverse, kind="stable")  # each label's values in the log's order
+    edges = np.searchsorted(inverse[order], np.arange(labels.size + 1))
     size = 1 << int(np.ceil(np.log2(n_epochs + MAX_LAG + 1)))  # zeros enough that no lag counted wraps round
-    spec = np.fft.rfft(series, size, axis=1)
-    acf = np.fft.irfft((spec * spec.conj()).sum(axis=0), size)[: min(MAX_LAG + 1, n_epochs)]
+    power = None
+    for first in range(0, labels.size, SERIES_AT_ONCE):
+        group = range(first, min(first + SERIES_AT_ONCE, labels.size))
+        series = np.zeros((len(group), n_epochs))
+        for row, label in enumerate(group):
+            at = order[edges[label] : edges[label + 1]]
+            value, seen = np.zeros(n_epochs), np.zeros(n_epochs, bool)
+            value[rows[at]], seen[rows[at]] = values[at], True
+            series[row] = np.where(seen, value - np.median(value[seen]), 0.0)
+        spec = np.fft.rfft(series, size, axis=1)
+        for term in np.square(spec.real) + np.square(spec.imag):  # |X|², in real arithmetic: the same bits in any group
+            if power is None:
+                power = term.copy()
+            else:
+                power += term
+    acf = np.fft.irfft(power, size)[: min(MAX_LAG + 1, n_epochs)]
     if not acf[0] > 0:
         return 1.0, np.ones(1)
     rho = acf / acf[0]
     below = np.flatnonzero(rho < RHO_CUT)
     cut = int(below[0]) if below.size else rho.size
     return float(1.0 + 2.0 * rho[1:cut].sum()), rho
+
+
+#: the residual series transformed at once (:func:`correlation_inflation`)
+SERIES_AT_ONCE = 16
 
 
 def _labels(sv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -10,6 +10,9 @@ This version is about a hundred times slower than the compiled one (scalar Pytho
 an install without a C compiler runs, and what the test checks the kernel against on short stretches.
 
 Arguments are those of the kernel (:func:`run_pass`, :func:`combine`); the matrices are row-major flat arrays.
+
+Why this file is long: it is the C file's steps one for one (prediction, clocks started, robust update, widening, the
+combination, their small dense algebra), kept together so that each can be read beside its compiled twin.
 """
 
 from __future__ import annotations
@@ -266,10 +269,12 @@ def _widen(p, ns, odometry):
 
 
 def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left, origin, rot, noise, start_x, start_p,
-             prior_x, prior_p, post_x, post_p, z_all, w_all, started_all, relocked,
-             direction, odometry, n_clocks, iterations, lost_min, keep_prior, keep_post, omega, c_mps, cauchy, relinearise):  # fmt: skip
+             start_started, prior_x, prior_p, post_x, post_p, z_all, w_all, started_all, relocked,
+             direction, odometry, n_clocks, iterations, lost_min, keep_prior, keep_post, resume, omega, c_mps, cauchy,
+             relinearise):  # fmt: skip
     """The kernel's ``run_pass``: the inputs as contiguous arrays (``sat`` (E, N, 3), ``mask`` uint8, ``clock``
-    int64), the outputs filled in place."""
+    int64), the outputs filled in place. ``start_started``: the clock groups started before the first epoch visited;
+    ``resume``: the start is the state after the first epoch visited, which is not visited again."""
     n_epochs, n_slots = pr.shape
     ns = M + n_clocks
     c = dict(n_slots=n_slots, n_states=ns, n_clocks=n_clocks, direction=direction, odometry=odometry,
@@ -279,12 +284,15 @@ def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left
              left=left.tolist(), origin=origin.tolist(), rot=rot.ravel().tolist(), noise=noise.tolist())  # fmt: skip
     tt = t.tolist()
     x, p = start_x.tolist(), start_p.ravel().tolist()
-    started = [0] * n_clocks
+    started = [1 if v else 0 for v in start_started.tolist()]
     prior_p2 = prior_p.reshape(n_epochs, ns * ns) if keep_prior else None
     post_p2 = post_p.reshape(n_epochs, ns * ns) if keep_post else None
     previous = -1
     for step in range(n_epochs):
         k = step if direction > 0 else n_epochs - 1 - step
+        if resume and step == 0:  # the state given is this epoch's posterior: go on from it
+            previous = k
+            continue
         if previous >= 0:
             p = _predict(c, x, p, abs(tt[k] - tt[previous]), max(k, previous))
         used = np.flatnonzero(mask[k]).tolist()

@@ -1,0 +1,109 @@
+"""A long log's trajectory swept in chunks (``trajectory_sweep``) is the whole log's, bit for bit.
+
+A pass resumed from the state another left (``run_pass(..., resume=...)``) goes on as one pass over the whole would:
+every state, covariance, innovation, weight and flag — compiled and twin, forward and backward, across a clock group
+that starts late, odometry holes and a jump that makes the pass lose the vehicle. Then the sweep (both passes and their
+combination) in chunks against the whole sweep, and the estimator's result on the real Berlin drive; and the noise's
+correlation, its residual series transformed a few at a time, against all at once.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import shared
+from test_trajectory_kernel import FIELDS, _both, _cases, _same, needs_kernel
+
+from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+from tollcli.gnss.sigma_models import NominalModel
+from tollcli.integrity import trajectory_noise, trajectory_sweep
+from tollcli.integrity.trajectory import _starts, estimate_trajectory
+from tollcli.integrity.trajectory_filter import MOTION_STATES, run_pass, state_after
+from tollcli.integrity.trajectory_inputs import trajectory_inputs
+from tollcli.integrity.trajectory_sweep import Sweep, sweep
+
+
+@pytest.fixture(scope="module")
+def berlin():
+    epochs, meas = pseudorange_epochs(str(shared("smartloc", "Berlin_Potsdamer_Platz_Input.txt")), "librsf", None, "nominal",
+                                      5.0, NominalModel())  # fmt: skip
+    return trajectory_inputs(epochs, meas)
+
+
+def _in_chunks(inp, sigma2, direction, start, odometry, bounds, robust=None):
+    """One pass over ``bounds`` (first, end) in the pass's order, each chunk going on from the state the last left;
+    its arrays in the log's order."""
+    parts, state = {}, None
+    for bound in bounds if direction > 0 else bounds[::-1]:
+        part = run_pass(inp, sigma2, direction, *start, odometry, robust_sigma2_m2=robust, rows=bound, resume=state)
+        state = state_after(part, -1 if direction > 0 else 0)
+        parts[bound] = part
+    return {name: np.concatenate([getattr(parts[b], name) for b in bounds]) for name in FIELDS}
+
+
+@needs_kernel
+@pytest.mark.parametrize("case", ["odometry", "no odometry", "odometry holes", "late clock", "jump"])
+def test_a_pass_resumed_chunk_by_chunk_is_the_whole_pass_bit_for_bit(berlin, monkeypatch, case):
+    inp, odometry = _cases(berlin)[case]
+    n = inp.t_s.size
+    sigma2 = np.where(inp.mask, 8.0**2, 900.0)
+    robust = np.where(inp.mask, 6.0**2, 900.0)
+    start_f, start_b = _starts(inp, odometry, MOTION_STATES)
+    bounds = [(a, min(a + 37, n)) for a in range(0, n, 37)]  # edges inside the holes (37), the late clock (74), the jump (111)
+    for direction, start in ((1, start_f), (-1, start_b)):
+        whole = run_pass(inp, sigma2, direction, *start, odometry, robust_sigma2_m2=robust)
+        compiled, twin = _both(monkeypatch, lambda: _in_chunks(inp, sigma2, direction, start, odometry, bounds, robust))
+        for name in FIELDS:
+            assert _same(compiled[name], getattr(whole, name)), (case, direction, name)
+            assert _same(twin[name], getattr(whole, name)), (case, direction, name, "twin")
+        if case == "jump" and direction == 1:
+            assert compiled["relocked"][90:93].any()  # the case does what it says
+
+
+@pytest.mark.parametrize("odometry", [True, False])
+def test_a_sweep_in_chunks_is_the_whole_sweep_bit_for_bit(berlin, odometry):
+    """The real Berlin drive's two passes and their combination, in chunks of 337 epochs and whole: every column."""
+    inp = berlin
+    sigma2 = np.where(inp.mask, 8.0**2, 900.0)
+    start_f, start_b = _starts(inp, odometry, MOTION_STATES)
+    whole = sweep(inp, sigma2, start_f, start_b, odometry)
+    chunked = sweep(inp, sigma2, start_f, start_b, odometry, chunk_epochs=337)
+    for field in dataclasses.fields(Sweep):
+        assert _same(getattr(chunked, field.name), getattr(whole, field.name)), field.name
+    assert np.isfinite(whole.x).all() and (whole.dof > 0).all()
+
+
+@pytest.mark.parametrize("positioning", ["smoothed", "filtered"])
+def test_a_long_logs_trajectory_in_chunks_is_the_whole_ones(berlin, monkeypatch, positioning):
+    """What the estimator gives a log it sweeps in chunks (every sweep of its noise rounds) is what it gives it whole:
+    the real Berlin drive with the chunking threshold lowered below its length."""
+    whole = estimate_trajectory(berlin, positioning)
+    monkeypatch.setattr(trajectory_sweep, "CHUNKED_FROM_EPOCHS", 500)
+    monkeypatch.setattr(trajectory_sweep, "CHUNK_EPOCHS", 300)
+    chunked = estimate_trajectory(berlin, positioning)
+    for field in dataclasses.fields(whole):
+        a, b = getattr(chunked, field.name), getattr(whole, field.name)
+        assert (_same(a, b) if isinstance(b, np.ndarray) else a == b), field.name
+
+
+def test_the_noise_correlation_is_the_same_whatever_the_series_taken_at_once(monkeypatch):
+    """Residual series of 40 satellites, each an AR(1) of φ = 0.8 with gaps: the factor 1 + 2 Σ ρ is the same to the
+    bit whether the series are transformed one, seven or all at a time — and it is the AR(1)'s, Σ over the lags until
+    ρ = 0.8ᵏ < 0.05 (k ≤ 13): 1 + 2 · 0.8 (1 − 0.8¹³) / 0.2 = 8.56."""
+    rng = np.random.default_rng(4)
+    n_epochs, n_sats = 3000, 40
+    z = np.empty((n_epochs, n_sats))
+    z[0] = rng.normal(size=n_sats)
+    for k in range(1, n_epochs):
+        z[k] = 0.8 * z[k - 1] + 0.6 * rng.normal(size=n_sats)
+    sv = np.tile(np.array([f"G{i:02d}" for i in range(n_sats)]), (n_epochs, 1))
+    mask = rng.random((n_epochs, n_sats)) > 0.02
+    results = []
+    for at_once in (1, 7, 1000):
+        monkeypatch.setattr(trajectory_noise, "SERIES_AT_ONCE", at_once)
+        results.append(trajectory_noise.correlation_inflation(z, sv, mask))
+    for factor, rho in results[1:]:
+        assert factor == results[0][0] and _same(rho, results[0][1])
+    assert results[0][0] == pytest.approx(1 + 2 * 0.8 * (1 - 0.8**13) / 0.2, rel=0.1)
