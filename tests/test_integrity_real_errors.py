@@ -36,7 +36,13 @@ def test_a_librsf_log_is_read_whole_and_a_bad_line_is_counted_or_refused(tmp_pat
     lines = [ln for ln in lines if ln.startswith("odom3")][:100] + [ln for ln in lines if ln.startswith("pseudorange3")][:300]
     bad = tmp_path / "bad.txt"
     bad.write_text("\n".join(lines[:100] + ["pseudorange3 1.5 not-a-number 25 1 2 3 4 1 40 40"] + lines[100:]) + "\n")
-    assert read_librsf(str(bad)).malformed == 1
+    text_read = read_librsf(str(bad))  # a field not a number: the file is read again as text, each field tried
+    assert text_read.malformed == 1
+    good = tmp_path / "good.txt"
+    good.write_text("\n".join(lines) + "\n")
+    number_read = read_librsf(str(good))  # the same lines without it: parsed as numbers as they are read
+    for name in ("pseudoranges", "odometry", "points"):
+        pd.testing.assert_frame_equal(getattr(text_read, name), getattr(number_read, name), check_exact=True)
     with pytest.raises(DataError, match=r"bad.txt:101: a pseudorange3 line"):
         read_librsf(str(bad), strict=True)
     proc = run_cli("integrity", str(bad), "--strict", "-o", str(tmp_path / "x.csv"))

@@ -2,12 +2,14 @@
 
 Satellite positions are given at transmission time in the ECEF frame of that
 time; each iteration rotates them by the Earth's rotation during the flight
-time (Sagnac), linearises at the current state and solves every epoch at once.
+time (Sagnac), linearises at the current state and solves every epoch at once —
+:data:`BLOCK_EPOCHS` epochs at a time, so that an iteration's (E, N, U) arrays are a block's, not a long log's
+(each epoch's solution is its own: the same bits whatever the block, tested).
 State: ECEF x, y, z and one receiver clock (m) per clock group (``clock_index``:
 each measurement's group, e.g. its constellation; default one clock for all). ``correction`` (optional)
 returns per-measurement delays (m) to subtract from the pseudoranges at the
-current position (ionosphere, troposphere); it is applied once the solution is
-near the Earth's surface.
+current position (ionosphere, troposphere) of the epochs ``rows`` (a slice of the log's); it is applied once the
+solution is near the Earth's surface.
 """
 
 from __future__ import annotations
@@ -21,7 +23,10 @@ from tollcli.gnss.wls import wls_geometry
 
 C_MPS = 299_792_458.0
 ITERATIONS = 12
-Correction = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+#: epochs linearised and solved at once
+BLOCK_EPOCHS = 4096
+#: ``correction(lat_deg, lon_deg, height_m, elev_deg, azim_deg, rows)``: the delays (m) of the epochs ``rows``
+Correction = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, slice], np.ndarray]
 
 
 def sagnac(sat_xyz: np.ndarray, flight_s: np.ndarray) -> np.ndarray:
@@ -59,47 +64,62 @@ def _clock_term(x: np.ndarray, clock_index: np.ndarray) -> np.ndarray:
     return np.take_along_axis(x[:, 3:], np.maximum(clock_index, 0), axis=1)
 
 
+def blocks(n_epochs: int, size: int | None = None) -> list[slice]:
+    """The epochs 0 … ``n_epochs`` in slices of ``size`` (default :data:`BLOCK_EPOCHS`)."""
+    size = size or BLOCK_EPOCHS
+    return [slice(a, min(a + size, n_epochs)) for a in range(0, n_epochs, size)] or [slice(0, 0)]
+
+
 def solve_positions(sat_xyz: np.ndarray, pr_m: np.ndarray, mask: np.ndarray, sigma_m: np.ndarray,
                     correction: Correction | None = None, clock_index: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
-    """Iterated WLS state (E, 3 + C): x, y, z (m, ECEF) and the receiver clocks (m)."""
+    """Iterated WLS state (E, 3 + C): x, y, z (m, ECEF) and the receiver clocks (m). Every epoch iterates until the
+    largest step of any is below 0.1 mm (from the fifth iteration on), :data:`ITERATIONS` at most."""
     n_epochs = mask.shape[0]
     clock_index, n_clocks = _clocks(mask, clock_index)
-    onehot = (clock_index[..., None] == np.arange(n_clocks)).astype(float)
     mean_sat = np.where(mask[..., None], sat_xyz, 0.0).sum(1) / np.maximum(mask.sum(1), 1)[:, None]
     norm = np.linalg.norm(mean_sat, axis=1, keepdims=True)
     x = np.concatenate([6_371_000.0 * mean_sat / np.where(norm > 0, norm, 1.0), np.zeros((n_epochs, n_clocks))], axis=1)
     for it in range(ITERATIONS):
-        los, rng = line_of_sight(sat_xyz, x)
-        pr = pr_m
-        if correction is not None and it >= 3:
-            pr = pr_m - _correction_at(correction, los, x)
-        dy = np.where(mask, pr - (rng + _clock_term(x, clock_index)), 0.0)
-        H = np.concatenate([-los, onehot], axis=-1)
-        geom = wls_geometry(H, sigma_m, mask)
-        dx = np.einsum("eun,en->eu", geom.A, dy)
+        dx = np.empty_like(x)
+        for rows in blocks(n_epochs):
+            ci = clock_index[rows]
+            los, rng = line_of_sight(sat_xyz[rows], x[rows])
+            pr = pr_m[rows]
+            if correction is not None and it >= 3:
+                pr = pr - _correction_at(correction, los, x[rows], rows)
+            dy = np.where(mask[rows], pr - (rng + _clock_term(x[rows], ci)), 0.0)
+            H = np.concatenate([-los, (ci[..., None] == np.arange(n_clocks)).astype(float)], axis=-1)
+            geom = wls_geometry(H, sigma_m[rows], mask[rows])
+            dx[rows] = np.einsum("eun,en->eu", geom.A, dy)
         x = x + dx
         if it >= 4 and np.nanmax(np.abs(dx[:, :3]), initial=0.0) < 1e-4:
             break
     return x
 
 
-def _correction_at(correction: Correction, los: np.ndarray, x: np.ndarray) -> np.ndarray:
+def _correction_at(correction: Correction, los: np.ndarray, x: np.ndarray, rows: slice) -> np.ndarray:
     lat, lon, h = ecef2geodetic(x[:, 0], x[:, 1], x[:, 2])
     _, elev, azim = local_angles(los, lat, lon)
-    return np.nan_to_num(correction(lat, lon, h, elev, azim))
+    return np.nan_to_num(correction(lat, lon, h, elev, azim, rows))
 
 
 def final_geometry(sat_xyz: np.ndarray, pr_m: np.ndarray, mask: np.ndarray, x: np.ndarray,
                    correction: Correction | None = None, clock_index: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """At the solution: geodetic position, angles, ENU observation matrix, pre-fit residuals, and the pseudoranges with
-    the corrections at that position removed (``pr_m``) with their clock groups."""
+    the corrections at that position removed (``pr_m``) with their clock groups (a block of epochs at a time)."""
     clock_index, n_clocks = _clocks(mask, clock_index)
-    onehot = (clock_index[..., None] == np.arange(n_clocks)).astype(float)
     lat, lon, h = ecef2geodetic(x[:, 0], x[:, 1], x[:, 2])
-    los, rng = line_of_sight(sat_xyz, x)
-    los_enu, elev, azim = local_angles(los, lat, lon)
-    pr = pr_m - (np.nan_to_num(correction(lat, lon, h, elev, azim)) if correction is not None else 0.0)
-    dy = np.where(mask, pr - (rng + _clock_term(x, clock_index)), np.nan)
-    H = np.concatenate([-los_enu, onehot], axis=-1)
-    return {"lat_deg": lat, "lon_deg": lon, "height_m": h, "elev_deg": elev, "azim_deg": azim, "H": H, "dy_m": dy,
-            "pr_m": np.where(mask, pr, np.nan), "clock_index": clock_index}
+    n_epochs, n_slots = mask.shape
+    out = {"lat_deg": lat, "lon_deg": lon, "height_m": h, "elev_deg": np.empty((n_epochs, n_slots)),
+           "azim_deg": np.empty((n_epochs, n_slots)), "H": np.empty((n_epochs, n_slots, 3 + n_clocks)),
+           "dy_m": np.empty((n_epochs, n_slots)), "pr_m": np.empty((n_epochs, n_slots)), "clock_index": clock_index}  # fmt: skip
+    for rows in blocks(n_epochs):
+        ci, m = clock_index[rows], mask[rows]
+        los, rng = line_of_sight(sat_xyz[rows], x[rows])
+        los_enu, elev, azim = local_angles(los, lat[rows], lon[rows])
+        pr = pr_m[rows] - (np.nan_to_num(correction(lat[rows], lon[rows], h[rows], elev, azim, rows)) if correction is not None else 0.0)
+        out["elev_deg"][rows], out["azim_deg"][rows] = elev, azim
+        out["dy_m"][rows] = np.where(m, pr - (rng + _clock_term(x[rows], ci)), np.nan)
+        out["H"][rows] = np.concatenate([-los_enu, (ci[..., None] == np.arange(n_clocks)).astype(float)], axis=-1)
+        out["pr_m"][rows] = np.where(m, pr, np.nan)
+    return out

@@ -130,11 +130,11 @@ def raw_epochs(m: pd.DataFrame, sigma_model: str = "nominal", sigma_m: float = 5
     modelled = np.isfinite(d["modelled_delay_m"].to_numpy(float)).all()
     tow = np.mod(epoch_t, WEEK_S)[:, None]
 
-    def correction(lat, lon, h, elev, azim):
+    def correction(lat, lon, h, elev, azim, rows):
         delay = saastamoinen_delay_m(lat[:, None], h[:, None], elev)
         if iono_coeffs is not None and len(iono_coeffs) == 8:
-            delay = delay + iono_scale * klobuchar_delay_m(lat[:, None], lon[:, None], elev, azim, tow,
-                                                           iono_coeffs[:4], iono_coeffs[4:])  # fmt: skip
+            delay = delay + iono_scale[rows] * klobuchar_delay_m(lat[:, None], lon[:, None], elev, azim, tow[rows],
+                                                                 iono_coeffs[:4], iono_coeffs[4:])  # fmt: skip
         return delay
 
     corr = None if modelled else correction

@@ -84,10 +84,10 @@ def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m:
     cn0 = pad(rows["cn0_dbhz"].to_numpy(float)[keep], row, slot, shape, np.nan)
     tow = np.mod(gps_seconds(epoch_times), WEEK_S)[:, None]
 
-    def correction(lat, lon, h, elev, azim):
+    def correction(lat, lon, h, elev, azim, rows):
         delay = saastamoinen_delay_m(lat[:, None], h[:, None], elev)
         if coeffs is not None and len(coeffs) == 8:
-            delay = delay + iono_scale * klobuchar_delay_m(lat[:, None], lon[:, None], elev, azim, tow, coeffs[:4], coeffs[4:])
+            delay = delay + iono_scale[rows] * klobuchar_delay_m(lat[:, None], lon[:, None], elev, azim, tow[rows], coeffs[:4], coeffs[4:])
         return delay
 
     present = [c for c in SYSTEMS if (letters == c).any()]  # one receiver clock per constellation, in SYSTEMS' order

@@ -23,9 +23,11 @@ INTEGERS = ("millisSinceGpsEpoch", "constellationType", "svid")
 
 def read_gsdc_derived(path, strict: bool = False) -> pd.DataFrame:
     """The derived CSV with the columns the WLS needs, checked: a row whose number fields are not numbers is skipped
-    and counted (``attrs['skipped_lines']``), or with ``strict`` an error naming its line."""
+    and counted (``attrs['skipped_lines']``), or with ``strict`` an error naming its line. Only those columns are
+    read (the others would be a Python string per field: most of the memory of a long drive's file)."""
+    wanted = set(REQUIRED)
     try:
-        table = pd.read_csv(path, dtype=str)
+        table = pd.read_csv(path, dtype=str, usecols=lambda c: c in wanted)
     except (OSError, pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
         raise DataError(f"{path}: not a readable CSV ({' '.join(str(exc).split())})") from None
     missing = [c for c in REQUIRED if c not in table.columns]

@@ -43,9 +43,20 @@ SATELLITE_ID_LIMIT = 1000
 
 
 def read_librsf(path: str, strict: bool = False) -> LibrsfLog:
-    """The three kinds of measurement of a libRSF file as tables (rows in file order)."""
+    """The three kinds of measurement of a libRSF file as tables (rows in file order).
+
+    Its fields are parsed as numbers as they are read; a file with a field that is not one (a malformed line, or a
+    line of another kind) is read again as text, each line's fields then tried one by one (the same numbers: 8 times
+    slower, and a Python string per field)."""
     try:
-        raw = pd.read_csv(path, sep=r"\s+", header=None, names=range(15), dtype=str, engine="c", comment="#")
+        raw = pd.read_csv(path, sep=r"\s+", header=None, names=range(15), dtype={0: str, **dict.fromkeys(range(1, 15), np.float64)},
+                          engine="c", comment="#")  # fmt: skip
+        numbers = True
+    except (ValueError, OSError):  # a field that is not a number; or the file unreadable, said and named below
+        numbers = False
+    try:
+        if not numbers:
+            raw = pd.read_csv(path, sep=r"\s+", header=None, names=range(15), dtype=str, engine="c", comment="#")
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
     except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
@@ -56,7 +67,8 @@ def read_librsf(path: str, strict: bool = False) -> LibrsfLog:
     tables, malformed = {}, 0
     for name, columns in (("pseudorange3", PSEUDORANGE_COLUMNS), ("odom3", ODOMETRY_COLUMNS), ("point3", POINT_COLUMNS)):
         rows = np.flatnonzero(kind == name)
-        values = raw.iloc[rows, 1 : 1 + len(columns)].apply(pd.to_numeric, errors="coerce").to_numpy(float)
+        values = raw.iloc[rows, 1 : 1 + len(columns)]
+        values = (values if numbers else values.apply(pd.to_numeric, errors="coerce")).to_numpy(float)
         bad = ~np.isfinite(values).all(axis=1)
         if name == "pseudorange3":  # a satellite number (GPS 1…, Galileo 301…) and a system code are small integers
             ids = values[:, [columns.index("sat"), columns.index("sys")]]
