@@ -140,3 +140,53 @@ def test_log_without_dates_needs_date_option(tmp_path):
 @pytest.mark.parametrize("args", [["epochs", SAMPLE, "--json"], ["epochs", SAMPLE, "-o", "-", "--satellites", "-"]])
 def test_conflicting_stdout_uses_are_usage_errors(args):
     _one_error_line(run_cli(*args), 2)
+
+
+def test_a_pseudorange_log_gives_the_positions_its_pseudoranges_solve_to(tmp_path):
+    """The real Berlin drive (libRSF): an epoch per epoch, the snapshot WLS positions `integrity --positioning snapshot`
+    vouches for (the same numbers), and a satellite row per pseudorange used, its angles and σ sensible."""
+    log = str(shared("smartloc", "Berlin_Potsdamer_Platz_Input.txt"))
+    epochs, satellites, checked = tmp_path / "e.csv", tmp_path / "s.parquet", tmp_path / "i.csv"
+    proc = run_cli("epochs", log, "-o", str(epochs), "--satellites", str(satellites), "--json")
+    assert proc.returncode == 0, proc.stderr.decode()
+    summary = json.loads(proc.stdout)
+    assert (summary["format"], summary["epochs"], summary["fixes"], summary["skipped_lines"]) == ("librsf", 1372, 1372, 0)
+    table, sats = pd.read_csv(epochs), pd.read_parquet(satellites)
+    assert len(table) == 1372 and len(sats) == summary["pseudoranges"] == table["n_measurements"].sum()
+    assert sats.groupby("epoch").size().to_numpy().tolist() == table["n_measurements"].tolist()
+    assert sats["elev_deg"].between(-5, 90).all() and sats["azim_deg"].between(0, 360).all() and (sats["sigma_m"] > 0).all()
+    assert set(sats["sv"].str[0]) == {"G", "E"} and set(sats["clock_group"]) == {0, 1}
+    proc = run_cli("integrity", log, "--positioning", "snapshot", "-q", "-o", str(checked))
+    assert proc.returncode == 0, proc.stderr.decode()
+    vouched = pd.read_csv(checked)
+    for column in ("lat_deg", "lon_deg", "height_m"):
+        assert (table[column] == vouched[column]).all(), column
+
+
+def test_a_pseudorange_log_without_its_orbits_says_which_to_give(tmp_path):
+    log = shared("android", "pixel6_gnsslogger.txt")
+    _one_error_line(run_cli("epochs", str(log), "-o", str(tmp_path / "e.csv")), 2, "pixel6_gnsslogger.txt", "--nav")
+    assert not (tmp_path / "e.csv").exists()
+
+
+def test_a_malformed_pseudorange_line_is_counted_and_strict_refuses_it(tmp_path):
+    lines = shared("smartloc", "Berlin_Potsdamer_Platz_Input.txt").read_text().splitlines()[:2000]
+    bad = tmp_path / "bad.txt"
+    bad.write_text("\n".join([*lines[:50], "pseudorange3 1.5 not-a-number 25 1 2 3 4 1 40 40", *lines[50:]]) + "\n")
+    proc = run_cli("epochs", str(bad), "-o", str(tmp_path / "e.csv"))
+    assert proc.returncode == 0 and "skipped 1 malformed lines" in proc.stderr.decode()
+    proc = run_cli("epochs", str(bad), "-o", str(tmp_path / "e.csv"), "--max-bad", "0")
+    assert proc.returncode == 3 and (tmp_path / "e.csv").exists()
+    _one_error_line(run_cli("epochs", str(bad), "--strict", "-o", str(tmp_path / "f.csv")), 1, "bad.txt:51")
+
+
+def test_a_rawx_log_without_orbits_gives_its_receivers_own_fixes(tmp_path):
+    """gpsd's NEO-M8T log has RXM-RAWX pseudoranges but no navigation data: its NAV fixes are read instead, and the
+    messages name the log (not the copy it was read through)."""
+    out = tmp_path / "e.csv"
+    proc = run_cli("epochs", str(shared("gpsd", "ublox-neo-m8t.log")), "-o", str(out))
+    err = proc.stderr.decode()
+    assert proc.returncode == 0, err
+    assert "ublox-neo-m8t.log: no orbits to solve its pseudoranges" in err and "receiver's own fixes" in err
+    assert "ublox-neo-m8t.log: 242 lines" in err and "tollcli-log-" not in err
+    assert len(pd.read_csv(out)) == 39
