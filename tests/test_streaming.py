@@ -65,8 +65,12 @@ def test_streamed_invoice_is_the_whole_log_invoice(monkeypatch, log, roads):
 def test_a_real_pseudorange_drive_streamed_is_the_whole_log(tmp_path, monkeypatch):
     """The Berlin drive (libRSF pseudoranges and odometry speed, 1 372 epochs) through the one charge path in 37-epoch
     chunks, with 500 m roads laid along its own track: the invoice of the whole log, passages and findings included,
-    with the smoothed trajectory (the default) and with snapshot positions."""
+    with the smoothed trajectory (the default) and with snapshot positions — the streamed run also solving its snapshot
+    positions 100 epochs at a time and sweeping its trajectory in 300-epoch chunks (what a long log gets)."""
     from conftest import BERLIN_START, roads_along_the_berlin_drive, shared
+
+    from tollcli.gnss import pseudorange_wls
+    from tollcli.integrity import trajectory_sweep
 
     log = str(shared("smartloc", "Berlin_Potsdamer_Platz_Input.txt"))
     geo = roads_along_the_berlin_drive(tmp_path)
@@ -74,10 +78,15 @@ def test_a_real_pseudorange_drive_streamed_is_the_whole_log(tmp_path, monkeypatc
         settings = {**settings, "start_time": BERLIN_START}
         monkeypatch.setattr(pipeline, "STREAM_ROUNDS", False)
         monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 1_000_000)
+        monkeypatch.setattr(pseudorange_wls, "BLOCK_EPOCHS", 1_000_000)
+        monkeypatch.setattr(trajectory_sweep, "CHUNKED_FROM_EPOCHS", 1_000_000)
         whole = charge_log(log, str(geo), TARIFF, ChargeSettings(**settings))[0]
         monkeypatch.setattr(pipeline, "STREAM_ROUNDS", True)
         monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 37)
         monkeypatch.setattr(streaming, "ROUND_ROWS", 1)
+        monkeypatch.setattr(pseudorange_wls, "BLOCK_EPOCHS", 100)
+        monkeypatch.setattr(trajectory_sweep, "CHUNKED_FROM_EPOCHS", 500)
+        monkeypatch.setattr(trajectory_sweep, "CHUNK_EPOCHS", 300)
         streamed = charge_log(log, str(geo), TARIFF, ChargeSettings(**settings))[0]
         assert invoice_json(streamed) == invoice_json(whole)
         if "positioning" not in settings:  # the smoothed trajectory: the city positions charge
