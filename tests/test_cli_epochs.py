@@ -163,9 +163,12 @@ def test_a_pseudorange_log_gives_the_positions_its_pseudoranges_solve_to(tmp_pat
         assert (table[column] == vouched[column]).all(), column
 
 
-def test_a_pseudorange_log_without_its_orbits_says_which_to_give(tmp_path):
-    log = shared("android", "pixel6_gnsslogger.txt")
-    _one_error_line(run_cli("epochs", str(log), "-o", str(tmp_path / "e.csv")), 2, "pixel6_gnsslogger.txt", "--nav")
+@pytest.mark.parametrize("name", ["pixel6_gnsslogger.txt", "pixel6.23o"])
+@pytest.mark.parametrize("command", ["epochs", "integrity"])
+def test_a_pseudorange_log_without_its_orbits_says_which_to_give(tmp_path, name, command):
+    """A GnssLogger file and a RINEX observation file carry no orbits: one line naming the file and --nav, exit 2."""
+    log = shared("android", name)
+    _one_error_line(run_cli(command, str(log), "-o", str(tmp_path / "e.csv")), 2, str(log) + ":", "no satellite orbits", "--nav")
     assert not (tmp_path / "e.csv").exists()
 
 

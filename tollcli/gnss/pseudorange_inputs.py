@@ -38,7 +38,7 @@ def pseudorange_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_m
         from tollcli.gnss.rinex_positions import rinex_epochs
 
         if nav is None:
-            raise UsageError("RINEX input needs --nav NAVFILE (broadcast ephemerides)")
+            raise UsageError(f"{log}: a RINEX observation file carries no satellite orbits: give --nav NAVFILE (RINEX 2 or 3 broadcast ephemerides)")
         return rinex_epochs(log, nav, sigma_model, sigma_m, nominal)
     if kind == "librsf":
         from tollcli.gnss.librsf_positions import librsf_epochs
