@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from conftest import REPO, run_cli, shared
 
 from tollcli.readers.ubx_frames import checksum
@@ -167,3 +169,24 @@ def test_a_file_of_false_ubx_headers_is_read_in_one_pass(tmp_path):
     done = run_cli("integrity", str(path), "-o", str(tmp_path / "e.csv"), "-q")
     err = done.stderr.decode()
     assert done.returncode == 1 and "6000000 bytes" in err and "empty" not in err, err
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.lists(st.one_of(st.none(),
+                          st.floats(allow_nan=False, allow_infinity=False).map(repr),
+                          st.floats(allow_nan=False, allow_infinity=False).map(lambda v: f"{v:.19e}"),
+                          st.integers(-10**22, 10**22).map(str),
+                          st.sampled_from(["-0", "-0.0", "+1", ".5", "5.", "1e400", "-1e-400", "nan", "inf", " 1", "1 ", "x",
+                                           "1,5", "0x10", "1_0", "1e", "--1", "١"])), max_size=10))  # fmt: skip
+def test_csv_numbers_are_pandas_numbers_to_the_bit(values):
+    """A CSV log's number columns read through Arrow's parser where every value is a plain decimal number: the same
+    doubles as ``pd.to_numeric(errors="coerce")`` (signs of zero included), whatever else the column holds."""
+    import numpy as np
+    import pandas as pd
+
+    from tollcli.readers.csv_numbers import numbers
+
+    text = pd.Series(values, dtype="str")
+    fast, reference = numbers(text), pd.to_numeric(text, errors="coerce").to_numpy(float)
+    assert fast.dtype == reference.dtype and np.array_equal(fast, reference, equal_nan=True)
+    assert (np.signbit(fast) == np.signbit(reference)).all()

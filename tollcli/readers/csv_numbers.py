@@ -17,6 +17,34 @@ from tollcli.errors import DataError
 INTEGER_LIMIT = 2**62
 
 
+#: a plain decimal number: what both parsers read alike (:func:`numbers`)
+PLAIN_NUMBER = r"^[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?$"
+
+
+def numbers(text: pd.Series) -> np.ndarray:
+    """``pd.to_numeric(text, errors="coerce")`` as float64, the same doubles: where every value given is a plain decimal
+    number (:data:`PLAIN_NUMBER`) through Arrow's parser, 30 times faster; else pandas' own (and where Arrow read a
+    negative zero, whose sign pandas keeps or not by the column's other values). Both round every decimal string
+    correctly (to the nearest double), so the two agree to the bit on plain numbers (tested)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    try:
+        strings = pa.array(text)  # the column's own Arrow strings (pandas' default string type), not a copy
+        if not (pa.types.is_string(strings.type) or pa.types.is_large_string(strings.type)):
+            raise TypeError("not text")
+        pool = pa.system_memory_pool()  # (Arrow's default allocator keeps what it freed: 80 MB more at a long log's peak)
+        plain = pc.match_substring_regex(strings, PLAIN_NUMBER, memory_pool=pool)
+        given = pc.or_kleene(plain, pc.is_null(strings, memory_pool=pool), memory_pool=pool)
+        if pc.all(given, memory_pool=pool).as_py() is not False:
+            values = np.array(pc.cast(strings, pa.float64(), memory_pool=pool).to_numpy(), float)
+            if not ((values == 0.0) & np.signbit(values)).any():  # (pandas reads "-0" as 0 in a column of integers)
+                return values
+    except (pa.ArrowException, TypeError, ValueError):  # not text (or not castable): pandas says what it is
+        pass
+    return pd.to_numeric(text, errors="coerce").to_numpy(float)
+
+
 def checked_numbers(table: pd.DataFrame, path, floats: tuple[str, ...], integers: tuple[str, ...] = (), strict: bool = False,
                     first_line: int = 2, exact: tuple[str, ...] = ()) -> pd.DataFrame:  # fmt: skip
     """``table`` (read as text) with ``floats`` as float64 (empty: NaN; infinite or not a number: malformed),
@@ -30,7 +58,7 @@ def checked_numbers(table: pd.DataFrame, path, floats: tuple[str, ...], integers
     out = {}
     for name in (*floats, *integers):
         text = table[name]
-        values = pd.to_numeric(text, errors="coerce").to_numpy(float) if n else np.zeros(0)
+        values = numbers(text) if n else np.zeros(0)
         given = text.notna().to_numpy()
         if name in integers:
             wrong = ~np.isfinite(values) | (np.abs(values) > INTEGER_LIMIT) | (np.floor(values) != values)
