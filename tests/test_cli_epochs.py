@@ -193,3 +193,12 @@ def test_a_rawx_log_without_orbits_gives_its_receivers_own_fixes(tmp_path):
     assert "ublox-neo-m8t.log: no orbits to solve its pseudoranges" in err and "receiver's own fixes" in err
     assert "ublox-neo-m8t.log: 242 lines" in err and "tollcli-log-" not in err
     assert len(pd.read_csv(out)) == 39
+
+
+@pytest.mark.parametrize("command", ["epochs", "integrity"])
+def test_a_rinex_navigation_file_given_as_the_log_says_what_it_is(tmp_path, command):
+    """The IGS broadcast file is orbits, not observations: it goes with --nav (it said "an observation file carries no
+    orbits: give --nav", of the file that was the orbits)."""
+    log = shared("rinex", "brdc1190.21n")
+    _one_error_line(run_cli(command, str(log), "-o", str(tmp_path / "e.csv")), 2, str(log) + ":", "RINEX navigation file",
+                    "--nav beside the observation file")  # fmt: skip

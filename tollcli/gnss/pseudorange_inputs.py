@@ -37,6 +37,9 @@ def pseudorange_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_m
     if kind == "rinex":
         from tollcli.gnss.rinex_positions import rinex_epochs
 
+        if _rinex_navigation(log):
+            raise UsageError(f"{log}: a RINEX navigation file (satellite orbits), not observations: give it as --nav beside the "
+                             "observation file")  # fmt: skip
         if nav is None:
             raise UsageError(f"{log}: a RINEX observation file carries no satellite orbits: give --nav NAVFILE (RINEX 2 or 3 broadcast ephemerides)")
         return rinex_epochs(log, nav, sigma_model, sigma_m, nominal)
@@ -51,6 +54,16 @@ def pseudorange_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_m
     if kind in ("gnsslogger", "device-gnss", "ubx"):
         return _raw_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
     raise UsageError(f"{log}: {kind} is not a pseudorange format")
+
+
+def _rinex_navigation(path: str) -> bool:
+    """Whether a RINEX file's first line says it holds navigation data (type N, G, C, … in column 21), not observations."""
+    try:
+        with open(path, "rb") as f:
+            first = f.readline(82).decode("ascii", "replace")
+    except OSError:
+        return False
+    return "RINEX VERSION / TYPE" in first[60:] and first[20:21] not in ("O", "")
 
 
 def _raw_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: str, sigma_m: float, nominal: NominalModel,
