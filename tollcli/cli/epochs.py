@@ -62,7 +62,7 @@ def epochs(
     with epoch_writer, (sat_writer or _Null()):
         with progress(f"reading {log}", quiet, log=log) as advance, LogRun(log, fmt, hashed=False) as run:  # the log opened once, not hashed: no invoice names it
             if run.kind not in NAVIGATION_KINDS:  # a pseudorange log
-                solved = _solved(run, opt.nav_files(nav), strict, epoch_writer, sat_writer)
+                solved = _solved(run, opt.nav_files(nav), strict, epoch_writer, sat_writer, quiet)
                 if solved is not None:
                     _finish_solved(solved, epoch_writer, sat_writer, as_json, quiet, max_bad)
                     return
@@ -95,7 +95,7 @@ def epochs(
     check_partial(stats, max_bad)
 
 
-def _solved(run: LogRun, nav, strict: bool, epoch_writer: TableWriter, sat_writer: TableWriter | None) -> dict | None:
+def _solved(run: LogRun, nav, strict: bool, epoch_writer: TableWriter, sat_writer: TableWriter | None, quiet: bool) -> dict | None:
     """A pseudorange log's solved epochs (and satellites) written; its summary. None: a u-blox log without the
     orbits to solve its pseudoranges but with its receiver's own fixes (NAV messages), which are read instead."""
     from tollcli.gnss.pseudorange_inputs import NoOrbitsError
@@ -107,7 +107,7 @@ def _solved(run: LogRun, nav, strict: bool, epoch_writer: TableWriter, sat_write
             epochs, satellite_rows = solved_tables(run.replay_path(), run.kind, nav, strict)
         except NoOrbitsError:
             if solutions_instead(run.replay_path(), run.kind, nav):
-                note(f"{run.name}: no orbits to solve its pseudoranges (--nav gives them): its receiver's own fixes are read", False)
+                note(f"{run.name}: no orbits to solve its pseudoranges (--nav gives them): its receiver's own fixes are read", quiet)
                 return None
             raise
     epoch_writer.write(epochs)
