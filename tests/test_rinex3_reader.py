@@ -27,6 +27,15 @@ def _same(a: pd.DataFrame, b: pd.DataFrame) -> bool:
 
 
 @pytest.fixture(scope="module")
+def walk_rawx():
+    """The rtklibexplorer walk's RAWX code pseudoranges, decoded once."""
+    from tollcli.gnss.ubx_measurements import rawx_measurements
+    from tollcli.readers.ubx import read_ubx
+
+    return rawx_measurements(read_ubx(str(shared("rtklibexplorer", "gnss_1730.ubx"))))
+
+
+@pytest.fixture(scope="module")
 def synthetic(tmp_path_factory):
     obs, _, _ = make_rinex(tmp_path_factory.mktemp("rinex"), n_epochs=20, noise_m=0.5, seed=7)
     return obs
@@ -38,15 +47,12 @@ def test_a_real_phones_rinex_3_file_gives_georinexs_rows():
     assert rows is not None and len(rows) > 900 and _same(rows, _georinex(path))
 
 
-def test_a_real_receivers_three_systems_give_georinexs_rows(tmp_path):
+def test_a_real_receivers_three_systems_give_georinexs_rows(tmp_path, walk_rawx):
     """The rtklibexplorer walk's RAWX code pseudoranges (its first 20 s) as RINEX 3.04: GPS and Galileo C1C, BeiDou C6I
     (B3I, chosen: its B1I C2I is empty) with their C/N0, a GLONASS C1C type in the header and no GLONASS satellite."""
     from rinex_multi import write_obs
 
-    from tollcli.gnss.ubx_measurements import rawx_measurements
-    from tollcli.readers.ubx import read_ubx
-
-    rawx = rawx_measurements(read_ubx(str(shared("rtklibexplorer", "gnss_1730.ubx"))))
+    rawx = walk_rawx
     write_obs(tmp_path / "walk.obs", rawx[rawx["t_rx_gps_s"] <= rawx["t_rx_gps_s"].min() + 20.0])
     rows = rinex3_observation_rows(str(tmp_path / "walk.obs"))
     assert rows is not None and set(rows["sv"].str[0]) == {"G", "E", "C"} and set(rows["code"]) == {"C1C", "C6I"}
@@ -69,7 +75,8 @@ def _edited(synthetic, tmp_path, edit) -> str:
     return str(out)
 
 
-@pytest.mark.parametrize("case", ["rinex 2", "epoch twice", "satellite twice", "not a number", "hash", "cut short", "non-ascii"])
+@pytest.mark.parametrize("case", ["rinex 2", "epoch twice", "satellite twice", "not a number", "hash", "cut short", "non-ascii",
+                                  "no time system"])
 def test_what_the_two_could_read_differently_is_left_to_georinex(synthetic, tmp_path, case):
     """Each of these files is read by georinex (None from the direct reader); the positions still come (or georinex's
     own error)."""
@@ -94,6 +101,47 @@ def test_what_the_two_could_read_differently_is_left_to_georinex(synthetic, tmp_
              "not a number": lambda lines, body: numbers(lines, body, "  2x234567.123"),
              "hash": lambda lines, body: numbers(lines, body, "  #"),
              "cut short": lambda lines, body: lines[:-2],  # the last epoch's last satellites missing
-             "non-ascii": lambda lines, body: [lines[0]] + ["é" + lines[1][1:]] + lines[2:]}  # fmt: skip
+             "non-ascii": lambda lines, body: [lines[0]] + ["é" + lines[1][1:]] + lines[2:],
+             "no time system": lambda lines, body: [ln for ln in lines if "TIME OF FIRST OBS" not in ln]}  # fmt: skip
     path = _edited(synthetic, tmp_path, edits[case])
     assert rinex3_observation_rows(path) is None
+
+
+def test_damaged_copies_of_a_real_file_are_read_as_georinex_reads_them(tmp_path, walk_rawx):
+    """Twelve copies of the real walk's first 3 s as RINEX 3.04 (13 epochs), each with bytes changed, cut
+    or added in its header or records: the direct reader gives georinex's rows, or leaves the file to georinex."""
+    import random
+
+    from rinex_multi import write_obs
+
+    from tollcli.errors import TollError
+
+    rawx = walk_rawx
+    write_obs(tmp_path / "walk.obs", rawx[rawx["t_rx_gps_s"] <= rawx["t_rx_gps_s"].min() + 3.0])
+    clean = (tmp_path / "walk.obs").read_bytes()
+    header = clean.index(b"END OF HEADER")
+    rng = random.Random(8)
+    read_alike = 0
+    for k in range(12):
+        data = bytearray(clean)
+        for _ in range(rng.randint(1, 4)):
+            at = rng.randrange(header + 80) if rng.random() < 0.5 else rng.randrange(len(data))
+            change = rng.random()
+            if change < 0.5:
+                data[at] = rng.choice(b"0123456789 .-+>GREC\n")
+            elif change < 0.75:
+                del data[at : at + rng.randint(1, 30)]
+            else:
+                data[at:at] = bytes(rng.choice(b"0123456789 .\n") for _ in range(rng.randint(1, 16)))
+        path = tmp_path / f"damaged-{k}.obs"
+        path.write_bytes(bytes(data))
+        rows = rinex3_observation_rows(str(path))
+        if rows is None:
+            continue
+        try:
+            reference = _georinex(path)
+        except TollError as exc:
+            raise AssertionError(f"copy {k}: read directly, refused by georinex ({exc})") from None
+        assert _same(rows, reference), k
+        read_alike += 1
+    assert read_alike >= 4  # (most damaged copies still read)
