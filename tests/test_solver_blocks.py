@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pandas as pd
 import pytest
 from conftest import shared
 
@@ -57,3 +58,33 @@ def test_blocks_cover_every_epoch_once():
         rows = pseudorange_wls.blocks(n)
         covered = np.concatenate([np.arange(n)[r] for r in rows]) if n else np.zeros(0, int)
         assert (covered == np.arange(n)).all() and all(r.stop - r.start <= pseudorange_wls.BLOCK_EPOCHS for r in rows)
+
+
+def test_an_epoch_with_fewer_measurements_than_unknowns_is_no_fix(tmp_path):
+    """Berlin's first 200 epochs with one epoch cut to three GPS pseudoranges and one Galileo: four measurements of five
+    unknowns (the position and two clocks). Its solution never left the iteration's start, hundreds of kilometres
+    away, and was written as a fix; it is no fix now (the RAIM calls it insufficient), and every other epoch is as
+    it was."""
+    lines = shared("smartloc", "Berlin_Potsdamer_Platz_Input.txt").read_text().splitlines()
+    times = sorted({float(line.split()[1]) for line in lines if line.startswith("pseudorange3")})[:200]
+    cut_at = times[100]
+    kept, gps, galileo = [], 0, 0
+    for line in lines:
+        fields = line.split()
+        if fields[0] not in ("pseudorange3", "odom3") or float(fields[1]) > times[-1]:
+            continue
+        if fields[0] == "pseudorange3" and float(fields[1]) == cut_at:
+            is_galileo = int(float(fields[7])) >= 300  # (satellite number: Galileo 300 + PRN)
+            if (galileo if is_galileo else gps) >= (1 if is_galileo else 3):
+                continue
+            galileo, gps = galileo + is_galileo, gps + (not is_galileo)
+        kept.append(line)
+    assert (gps, galileo) == (3, 1)
+    log = tmp_path / "cut.txt"
+    log.write_text("\n".join(kept) + "\n")
+    epochs, meas = pseudorange_epochs(str(log), "librsf", None, "nominal", 5.0, NominalModel())
+    seconds = (epochs["time_utc"] - pd.Timestamp("1970-01-01", tz="UTC")).dt.total_seconds().to_numpy()  # (libRSF: from 1970)
+    row = int(np.flatnonzero(np.isclose(seconds, cut_at))[0])
+    assert meas.mask[row].sum() == 4 and np.isnan(epochs["lat_deg"].iat[row])
+    assert np.isfinite(np.delete(epochs["lat_deg"].to_numpy(), row)).all()
+    assert pseudorange_wls.solvable(meas.mask, meas.clock_index).tolist() == np.isfinite(epochs["lat_deg"].to_numpy()).tolist()

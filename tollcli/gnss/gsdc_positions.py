@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.gnss.measurements import Measurements, pad, slots, sv_labels
-from tollcli.gnss.pseudorange_wls import final_geometry, solve_positions
+from tollcli.gnss.pseudorange_wls import final_geometry, solvable, solve_positions
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.gps_time import gps_millis_to_utc
 from tollcli.readers.gsdc import ANDROID_CONSTELLATION
@@ -68,7 +68,7 @@ def gsdc_epochs(
         np.nan,
     )  # fmt: skip
     H_enu, dy = g["H"], g["dy_m"]
-    ok = mask.sum(axis=1) >= 4
+    ok = solvable(mask)  # (one clock: four measurements)
     epochs = pd.DataFrame(
         {
             "epoch": np.arange(n_epochs, dtype=np.int64),

@@ -15,7 +15,7 @@ import pandas as pd
 from tollcli.errors import DataError
 from tollcli.gnss.odometry import interval_displacement, interval_odometry
 from tollcli.gnss.measurements import Measurements, pad, slots, sv_labels
-from tollcli.gnss.pseudorange_wls import final_geometry, solve_positions
+from tollcli.gnss.pseudorange_wls import final_geometry, solvable, solve_positions
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.librsf import LibrsfLog, librsf_times
 from tollcli.times import nearest_index
@@ -56,7 +56,7 @@ def librsf_epochs(log: LibrsfLog, sigma_model: str = "nominal", sigma_m: float =
     sigma = np.where(mask, sigma_for(sigma_model, elev_deg=g["elev_deg"], cn0_dbhz=cn0, constellation=const,
                                      lat_deg=g["lat_deg"][:, None], lon_deg=g["lon_deg"][:, None], sigma_input_m=unc,
                                      sigma_const_m=sigma_m, nominal=nominal), np.nan)  # fmt: skip
-    ok = mask.sum(axis=1) >= 4
+    ok = solvable(mask, clock_index)
     epochs = pd.DataFrame(
         {
             "epoch": np.arange(n_epochs, dtype=np.int64),

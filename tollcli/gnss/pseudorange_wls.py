@@ -64,6 +64,17 @@ def _clock_term(x: np.ndarray, clock_index: np.ndarray) -> np.ndarray:
     return np.take_along_axis(x[:, 3:], np.maximum(clock_index, 0), axis=1)
 
 
+def solvable(mask: np.ndarray, clock_index: np.ndarray | None = None) -> np.ndarray:
+    """Epochs (E,) with at least as many measurements as unknowns: the position's three and one clock per clock group
+    the epoch has a measurement of (three GPS satellites and one Galileo are four measurements of five unknowns: the
+    solution stays where the iteration started, hundreds of kilometres off, and is not a fix)."""
+    clock_index, n_clocks = _clocks(mask, clock_index)
+    present = np.zeros((mask.shape[0], n_clocks), bool)
+    rows, cols = np.nonzero(mask)
+    present[rows, clock_index[rows, cols]] = True
+    return mask.sum(axis=1) >= 3 + present.sum(axis=1)
+
+
 def blocks(n_epochs: int, size: int | None = None) -> list[slice]:
     """The epochs 0 … ``n_epochs`` in slices of ``size`` (default :data:`BLOCK_EPOCHS`)."""
     size = size or BLOCK_EPOCHS

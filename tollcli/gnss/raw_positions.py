@@ -30,6 +30,7 @@ from tollcli.gnss.pseudorange_wls import (
     C_MPS,
     final_geometry,
     line_of_sight,
+    solvable,
     solve_positions,
 )
 from tollcli.gnss.satellite_states import satellite_states
@@ -150,7 +151,7 @@ def raw_epochs(m: pd.DataFrame, sigma_model: str = "nominal", sigma_m: float = 5
                            padded("prr_mps").astype(float),
                            np.where(np.isfinite(prr_sigma) & (prr_sigma > 0), prr_sigma, DEFAULT_PRR_SIGMA_MPS),
                            mask & (g["elev_deg"] > 0))  # fmt: skip
-    ok = (mask.sum(axis=1) >= 4) & np.isfinite(g["lat_deg"])
+    ok = solvable(mask, clock_index) & np.isfinite(g["lat_deg"])
     millis = np.round(epoch_t * 1000).astype(np.int64)
     epochs = pd.DataFrame({
         "epoch": np.arange(n_epochs, dtype=np.int64),

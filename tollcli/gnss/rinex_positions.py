@@ -22,7 +22,7 @@ from tollcli.errors import DataError, UsageError
 from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
 from tollcli.gnss.measurements import Measurements, pad, slots
 from tollcli.gnss.orbits import WEEK_S
-from tollcli.gnss.pseudorange_wls import C_MPS, final_geometry, solve_positions
+from tollcli.gnss.pseudorange_wls import C_MPS, final_geometry, solvable, solve_positions
 from tollcli.gnss.satellite_states import load_navigation, navigation_files, satellite_states
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.gps_time import gps_millis_to_utc, gps_seconds
@@ -107,7 +107,7 @@ def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m:
                                      lat_deg=g["lat_deg"][:, None], lon_deg=g["lon_deg"][:, None],
                                      sigma_const_m=sigma_m, nominal=nominal), np.nan)  # fmt: skip
     H = g["H"]
-    ok = mask.sum(axis=1) >= 4
+    ok = solvable(mask, clock_index)
     epochs = pd.DataFrame(
         {
             "epoch": np.arange(epoch_times.size, dtype=np.int64),
