@@ -21,9 +21,11 @@ from hypothesis import strategies as st
 from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.integrity import trajectory_filter
-from tollcli.integrity.trajectory import OMEGAS, _combined, _starts
+from tollcli.integrity.trajectory import _starts
 from tollcli.integrity.trajectory_filter import MOTION_STATES, combine, residuals, run_pass
 from tollcli.integrity.trajectory_inputs import trajectory_inputs
+from tollcli.integrity.trajectory_sweep import OMEGAS
+from tollcli.integrity.trajectory_sweep import combined as _combined
 
 kernel = trajectory_filter._kernel()
 needs_kernel = pytest.mark.skipif(kernel is None, reason="trajectory kernel not built")

@@ -36,8 +36,7 @@ from tollcli.integrity.trajectory_noise import (
     postfit_residuals,
     sigma_by_bin,
 )
-from tollcli.integrity.trajectory_sweep import OMEGAS, UNKNOWN_M2, fault_test, sigma_major_m, sweep  # noqa: F401  (OMEGAS, UNKNOWN_M2: here as before)
-from tollcli.integrity.trajectory_sweep import combined as _combined  # noqa: F401  (the tests compare its kernel and twin)
+from tollcli.integrity.trajectory_sweep import sigma_major_m, sweep
 
 #: ``auto``: smoothed, with the log's odometry or without (the GNSS-only motion model): on the simulator's city drives
 #: without odometry the snapshot RAIM let 65–86 misleading epochs through in 10 000 and the GNSS-only trajectory none,

@@ -14,8 +14,9 @@ pass", done exactly rather than with an overlap):
 2. each chunk's two passes again from those states (``run_pass(..., resume=...)``: the same bits as one pass over the
    whole log), combined and reduced to the per-epoch columns, chunk by chunk on two threads.
 
-The result is the whole sweep's bit for bit (tested on a simulated drive swept in chunks of a few hundred epochs, and
-on the real Berlin drive), for about twice the passes' time; the memory beyond the log's inputs is a few chunks'
+The result is the whole sweep's bit for bit (tested on the real Berlin drive in chunks of a few hundred epochs, and
+each resumed pass on stretches of it with a late clock, odometry holes and a lost vehicle), for about twice the
+passes' time; the memory beyond the log's inputs is a few chunks'
 covariances and the per-epoch columns, whatever the log's length (``benchmarks/trajectory_cost.py --memory``).
 """
 

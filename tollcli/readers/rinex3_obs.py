@@ -47,6 +47,71 @@ def rinex3_observation_rows(path: str) -> pd.DataFrame | None:
 
 
 def _rows(lines: list[str]) -> pd.DataFrame | None:
+    header = _header(lines)
+    if header is None:
+        return None
+    types, at = header
+    systems = [s for s in SYSTEMS if s in types]
+    if not systems:
+        return None
+    wanted = {s: [c for c in CODES[s] if c in types[s]] for s in systems}  # the candidates, in CODES' order
+    columns = {s: sorted({types[s].index(c) for c in wanted[s]} | {types[s].index("S" + c[1:]) for c in wanted[s] if "S" + c[1:] in types[s]})
+               for s in systems}  # fmt: skip
+    times: list[dt.datetime] = []
+    seen_times: set[dt.datetime] = set()
+    per_system = {s: ([], [], []) for s in systems}  # each system's (epoch numbers, satellites, the columns' values)
+    while at < len(lines):
+        line = lines[at]
+        at += 1
+        if not line.startswith(">"):
+            break
+        try:
+            time = _epoch_time(line)
+        except ValueError:  # georinex passes over a time it cannot read (and the lines after it end the records)
+            continue
+        n_sats = int(line[33:35])
+        if time in seen_times:
+            return None
+        seen_times.add(time)
+        times.append(time)
+        seen = set()
+        for sat_line in lines[at : at + n_sats]:
+            sv, data = sat_line[:3], sat_line[3:]
+            if not data.strip("\r\n") or "#" in data or sv in seen:
+                return None
+            seen.add(sv)
+            if sv[0] in per_system:
+                epochs, svs, values = per_system[sv[0]]
+                epochs.append(len(times) - 1)
+                svs.append(sv.replace(" ", "0"))
+                values.append([_value(data[16 * i : 16 * i + 14]) for i in columns[sv[0]]])
+        if at + n_sats > len(lines):
+            return None
+        at += n_sats
+    frames = []
+    for system, (epochs, svs, values) in per_system.items():
+        table = np.array(values, float).reshape(len(epochs), len(columns[system]))
+        index = {types[system][i]: k for k, i in enumerate(columns[system])}
+        code = next((c for c in wanted[system] if np.isfinite(table[:, index[c]]).any()), None)
+        if code is None:  # (no satellite of the system, or none with a pseudorange)
+            continue
+        snr = table[:, index["S" + code[1:]]] if "S" + code[1:] in index else np.full(len(epochs), np.nan)
+        frames.append(pd.DataFrame({"epoch": epochs, "sv": np.asarray(svs, dtype=object), "pr_m": table[:, index[code]],
+                                    "cn0_dbhz": snr, "code": code}))  # fmt: skip
+    if not frames:
+        return None
+    out = pd.concat(frames, ignore_index=True)
+    out = out[np.isfinite(out["pr_m"].to_numpy())]
+    stamps = np.array(times, dtype="datetime64[us]").astype("datetime64[ns]")
+    out.insert(0, "time", stamps[out["epoch"].to_numpy()])
+    out = out.drop(columns="epoch").sort_values(["time", "sv"], kind="stable").reset_index(drop=True)
+    return out if len(out) else None
+
+
+def _header(lines: list[str]) -> tuple[dict[str, list[str]], int] | None:
+    """The observation types of each system (``SYS / # / OBS TYPES``) and the first record line; None where the file
+    is not RINEX 3 observations or has no time system for georinex (its system letter, or a mixed file's TIME OF
+    FIRST OBS)."""
     if not lines or "RINEX VERSION / TYPE" not in lines[0][60:80] or lines[0][20:21] != "O" or not lines[0][:9].strip().startswith("3"):
         return None
     types: dict[str, list[str]] = {}
@@ -66,73 +131,10 @@ def _rows(lines: list[str]) -> pd.DataFrame | None:
             if len(names) != count:
                 raise ValueError("not as many types as said")
             types[system] = names
-    at += 1
-    file_system = lines[0][40:41]  # georinex's time system: the file's system, or a mixed file's TIME OF FIRST OBS
+    file_system = lines[0][40:41]
     if file_system not in ("G", "R", "E", "J", "C", "I", "M") or (file_system == "M" and "TIME OF FIRST OBS" not in labels):
         return None
-    systems = [s for s in SYSTEMS if s in types]
-    if not systems:
-        return None
-    wanted = {s: [c for c in CODES[s] if c in types[s]] for s in systems}  # the candidates, in CODES' order
-    columns = {s: sorted({types[s].index(c) for c in wanted[s]} | {types[s].index("S" + c[1:]) for c in wanted[s] if "S" + c[1:] in types[s]})
-               for s in systems}  # fmt: skip
-    times: list[dt.datetime] = []
-    seen_times: set[dt.datetime] = set()
-    epoch_of, svs = [], []
-    for_system = {s: ([], []) for s in systems}  # (row numbers, their field values) per system
-    while at < len(lines):
-        line = lines[at]
-        at += 1
-        if not line.startswith(">"):
-            break
-        try:
-            time = _epoch_time(line)
-        except ValueError:  # georinex passes over a time it cannot read (and the lines after it end the records)
-            continue
-        n_sats = int(line[33:35])
-        if time in seen_times:
-            return None
-        seen_times.add(time)
-        epoch = len(times)
-        times.append(time)
-        seen_here = set()
-        for sat_line in lines[at : at + n_sats]:
-            sv, data = sat_line[:3], sat_line[3:]
-            if not data.strip("\r\n") or "#" in data or sv in seen_here:
-                return None
-            seen_here.add(sv)
-            system = sv[0]
-            if system not in wanted:
-                continue
-            rows, fields = for_system[system]
-            rows.append(len(svs))
-            epoch_of.append(epoch)
-            svs.append(sv.replace(" ", "0"))
-            fields.append([_value(data[16 * i : 16 * i + 14]) for i in columns[system]])
-        if at + n_sats > len(lines):
-            return None
-        at += n_sats
-    frames = []
-    for system in systems:
-        rows, fields = for_system[system]
-        if not rows:
-            continue
-        table = np.array(fields, float).reshape(len(rows), len(columns[system]))
-        index = {types[system][i]: k for k, i in enumerate(columns[system])}
-        code = next((c for c in wanted[system] if np.isfinite(table[:, index[c]]).any()), None)
-        if code is None:
-            continue
-        snr = table[:, index["S" + code[1:]]] if "S" + code[1:] in index else np.full(len(rows), np.nan)
-        frames.append(pd.DataFrame({"epoch": np.asarray(epoch_of)[rows], "sv": np.asarray(svs, dtype=object)[rows],
-                                    "pr_m": table[:, index[code]], "cn0_dbhz": snr, "code": code}))  # fmt: skip
-    if not frames:
-        return None
-    out = pd.concat(frames, ignore_index=True)
-    out = out[np.isfinite(out["pr_m"].to_numpy())]
-    stamps = np.array(times, dtype="datetime64[us]").astype("datetime64[ns]")
-    out.insert(0, "time", stamps[out["epoch"].to_numpy()])
-    out = out.drop(columns="epoch").sort_values(["time", "sv"], kind="stable").reset_index(drop=True)
-    return out if len(out) else None
+    return types, at + 1
 
 
 def _epoch_time(line: str) -> dt.datetime:
