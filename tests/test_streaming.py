@@ -74,22 +74,22 @@ def test_a_real_pseudorange_drive_streamed_is_the_whole_log(tmp_path, monkeypatc
 
     log = str(shared("smartloc", "Berlin_Potsdamer_Platz_Input.txt"))
     geo = roads_along_the_berlin_drive(tmp_path)
-    for settings in ({}, {"positioning": "snapshot"}, {"environment": "open", "positioning": "snapshot"}):
-        settings = {**settings, "start_time": BERLIN_START}
+    for chosen in ({}, {"positioning": "snapshot"}, {"environment": "open", "positioning": "snapshot"}):
+        chosen = {**chosen, "start_time": BERLIN_START}
         monkeypatch.setattr(pipeline, "STREAM_ROUNDS", False)
         monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 1_000_000)
         monkeypatch.setattr(pseudorange_wls, "BLOCK_EPOCHS", 1_000_000)
         monkeypatch.setattr(trajectory_sweep, "CHUNKED_FROM_EPOCHS", 1_000_000)
-        whole = charge_log(log, str(geo), TARIFF, ChargeSettings(**settings))[0]
+        whole = charge_log(log, str(geo), TARIFF, ChargeSettings(**chosen))[0]
         monkeypatch.setattr(pipeline, "STREAM_ROUNDS", True)
         monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 37)
         monkeypatch.setattr(streaming, "ROUND_ROWS", 1)
         monkeypatch.setattr(pseudorange_wls, "BLOCK_EPOCHS", 100)
         monkeypatch.setattr(trajectory_sweep, "CHUNKED_FROM_EPOCHS", 500)
         monkeypatch.setattr(trajectory_sweep, "CHUNK_EPOCHS", 300)
-        streamed = charge_log(log, str(geo), TARIFF, ChargeSettings(**settings))[0]
+        streamed = charge_log(log, str(geo), TARIFF, ChargeSettings(**chosen))[0]
         assert invoice_json(streamed) == invoice_json(whole)
-        if "positioning" not in settings:  # the smoothed trajectory: the city positions charge
+        if "positioning" not in chosen:  # the smoothed trajectory: the city positions charge
             assert whole["lines"] and whole["parameters"]["positioning_used"] == "smoothed"
         else:  # each epoch alone: mostly not (declared open: some)
             assert whole["not_charged"] and whole["findings"]["items"]
