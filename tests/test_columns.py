@@ -98,7 +98,7 @@ def test_parquet_from_columns_holds_the_frames_columns_types_and_values(tmp_path
             pd.testing.assert_frame_equal(back, pd.concat([getattr(c, f"{table}s") for c in chunks], ignore_index=True), check_dtype=False)
 
 
-HEAVY = ("pandas", "scipy", "matplotlib", "tollcli.simulate", "tollcli.integrity", "tollcli.charging")
+HEAVY = ("pandas", "scipy", "matplotlib", "tollcli.simulate", "tollcli.integrity", "tollcli.charging", "pydantic")
 
 
 @pytest.mark.parametrize("command", [["epochs", "{log}", "-o", "{out}.csv", "-q", "--satellites", "{out}.sat.parquet"],
