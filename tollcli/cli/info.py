@@ -24,7 +24,10 @@ def info(
     solutions), and for a receiver's own solutions the epochs, their span and
     rate, the fixes by quality, how many epochs carry each integrity source's
     evidence (residuals, the receiver's RAIM, its error ellipse, satellites) and
-    the level --integrity-sources auto would settle on. A geo-object file: as
+    the level --integrity-sources auto would settle on; where the log is and how
+    far it drove (from the receiver's speed where it gave one, else along the
+    positions: the trajectory's for a pseudorange log it can place, never the
+    noise of the fixes summed). A geo-object file: as
     'tollcli geoobjects info'. An invoice: its vehicle, period, charges and total.
     """
     from tollcli.job.file_info import file_info
@@ -81,5 +84,5 @@ def _where(s: dict) -> list[str]:
     if s.get("box_deg"):
         b = s["box_deg"]
         out.append(f"where: longitude {b[0]:.5f} – {b[2]:.5f}, latitude {b[1]:.5f} – {b[3]:.5f}; "
-                   f"{s['distance_m'] / 1000:,.2f} km driven")  # fmt: skip
+                   f"{s['distance_m'] / 1000:,.2f} km driven" + (f" (from {s['distance_from']})" if s.get("distance_from") else ""))  # fmt: skip
     return out

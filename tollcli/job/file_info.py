@@ -16,6 +16,7 @@ import numpy as np
 
 from tollcli.errors import DataError
 from tollcli.io.log_run import LogRun
+from tollcli.job.distance_driven import DistanceCarry, add_distance, distance_from
 from tollcli.readers.log_contents import message_counts
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
@@ -99,9 +100,10 @@ def _pseudorange_info(path: str, kind: str, nav, messages: dict, name: str) -> d
     from tollcli.errors import UsageError
     from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
     from tollcli.gnss.sigma_models import NominalModel
+    from tollcli.integrity.trajectory import with_trajectory
 
     try:
-        epochs, _ = pseudorange_epochs(path, kind, nav, "nominal", 5.0, NominalModel())
+        epochs, meas = pseudorange_epochs(path, kind, nav, "nominal", 5.0, NominalModel())
     except (DataError, UsageError) as exc:
         out = {"positions": f"not solved: {str(exc).replace(path, name)}"}
         solutions = receiver_solutions(messages) if kind == "ubx" and nav is None else []
@@ -115,11 +117,19 @@ def _pseudorange_info(path: str, kind: str, nav, messages: dict, name: str) -> d
     positive = steps[steps > 0]
     interval = float(np.median(positive)) if positive.size else None
     lat, lon = epochs["lat_deg"].to_numpy(float), epochs["lon_deg"].to_numpy(float)
-    return {"epochs": len(epochs), "epochs_with_position": int((np.isfinite(lat) & np.isfinite(lon)).sum()),
+    with_position = int((np.isfinite(lat) & np.isfinite(lon)).sum())
+    placed, _, positioning = with_trajectory(epochs, meas, "auto")  # where process charges it from
+    distance = DistanceCarry()
+    t_s = (placed["time_utc"] - placed["time_utc"].iloc[0]).dt.total_seconds().to_numpy(float) if len(placed) else np.zeros(0)
+    lat, lon = placed["lat_deg"].to_numpy(float), placed["lon_deg"].to_numpy(float)
+    add_distance(distance, t_s, lat, lon, placed["speed_mps"].to_numpy(float) if "speed_mps" in placed else None)
+    source = distance_from(distance, "fixes" if positioning == "snapshot" else f"the {positioning} trajectory")
+    return {"epochs": len(epochs), "epochs_with_position": with_position,
             "first_utc": _iso(first), "last_utc": _iso(last),
             "span_s": round((last - first).total_seconds(), 3) if first is not None else None,
             "interval_s": round(interval, 3) if interval else None, "rate_hz": round(1.0 / interval, 3) if interval else None,
-            **track_extent(lat, lon), "clock": "seconds from the start (no date)" if kind == "librsf" else "GPS time"}  # fmt: skip
+            **track_extent(lat, lon), "distance_m": round(distance.distance_m, 1), "distance_from": source,
+            "clock": "seconds from the start (no date)" if kind == "librsf" else "GPS time"}  # fmt: skip
 
 
 #: the u-blox messages that carry the receiver's own position solution
@@ -138,16 +148,12 @@ def solutions_instead(path: str, kind: str, nav) -> list[str]:
 
 
 def track_extent(lat_deg: np.ndarray, lon_deg: np.ndarray) -> dict:
-    """The box (lon/lat, degrees) of the finite positions and the distance driven along them (great circle, m)."""
-    from tollcli.geodesy import great_circle_distance_m
-
+    """The box (lon/lat, degrees) of the finite positions."""
     ok = np.isfinite(lat_deg) & np.isfinite(lon_deg)
     if not ok.any():
-        return {"box_deg": None, "distance_m": 0.0}
+        return {"box_deg": None}
     lat, lon = lat_deg[ok], lon_deg[ok]
-    steps = great_circle_distance_m(lat[:-1], lon[:-1], lat[1:], lon[1:]) if lat.size > 1 else np.zeros(0)
-    return {"box_deg": [round(float(lon.min()), 6), round(float(lat.min()), 6), round(float(lon.max()), 6), round(float(lat.max()), 6)],
-            "distance_m": round(float(np.sum(steps)), 1)}  # fmt: skip
+    return {"box_deg": [round(float(lon.min()), 6), round(float(lat.min()), 6), round(float(lon.max()), 6), round(float(lat.max()), 6)]}
 
 
 def _solution_info(path: str, kind: str) -> dict:
@@ -160,17 +166,14 @@ def _solution_info(path: str, kind: str) -> dict:
     evidence = dict.fromkeys(("residuals", "receiver_raim", "error_ellipse", "satellites", "hdop"), 0)
     previous = None
     box = np.array([np.inf, np.inf, -np.inf, -np.inf])
-    distance_m, last_fix = 0.0, None
+    distance = DistanceCarry()
     for chunk in iter_navigation_tables(path, kind, stats=stats):
         e, s = chunk.epoch_columns, chunk.satellite_columns  # arrays: info imports no pandas
         lat, lon = e["lat_deg"].astype(float), e["lon_deg"].astype(float)
         ok = np.isfinite(lat) & np.isfinite(lon)
+        t_s = np.where(np.isnat(e["time_utc"]), np.nan, e["time_utc"].astype("datetime64[ms]").astype(np.int64) / 1000.0)
+        add_distance(distance, t_s, lat, lon, e["speed_mps"].astype(float) if "speed_mps" in e else None)
         if ok.any():
-            lat_ok, lon_ok = lat[ok], lon[ok]
-            if last_fix is not None:
-                lat_ok, lon_ok = np.r_[last_fix[0], lat_ok], np.r_[last_fix[1], lon_ok]
-            distance_m += track_extent(lat_ok, lon_ok)["distance_m"]
-            last_fix = (lat_ok[-1], lon_ok[-1])
             box = np.array([min(box[0], lon[ok].min()), min(box[1], lat[ok].min()), max(box[2], lon[ok].max()), max(box[3], lat[ok].max())])
         epochs += len(e)
         with_position += int(ok.sum())
@@ -198,7 +201,8 @@ def _solution_info(path: str, kind: str) -> dict:
         "span_s": round((last - first) / 1000.0, 3) if first is not None and last is not None else None,
         "interval_s": rate_s, "rate_hz": round(1.0 / rate_s, 3) if rate_s else None,
         "fix_quality": {str(k): v for k, v in sorted(quality.items()) if k >= 0},  # (-1: no GGA said: no quality to count)
-        "box_deg": [round(float(v), 6) for v in box] if np.isfinite(box).all() else None, "distance_m": round(distance_m, 1),
+        "box_deg": [round(float(v), 6) for v in box] if np.isfinite(box).all() else None, "distance_m": round(distance.distance_m, 1),
+        "distance_from": distance_from(distance),
         "integrity_evidence_epochs": evidence, "integrity_level": level,
     }
 
