@@ -306,3 +306,33 @@ def test_an_epoch_without_speed_streamed_is_the_whole_log(tmp_path, monkeypatch)
     whole = _whole(monkeypatch, str(log))
     assert invoice_json(_streamed(monkeypatch, str(log))) == invoice_json(whole)
     assert len(whole["lines"]) == 2
+
+
+@pytest.mark.parametrize("log, kind, positioning", [(("smartloc", "Berlin_Potsdamer_Platz_Input.txt"), "librsf", "auto"),
+                                                    (("smartloc", "Berlin_Potsdamer_Platz_Input.txt"), "librsf", "snapshot"),
+                                                    (("rtklibexplorer", "gnss_1730.ubx"), "ubx", "auto"),
+                                                    ("rural-fault", "gsdc-derived", "snapshot")])  # fmt: skip
+def test_a_pseudorange_logs_integrity_table_checked_in_chunks_is_the_whole_logs(monkeypatch, log, kind, positioning):
+    """``integrity`` of a pseudorange log runs the RAIM and the measured environment a chunk of epochs at a time (the
+    RAIM over all 40 000 epochs of a long drive at once was its peak memory): in chunks of 37 epochs, the table of the
+    whole log at once, to the bit — real logs with the trajectory and with snapshot positions, and a simulated drive
+    with a faulty satellite (valid, fault_detected and unavailable epochs; open and urban measured)."""
+    from conftest import shared
+
+    from tollcli.integrity.raim import RaimParams
+    from tollcli.job import log_integrity
+
+    path = str(SAMPLES / "sim" / log / "drive-derived.csv") if isinstance(log, str) else str(shared(*log))
+
+    def table(chunk_epochs):
+        monkeypatch.setattr(log_integrity, "RAIM_CHUNK_EPOCHS", chunk_epochs)
+        parts = [c.table for c in log_integrity.iter_integrity(path, kind, RaimParams(hal_m=50.0), positioning=positioning)]
+        return parts, pd.concat(parts, ignore_index=True)
+
+    whole_parts, whole = table(1_000_000)
+    chunked_parts, chunked = table(37)
+    assert len(whole_parts) == 1 and len(chunked_parts) == -(-len(whole) // 37) > 5
+    pd.testing.assert_frame_equal(chunked, whole, check_exact=True)
+    assert chunked_parts[0].attrs == whole_parts[0].attrs
+    if kind == "gsdc-derived":  # verdicts that differ among the epochs, and both environments, are compared
+        assert whole["raim_status"].nunique() == 3 and whole["environment"].nunique() == 2

@@ -6,6 +6,7 @@ import datetime as dt
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import numpy as np
 import pandas as pd
 
 from tollcli.errors import UsageError
@@ -35,6 +36,12 @@ def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
     north = table["fde_shift_n_m"].to_numpy(float) + table["wls_shift_n_m"].to_numpy(float)
     lat, lon = enu_shift2geodetic(table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float), east, north)
     return table.assign(raim_lat_deg=lat, raim_lon_deg=lon)
+
+
+#: the epochs of a pseudorange log checked at a time (its positions are solved and placed for the whole log first): the
+#: RAIM's working set — the subsets' solutions of every epoch — is a chunk's (``integrity`` of a 40 000-epoch log
+#: peaked in the RAIM over all of it at once)
+RAIM_CHUNK_EPOCHS = 3_600
 
 
 def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
@@ -71,12 +78,16 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
                 yield chunk
             return
         epochs, meas, _used = with_trajectory(epochs, meas, positioning)
-        meas, env_columns = measured_environment(epochs, meas, environment)
-        table = with_raim_position(pd.concat([epochs, env_columns, run_raim(meas, params)], axis=1))
-        table.attrs["skipped_lines"] = int(epochs.attrs.get("skipped_lines", 0))
-        if "positioning_note" in epochs.attrs:  # why no trajectory placed the epochs
-            table.attrs["positioning_note"] = epochs.attrs["positioning_note"]
-        yield IntegrityChunk(table, None)
+        env_carry = EnvironmentCarry()
+        for start in range(0, max(len(epochs), 1), RAIM_CHUNK_EPOCHS):  # the RAIM's working set a chunk's, not the log's
+            rows = np.arange(start, min(start + RAIM_CHUNK_EPOCHS, len(epochs)))
+            part, part_meas = epochs.iloc[rows].reset_index(drop=True), meas.take(rows)
+            part_meas, env_columns = measured_environment(part, part_meas, environment, env_carry)
+            table = with_raim_position(pd.concat([part, env_columns, run_raim(part_meas, params)], axis=1))
+            table.attrs["skipped_lines"] = int(epochs.attrs.get("skipped_lines", 0))
+            if "positioning_note" in epochs.attrs:  # why no trajectory placed the epochs
+                table.attrs["positioning_note"] = epochs.attrs["positioning_note"]
+            yield IntegrityChunk(table, None)
         return
     if sigma_model == "input":
         raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")
