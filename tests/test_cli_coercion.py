@@ -74,3 +74,15 @@ def test_plain_values_are_typed_without_asking_typer():
 def test_installed_on_this_typer():
     assert coercion.install()
     assert coercion.install()  # twice: once
+
+
+def test_a_typer_whose_parameters_are_not_as_expected_keeps_its_own_coercion(monkeypatch):
+    def unexpected(descriptor):
+        raise AttributeError("parameter_info has no min")
+
+    assert coercion.install()
+    param = next(p for _, _, p in _params() if coercion._kind(p.type_descriptor) == "float")
+    monkeypatch.setattr(coercion, "_kind", unexpected)
+    runtime = param.get_runtime_param()
+    assert not isinstance(runtime, coercion._Plain)
+    assert runtime.coerce("2.5", param=param, ctx=None) == 2.5

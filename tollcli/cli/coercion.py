@@ -39,7 +39,10 @@ def install() -> bool:
     def get_runtime_param(param):
         if param._runtime_param is None:
             descriptor = param.type_descriptor
-            param._runtime_param = _Plain(descriptor.parameter_info, descriptor.annotation, _kind(descriptor), descriptor)
+            try:
+                param._runtime_param = _Plain(descriptor.parameter_info, descriptor.annotation, _kind(descriptor), descriptor)
+            except (AttributeError, TypeError):  # a Typer whose parameters are not what this expects: its own coercion
+                param._runtime_param = build_runtime_param(descriptor)
         return param._runtime_param
 
     get_runtime_param.tollcli_plain = True
