@@ -44,6 +44,13 @@ def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
 RAIM_CHUNK_EPOCHS = 3_600
 
 
+def epoch_chunks(epochs: pd.DataFrame, meas, chunk_epochs: int) -> Iterator[tuple[pd.DataFrame, object]]:
+    """A whole log's epoch table and measurements, ``chunk_epochs`` epochs at a time (each table indexed from 0)."""
+    for start in range(0, len(epochs), chunk_epochs):
+        rows = np.arange(start, min(start + chunk_epochs, len(epochs)))
+        yield epochs.iloc[rows].reset_index(drop=True), meas.take(rows)
+
+
 def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
                    nominal: NominalModel | None = None, strict: bool = False, stats: ReadStats | None = None,
                    nav: str | tuple[str, ...] | None = None, date: dt.date | None = None, environment: str = "auto",
@@ -79,9 +86,8 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
             return
         epochs, meas, _used = with_trajectory(epochs, meas, positioning)
         env_carry = EnvironmentCarry()
-        for start in range(0, max(len(epochs), 1), RAIM_CHUNK_EPOCHS):  # the RAIM's working set a chunk's, not the log's
-            rows = np.arange(start, min(start + RAIM_CHUNK_EPOCHS, len(epochs)))
-            part, part_meas = epochs.iloc[rows].reset_index(drop=True), meas.take(rows)
+        chunks = epoch_chunks(epochs, meas, RAIM_CHUNK_EPOCHS) if len(epochs) else [(epochs, meas)]
+        for part, part_meas in chunks:  # the RAIM's working set a chunk's, not the log's
             part_meas, env_columns = measured_environment(part, part_meas, environment, env_carry)
             table = with_raim_position(pd.concat([part, env_columns, run_raim(part_meas, params)], axis=1))
             table.attrs["skipped_lines"] = int(epochs.attrs.get("skipped_lines", 0))

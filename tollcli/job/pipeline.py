@@ -15,7 +15,6 @@ import os
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, replace
 
-import numpy as np
 import pandas as pd
 
 from tollcli.charging.invoice import (
@@ -45,7 +44,7 @@ from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.integrity.trajectory import POSITIONINGS, with_trajectory
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
 from tollcli.io.sources import INPUT_KINDS, printable_path
-from tollcli.job.log_integrity import measured_environment
+from tollcli.job.log_integrity import epoch_chunks, measured_environment
 from tollcli.job.osnma_evidence import OsnmaEvidence, failure_findings, fixes_before, osnma_evidence, record_in_invoice
 from tollcli.job.osnma_evidence import inputs_record as osnma_inputs
 from tollcli.io.log_run import LogRun
@@ -391,9 +390,8 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
         placed["note"] = epochs.attrs["positioning_note"]
     if "trajectory_correlation_s" in epochs.attrs:
         charger.independent_after(epochs.attrs["trajectory_correlation_s"])
-    for start in range(0, len(epochs), CHUNK_EPOCHS):
-        rows = np.arange(start, min(start + CHUNK_EPOCHS, len(epochs)))
-        yield epochs.iloc[rows].reset_index(drop=True), meas.take(rows), None
+    for part, part_meas in epoch_chunks(epochs, meas, CHUNK_EPOCHS):
+        yield part, part_meas, None
 
 
 def _prepared_chunks(chunks, settings: ChargeSettings, params: RaimParams):
