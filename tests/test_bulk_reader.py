@@ -379,3 +379,125 @@ def test_sentences_after_binary_bytes_are_read_in_bulk_as_the_reference_does(tmp
     plain_junk = all(not any(c in junk for c in b"$!*#\r") and not junk.strip().startswith(b"NMEA,") for _, junk in glued)
     if plain_junk and _read(log, "reference")[1].malformed == 0:
         assert readers[0].slow_epochs == 0
+
+
+def _arrays_in_two_stages(path, block_bytes: int, decode_first: bool, strict: bool = False):
+    """The bulk reader's epoch arrays and statistics for a log, its blocks fed whole (``feed``) or — as the two
+    threads may at worst — every block decoded before the first is taken (``decode_first``); or the error."""
+    from tollcli.io.sources import iter_byte_blocks, open_binary
+
+    stats = ReadStats()
+    reader = bulk_reader.BulkReader(stats, strict, path.name)
+    with open_binary(str(path)) as stream:
+        blocks = list(iter_byte_blocks(stream, path.name, block_bytes))
+    try:
+        if decode_first:
+            steps = [reader.decode(b) for b in blocks] + [reader.decode_end()]
+            parts = [reader.take(s) for s in steps]
+        else:
+            parts = [reader.feed(b) for b in blocks] + [reader.finish()]
+    except DataError as exc:
+        return None, stats.as_dict(), str(exc)
+    merged = bulk_reader.merge_arrays([p for p in parts if p is not None]) if any(p is not None for p in parts) else None
+    return merged, stats.as_dict(), None
+
+
+def _same_arrays(a, b) -> bool:
+    if a is None or b is None:
+        return a is b
+    return a.keys() == b.keys() and all(a[k].dtype == b[k].dtype and np.array_equal(a[k], b[k], equal_nan=a[k].dtype.kind == "f")
+                                        for k in a)  # fmt: skip
+
+
+@pytest.mark.parametrize("block_bytes", [700, 4096])
+def test_every_block_decoded_before_any_is_taken_gives_what_one_thread_gives(block_bytes):
+    """The reader's two stages (decoding, then counting and assembling) run on two threads a block apart; the
+    decoding stage must never read what the assembling one writes (the line count, the epoch numbers). So the
+    farthest apart they can be — every block of a log decoded before the first is taken — gives the arrays,
+    statistics and first problem of one stage after the other, on every gpsd log, in small blocks."""
+    differ = []
+    for path in _gpsd_logs():
+        serial = _arrays_in_two_stages(path, block_bytes, decode_first=False)
+        staged = _arrays_in_two_stages(path, block_bytes, decode_first=True)
+        if not (_same_arrays(serial[0], staged[0]) and serial[1:] == staged[1:]):
+            differ.append(path.name)
+    assert not differ
+
+
+def test_the_two_stages_apart_in_strict_mode_and_on_the_reference_way(tmp_path, monkeypatch):
+    """The routes a log can take beside the bulk one, with the stages a whole log apart: a damaged line in strict
+    mode (the same error, naming the same line), time stamps the epoch cut cannot follow (the rest of the log read the
+    reference way), and an epoch longer than the carry allows (counted, then the reference way)."""
+    lines = (SAMPLES / "sim" / "rural-clean" / "drive.nmea").read_text().splitlines()
+    damaged = list(lines)
+    damaged[len(lines) // 2] = damaged[len(lines) // 2][:-2] + "00"
+    log = tmp_path / "damaged.nmea"
+    log.write_text("\n".join(damaged) + "\n")
+    serial = _arrays_in_two_stages(log, 2048, decode_first=False, strict=True)
+    assert serial[2] is not None and f"damaged.nmea:{len(lines) // 2 + 1}:" in serial[2]
+    assert _arrays_in_two_stages(log, 2048, decode_first=True, strict=True)[1:] == serial[1:]
+
+    creep = list(lines)  # an epoch whose times creep by 0.4 ms a sentence: the epoch cut gives up, the reference goes on
+    i = next(k for k in range(len(lines) // 2, len(lines)) if lines[k].startswith("$GNGGA"))
+    for k, extra in ((i, "04"), (next(k for k in range(i, len(lines)) if lines[k].startswith("$GNGST")), "08")):
+        body = creep[k][1 : creep[k].rfind("*")].split(",")
+        body[1] += extra
+        creep[k] = compose.with_checksum(",".join(body))
+    odd = tmp_path / "time-creep.nmea"
+    odd.write_text("\n".join(creep) + "\n")
+    gsv = next(k for k in range(len(lines) // 2, len(lines)) if lines[k].startswith("$GPGSV"))
+    long = tmp_path / "long-epoch.nmea"  # an epoch of 7 kB mid-log: longer than the carry allows here
+    long.write_text("\n".join(lines[:gsv] + [lines[gsv]] * 100 + lines[gsv:]) + "\n")
+    for path, carry in ((odd, bulk_reader.MAX_CARRY_BYTES), (long, 5000)):
+        monkeypatch.setattr(bulk_reader, "MAX_CARRY_BYTES", carry)
+        made = []
+        original = bulk_reader.BulkReader.take
+
+        def spy(self, step):
+            made.append(step.route)
+            return original(self, step)
+
+        monkeypatch.setattr(bulk_reader.BulkReader, "take", spy)
+        serial = _arrays_in_two_stages(path, 2048, decode_first=False)
+        staged = _arrays_in_two_stages(path, 2048, decode_first=True)
+        monkeypatch.setattr(bulk_reader.BulkReader, "take", original)
+        assert serial[2] is None and serial[0]["epoch"].size > 100
+        assert _same_arrays(serial[0], staged[0]) and serial[1:] == staged[1:]
+        route = bulk_reader.REFERENCE_ROUTE if path is odd else bulk_reader.COUNTED_THEN_REFERENCE
+        assert made[0] == bulk_reader.BULK_ROUTE and route in made
+
+
+def test_decoding_ahead_on_a_thread_gives_the_same_tables_and_errors(tmp_path):
+    """``decode_ahead`` (what ``tollcli epochs`` asks for): the next block decoded on a thread of its own gives the
+    tables, statistics and strict-mode error of one thread, and leaves no thread behind."""
+    import threading
+
+    from tollcli.io.prefetch import THREAD_NAME
+    from tollcli.readers.nmea.reader import iter_nmea_tables
+
+    lines = (SAMPLES / "sim" / "rural-clean" / "drive.nmea").read_text().splitlines()
+    lines[len(lines) * 2 // 3] = lines[len(lines) * 2 // 3][:-2] + "00"
+    damaged = tmp_path / "damaged.nmea"
+    damaged.write_text("\n".join(lines) + "\n")
+    logs = [shared("android", "pixel6.nmea"), SAMPLES / "sim" / "urban-fault" / "drive.nmea", damaged,
+            *[p for p in _gpsd_logs() if p.stat().st_size > 30_000]]  # fmt: skip
+    assert len(logs) > 10
+    for path in logs:
+        out = []
+        for ahead in (False, True):
+            for strict in (False, True):
+                stats = ReadStats()
+                try:
+                    chunks = list(iter_nmea_tables(str(path), stats=stats, strict=strict, block_bytes=1500, chunk_epochs=40,
+                                                   decode_ahead=ahead))  # fmt: skip
+                    tables = [(c.epochs, c.satellites) for c in chunks]
+                    error = None
+                except DataError as exc:
+                    tables, error = [], str(exc)
+                out.append((tables, stats.as_dict(), error))
+        for (a, sa, ea), (b, sb, eb) in zip(out[:2], out[2:]):
+            assert sa == sb and ea == eb and len(a) == len(b), path.name
+            for (e1, s1), (e2, s2) in zip(a, b):
+                pd.testing.assert_frame_equal(e1, e2)
+                pd.testing.assert_frame_equal(s1, s2)
+    assert not [t for t in threading.enumerate() if t.name == THREAD_NAME]

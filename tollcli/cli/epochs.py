@@ -70,7 +70,8 @@ def epochs(
 
                 tables = receiver_fix_tables(run, strict, stats)  # its receiver's own fixes
             else:
-                tables = iter_epoch_tables(run, strict=strict, date=date.date() if date else None, stats=stats, engine=reader)
+                tables = iter_epoch_tables(run, strict=strict, date=date.date() if date else None, stats=stats, engine=reader,
+                                           decode_ahead=True)  # reading is this command's whole work  # fmt: skip
             with read_ahead(tables) as chunks:  # the next chunk read while this one is written
                 for chunk in chunks:
                     epochs = chunk.epoch_columns

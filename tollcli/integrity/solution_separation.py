@@ -92,9 +92,15 @@ def _risk(hpl: np.ndarray, sigma_0: np.ndarray, prior: np.ndarray, threshold: np
     the guards against one are skipped (the same sums)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         free = np.exp(-0.5 * (hpl / sigma_0) ** 2)
-        over = np.maximum(hpl[:, None] - threshold, 0.0) / sigma_k
-        if finite:
-            return np.where(sigma_0 > 0, free, 0.0) + (prior * np.exp(-0.5 * over**2)).sum(axis=1)
+        over = np.subtract(hpl[:, None], threshold)
+        np.maximum(over, 0.0, out=over)
+        np.divide(over, sigma_k, out=over)
+        if finite:  # prior · exp(−over²/2) in one array, step by step (the bisection's hot loop: no temporaries)
+            np.square(over, out=over)
+            np.multiply(-0.5, over, out=over)
+            np.exp(over, out=over)
+            np.multiply(prior, over, out=over)
+            return np.where(sigma_0 > 0, free, 0.0) + over.sum(axis=1)
         modes = prior * np.exp(-0.5 * np.where(np.isfinite(over), over, np.inf) ** 2)
     return np.where(sigma_0 > 0, free, 0.0) + np.nansum(modes, axis=1)
 

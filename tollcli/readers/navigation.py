@@ -49,13 +49,13 @@ def iter_navigation_tables(source: str | os.PathLike | BinaryIO, kind: str = "nm
 
 
 def iter_epoch_tables(run, strict: bool = False, date: dt.date | None = None, stats: ReadStats | None = None,
-                      engine: str = "bulk") -> Iterator[NmeaTables]:  # fmt: skip
+                      engine: str = "bulk", decode_ahead: bool = False) -> Iterator[NmeaTables]:  # fmt: skip
     """A log's epoch and satellite tables, chunk by chunk, through its :class:`~tollcli.io.log_run.LogRun` (``epochs``):
     NMEA (and what is nothing else: its errors say why) by the NMEA reader's ``engine``, the other receiver solutions
-    by their readers."""
+    by their readers. ``decode_ahead``: see :func:`~tollcli.readers.nmea.reader.iter_nmea_tables`."""
     stats = stats if stats is not None else ReadStats()
     with run.named_errors():
         if run.kind not in NAVIGATION_KINDS or run.kind == "nmea":
-            yield from iter_nmea_tables(run.stream(), strict=strict, date=date, stats=stats, engine=engine)
+            yield from iter_nmea_tables(run.stream(), strict=strict, date=date, stats=stats, engine=engine, decode_ahead=decode_ahead)
         else:
             yield from iter_navigation_tables(run.stream(), run.kind, strict=strict, stats=stats)

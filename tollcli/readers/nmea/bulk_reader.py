@@ -13,12 +13,21 @@ Per block (≈ 2 MB of whole lines):
    with anything else is fed, sentence by sentence, to the reference
    :class:`~tollcli.readers.nmea.assembler.EpochAssembler`.
 
+Steps 1–3 are the decoding stage (:meth:`BulkReader.decode`), step 4 and the counting of the lines the assembling
+stage (:meth:`BulkReader.take`); ``tollcli epochs`` runs them on two threads a block apart.
+
 The result is the reference reader's, table for table: ``tests/test_bulk_reader.py``
 compares both on every gpsd log. Should the time stamps of a block ever fall outside
 what the epoch cut assumes, the rest of the log is read by the reference path.
+
+Why this file is long: the two stages hand each other one record (:class:`Decoded`) whose fields are read in one
+place only if both stages live beside it — the decoding, the epoch cut, the counting and the assembly are one
+block's life, and the stage boundary is the one thing a reader of this file must see whole.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -58,8 +67,39 @@ MAX_CARRY_BYTES = 16 << 20
 SAME_TIME_S = 5e-4  # as the reference assembler
 
 
+#: what the decoding stage hands the assembling stage (:class:`Decoded`'s ``route``)
+BULK_ROUTE, REFERENCE_ROUTE, COUNTED_THEN_REFERENCE, END_ROUTE = range(4)
+
+
+@dataclass
+class Decoded:
+    """A block as the decoding stage left it (:meth:`BulkReader.decode`), for :meth:`BulkReader.take`.
+
+    ``route``: ``BULK_ROUTE`` (decoded: its first ``cut`` lines to count and its finished epochs, ``epochs``, to
+    assemble), ``REFERENCE_ROUTE`` (``data`` to read the reference way, as the rest of the log),
+    ``COUNTED_THEN_REFERENCE`` (the first ``cut`` lines counted, then ``data`` the reference way) or ``END_ROUTE``
+    (the log ended with nothing carried)."""
+
+    route: int
+    data: bytes = b""
+    final: bool = False
+    first_line: int = 0
+    bl: BlockLines | None = None
+    kind: np.ndarray | None = None
+    why: dict | None = None
+    stype: np.ndarray | None = None
+    cut: int = 0
+    epochs: tuple | None = None  # _assemble's (dec, local, dec_tod, first_dec, n_done, slow, decoded, parsed)
+
+
 class BulkReader:
-    """Feed it blocks of whole lines with :meth:`feed`; it returns finished epochs as arrays."""
+    """Feed it blocks of whole lines with :meth:`feed`; it returns finished epochs as arrays.
+
+    A block is read in two stages, which may run on two threads a block apart (each called in the blocks' order):
+    :meth:`decode` frames and decodes the lines and cuts the epochs — it holds the unfinished last epoch (``carry``)
+    and the count of lines before the block; :meth:`take` counts the lines into the statistics (raising there in
+    strict mode) and assembles the finished epochs — it holds the epoch numbers and, once the log goes the reference
+    way, the reference assembler. :meth:`feed` is the two at once."""
 
     def __init__(self, stats, strict: bool, name: str):
         self.stats = stats
@@ -69,28 +109,50 @@ class BulkReader:
         self.carry = b""
         self.reference: EpochAssembler | None = None  # set once the rest of the log goes the reference way
         self._handled = {pack_address("XX" + t) >> 16 for t in HANDLED_TYPES}
+        self._line = stats.lines  # lines before the next block to decode
+        self._referenced = False  # the decoding stage sends the rest of the log the reference way
         self.fast_epochs = 0  # epochs assembled in bulk (for tests and benchmarks)
         self.slow_epochs = 0
 
     # ------------------------------------------------------------------ public
     def feed(self, data: bytes, final: bool = False) -> dict[str, np.ndarray] | None:
         """Read one block (whole lines, no trailing line feed); the epochs it finished, or None."""
-        if self.carry:
-            data = self.carry + b"\n" + data
-            self.carry = b""
-        if self.reference is not None:
-            return self._reference_feed(data, final)
-        return self._bulk_feed(data, final)
+        return self.take(self.decode(data, final))
 
     def finish(self) -> dict[str, np.ndarray] | None:
         """End of the log: the last epoch."""
+        return self.take(self.decode_end())
+
+    def decode(self, data: bytes, final: bool = False) -> Decoded:
+        """The decoding stage of a block (whole lines, no trailing line feed)."""
+        if self.carry:
+            data = self.carry + b"\n" + data
+            self.carry = b""
+        if self._referenced:
+            return Decoded(REFERENCE_ROUTE, data, final)
+        return self._bulk_decode(data, final)
+
+    def decode_end(self) -> Decoded:
+        """The decoding stage at the end of the log: the epoch it carried, as the last block."""
         if self.carry:
             data, self.carry = self.carry, b""
-            return self.feed(data, final=True)
-        if self.reference is not None:
-            self.reference.finish()
-            return self.reference.take()
-        return None
+            return self.decode(data, final=True)
+        return Decoded(END_ROUTE)
+
+    def take(self, step: Decoded) -> dict[str, np.ndarray] | None:
+        """The assembling stage of a decoded block: the epochs it finished, or None."""
+        if step.route == END_ROUTE:
+            if self.reference is not None:
+                self.reference.finish()
+                return self.reference.take()
+            return None
+        if step.route != REFERENCE_ROUTE:
+            self._count(step.bl, step.kind, step.why, step.stype, step.cut, step.first_line)
+        if step.route != BULK_ROUTE:
+            return self._reference_feed(step.data, step.final)
+        if step.epochs is None:
+            return None
+        return self._assemble(step.bl, step.first_line, *step.epochs)
 
     # ------------------------------------------------------------------ reference path
     def _reference_feed(self, data: bytes, final: bool) -> dict[str, np.ndarray]:
@@ -105,10 +167,10 @@ class BulkReader:
         return self.reference.take()
 
     # ------------------------------------------------------------------ bulk path
-    def _bulk_feed(self, data: bytes, final: bool) -> dict[str, np.ndarray] | None:
+    def _bulk_decode(self, data: bytes, final: bool) -> Decoded:
         bl = split_block(data)
         n = bl.start.size
-        first_line = self.stats.lines
+        first_line = self._line
         kind = np.full(n, -1, np.int8)
         why: dict[int, str] = {}
         stype = np.full(n, None, dtype=object)  # None: not yet named (an empty address is a name)
@@ -164,7 +226,8 @@ class BulkReader:
             opener = first_tod[local[first_dec[1:]]]
             before = first_tod[local[first_dec[1:]] - 1]
             if np.any(spread[timed] >= SAME_TIME_S) or np.any(~(np.abs(opener - before) >= SAME_TIME_S)):
-                return self._reference_feed(data, final)  # from here on, line by line
+                self._referenced = True
+                return Decoded(REFERENCE_ROUTE, data, final)  # from here on, line by line
 
         # the last epoch may go on in the next block
         cut = n
@@ -175,12 +238,11 @@ class BulkReader:
             self.carry = data[(bl.start if bl.line_start is None else bl.line_start)[cut] :]
             if len(self.carry) > MAX_CARRY_BYTES:  # no epoch end in sight: go line by line from here
                 data, self.carry = self.carry, b""
-                self._count(bl, kind, why, stype, cut, first_line)
-                return self._reference_feed(data, final)  # from here on, line by line
-        self._count(bl, kind, why, stype, cut, first_line)
-        if n_done == 0:
-            return None
-        return self._assemble(bl, first_line, dec, local, dec_tod, first_dec, n_done, slow, decoded, parsed)
+                self._referenced = True
+                return Decoded(COUNTED_THEN_REFERENCE, data, final, first_line, bl, kind, why, stype, cut)
+        self._line = first_line + cut
+        epochs = (dec, local, dec_tod, first_dec, n_done, slow, decoded, parsed) if n_done else None
+        return Decoded(BULK_ROUTE, b"", final, first_line, bl, kind, why, stype, cut, epochs)
 
     @staticmethod
     def _other_sentences(bl: BlockLines, kind, why, stype) -> np.ndarray:
