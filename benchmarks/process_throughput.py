@@ -18,6 +18,9 @@ GBS (the receiver's RAIM, no failed satellite), no GRS; the share of the segment
 charged, the parallel roads (300 m apart) charged, the findings, and the time ``pynmea2.parse`` alone needs
 for the file are printed beside; then ``--pairs`` (3) ratios of a warm ``process`` to ``pynmea2.parse`` timed right
 after it, and their median (the two seconds apart, not minutes: a shared machine's speed drifts).
+``--mix neo-m9n``: the same drive without the ZED-F9P's second-band GSV lines (:func:`real_patterns.first_band`: 12 GSV lines an
+epoch instead of 24, 23 lines an epoch, 828 000 lines in 10 h — what a single-band u-blox NEO-M9N with GST, GBS and ZDA
+on writes, and the line count of the 10 h drive issue 49 was measured on).
 ``--mix satellites-only``: the same 25 m/s drive with the sentences of a real SiRF IV receiver that writes GGA RMC GSA
 GSV only (``bu353s4.log``): the ``model`` level; with ``--environment open`` (open country declared) it is charged, and
 so it is with ``--declare open`` (the geo-objects built with ``geoobjects build --environment motorway=open``: the
@@ -111,15 +114,16 @@ def ubx_nav_drive(path: Path, n_epochs: int, bias: tuple[int, int, float] | None
     real_patterns.ubx_drive(UBX_LOG, path, n_epochs, _track, bias=bias)
 
 
-def ublox_drive(path: Path, n_epochs: int) -> None:
-    """A drive along the motorway at ``UBLOX_SPEED`` with the real u-blox log's sentences, epoch by epoch."""
+def ublox_drive(path: Path, n_epochs: int, single_band: bool = False) -> None:
+    """A drive along the motorway at ``UBLOX_SPEED`` with the real u-blox log's sentences, epoch by epoch (``single_band``:
+    without its second band's GSV lines)."""
     import real_patterns
 
     def track(k: int):
         lon, lat = point(k * UBLOX_SPEED, 0.0)
         return lat, lon, UBLOX_SPEED, math.degrees(COURSE)
 
-    real_patterns.drive(real_patterns.DATA / UBLOX_LOG, path, n_epochs, track)
+    real_patterns.drive(real_patterns.DATA / UBLOX_LOG, path, n_epochs, track, single_band=single_band)
 
 
 def paired_ratios(process: list[str], env: dict, log: Path, pairs: int) -> list[float]:
@@ -146,8 +150,9 @@ def main() -> None:
     parser.add_argument("--hours", type=float, default=10.0)
     parser.add_argument("--objects", type=int, default=10_000)
     parser.add_argument("--memory-hours", type=float, nargs="*", default=[], help="drive lengths for the memory test, h")
-    parser.add_argument("--mix", choices=("compose", "ublox", "satellites-only", "ubx"), default="compose",
-                        help="the drive's sentence mix: compose, ublox (ZED-F9P NMEA), satellites-only (bu353s4 GSA+GSV), "
+    parser.add_argument("--mix", choices=("compose", "ublox", "neo-m9n", "satellites-only", "ubx"), default="compose",
+                        help="the drive's sentence mix: compose, ublox (ZED-F9P NMEA), neo-m9n (the same, single band), "
+                        "satellites-only (bu353s4 GSA+GSV), "
                         "ubx (the OSNMA recording's NAV-PVT + NAV-SAT)")  # fmt: skip
     parser.add_argument("--environment", default="auto", help="tollcli's --environment (satellites-only: open declares open country)")
     parser.add_argument("--declare", choices=("open", "urban"), default=None,
@@ -161,8 +166,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / ("drive.ubx" if args.mix == "ubx" else "drive.nmea")
         speed = SPEED if args.mix == "compose" else UBLOX_SPEED
-        if args.mix == "ublox":
-            ublox_drive(log, n_epochs)
+        if args.mix in ("ublox", "neo-m9n"):
+            ublox_drive(log, n_epochs, single_band=args.mix == "neo-m9n")
         elif args.mix == "satellites-only":
             satellites_only_drive(log, n_epochs)
         elif args.mix == "ubx":

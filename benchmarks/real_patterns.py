@@ -106,6 +106,22 @@ def replay(log: Path, out: Path, min_lines: int) -> int:
     return written
 
 
+def first_band(epoch: list[tuple[str, list[str], int, float | None]]) -> list[tuple[str, list[str], int, float | None]]:
+    """An epoch's sentences without the GSV lines of any signal but the first each talker reports (NMEA 4.10's signal
+    id, the last field): what a single-band receiver of the same make writes — a dual-band u-blox ZED-F9P's epoch as a
+    NEO-M9N would write it (12 GSV lines instead of 24)."""
+    first: dict[str, str] = {}
+    out = []
+    for item in epoch:
+        address, fields = item[0], item[1]
+        if address[2:] == "GSV":
+            signal = fields[-1] if (len(fields) - 3) % 4 == 1 else ""
+            if first.setdefault(address[:2], signal) != signal:
+                continue
+        out.append(item)
+    return out
+
+
 def _epochs(lines: list[tuple[str, list[str], int, float | None]]) -> list[list[tuple[str, list[str], int, float | None]]]:
     """The template's sentences grouped into epochs (a new one where a time of day changes)."""
     out: list[list] = []
@@ -128,8 +144,9 @@ def _ddmm(value_deg: float, width: int, decimals: int) -> tuple[str, bool]:
     return text, value_deg < 0
 
 
-def drive(log: Path, out: Path, n_epochs: int, track, day0: tuple[int, int, int] = (6, 5, 2024)) -> int:
+def drive(log: Path, out: Path, n_epochs: int, track, day0: tuple[int, int, int] = (6, 5, 2024), single_band: bool = False) -> int:
     """A drive of ``n_epochs`` 1 Hz epochs with ``log``'s sentences, on ``track``; returns the number of lines.
+    ``single_band``: each epoch without the GSV lines of a constellation's second signal (:func:`first_band`).
 
     Epoch k is the log's epoch k mod (its number of epochs), as the receiver wrote it (satellites,
     GSA/GSV, GST, GBS, …), with its time set to k s after midnight of ``day0`` (d, m, y) and its
@@ -139,6 +156,8 @@ def drive(log: Path, out: Path, n_epochs: int, track, day0: tuple[int, int, int]
     import datetime as dt
 
     epochs = _epochs(template(log))
+    if single_band:
+        epochs = [first_band(e) for e in epochs]
     written = 0
     start = dt.datetime(day0[2], day0[1], day0[0])
     with open(out, "w", encoding="latin-1", newline="\n") as fh:
