@@ -111,8 +111,11 @@ def test_a_fault_is_found_on_the_faulty_satellite():
 
 def test_the_protection_level_is_the_least_within_the_budget():
     """The solver's L spends the integrity budget: the risk at L is within it, and at L less one part in 10⁹ it is
-    not (the bisection ends within 2⁻⁴⁸ of its start)."""
-    from tollcli.integrity.solution_separation import _risk, _solve_hpl, radius_factor
+    not (the solver ends within 1e-10 of it: ``tests/test_protection_level_solve.py``)."""
+    from tollcli.integrity.solution_separation import _risk_and_slope, _solve_hpl, radius_factor
+
+    def _risk(hpl, *terms):
+        return _risk_and_slope(hpl, *terms, True)[0]
 
     rng = np.random.default_rng(3)
     n_epochs, n_modes = 3000, 30
