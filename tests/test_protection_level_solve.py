@@ -69,3 +69,19 @@ def test_newton_needs_a_handful_of_evaluations(monkeypatch):
     monkeypatch.setattr(ss, "_risk_and_slope", lambda *a: calls.append(1) or original(*a))
     hpl = ss._solve_hpl(*_equations(np.random.default_rng(7), 512, 40))
     assert np.isfinite(hpl).all() and len(calls) <= 16
+
+
+def test_an_epochs_level_is_the_same_in_any_block():
+    """Metamorphic: an epoch's level does not depend on the epochs solved with it, nor on the empty mode columns a
+    block pads its rows with (its most satellites), to the bit — a log's invoice is the same in any chunks. (Newton's
+    steps carry the risk's last bit into the next L: the rows are summed term after term, so a zero adds nothing.)"""
+    rng = np.random.default_rng(11)
+    sigma_0, prior, threshold, sigma_k, budget = _equations(rng, 400, 30)
+    whole = ss._solve_hpl(sigma_0, prior, threshold, sigma_k, budget)
+    rows = np.arange(0, 400, 7)
+    alone = ss._solve_hpl(sigma_0[rows], prior[rows], threshold[rows], sigma_k[rows], budget[rows])
+    assert np.array_equal(whole[rows], alone)
+    pad = rng.integers(1, 40)
+    at = np.sort(rng.integers(0, 31, pad))  # empty modes anywhere among the others, as a larger block's slots
+    padded = [np.insert(a, at, fill, axis=1) for a, fill in ((prior, 0.0), (threshold, 0.0), (sigma_k, 1.0))]
+    assert np.array_equal(ss._solve_hpl(sigma_0, padded[0], padded[1], padded[2], budget), whole)

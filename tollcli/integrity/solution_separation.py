@@ -116,9 +116,20 @@ def _risk_and_slope(hpl: np.ndarray, sigma_0: np.ndarray, prior: np.ndarray, thr
         np.multiply(prior, term, out=term)  # pₖ·exp(−u²/2)
         slope = np.multiply(term, u)
         np.divide(slope, sigma_k, out=slope)  # pₖ·exp(−u²/2)·u/σₖ: minus the term's derivative
-        if finite:
-            return free + term.sum(axis=1), -(free_slope + slope.sum(axis=1))
-        return free + np.nansum(term, axis=1), -(free_slope + np.nansum(np.where(term > 0, slope, 0.0), axis=1))
+        if not finite:
+            term, slope = np.nan_to_num(term, nan=0.0), np.where(term > 0, slope, 0.0)
+        # each row summed in column order, one term after another: a mode not present (a zero term: an empty slot, the
+        # block's padding) then changes no bit, so an epoch's level is the same in any block (chunk) of epochs — Newton's
+        # steps carry the last bit of the risk into the next L, where bisection only compared it with the budget
+        return free + _row_sums(term), -(free_slope + _row_sums(slope))
+
+
+def _row_sums(a: np.ndarray) -> np.ndarray:
+    """The sums of the rows of ``a`` (E, K), each left to right (numpy's ``sum`` adds in pairs: padding moves its
+    partial sums)."""
+    if a.shape[1] == 0:
+        return np.zeros(a.shape[0])
+    return np.cumsum(a, axis=1)[:, -1]
 
 
 def _solve_hpl(sigma_0: np.ndarray, prior: np.ndarray, threshold: np.ndarray, sigma_k: np.ndarray,
