@@ -16,8 +16,8 @@ Horizontally, with Σ the measurement covariance and σ_major(C) the semi-major 
 * test: a fault is detected when |Δₖ| > Tₖ = K(p_fa / N_mon)·σ_ss,k for a monitored mode;
 * protection level: the smallest L with exp(−(L/σ₀)²/2) + Σₖ pₖ·exp(−((L − Tₖ)/σₖ)²/2) ≤ p_md − P_NM
   (σₖ = σ_major of x̂ₖ: under mode k the subset is fault-free and, with no alarm, |x̂₀ − x̂ₖ| ≤ Tₖ by the
-  triangle inequality), solved for every epoch at once (:func:`_solve_hpl`: Newton's steps inside a bracket) — the ARAIM integrity equation with the
-  budget going where it is needed, no fixed split;
+  triangle inequality), solved for every epoch at once (:func:`_solve_hpl`: Newton's steps inside a bracket) — the
+  ARAIM integrity equation with the budget going where it is needed, no fixed split;
 * **faults not monitored**: P_NM, the prior probability of more satellites failing at once than any subset leaves
   out — (Σ p)² / 2 for two, (Σ p)³ / 6 for three where pairs are monitored — plus the priors of the modes too
   rare to monitor.
@@ -91,7 +91,7 @@ def _finite_modes(prior: np.ndarray, threshold: np.ndarray, sigma_k: np.ndarray)
 
 #: the protection level is found to this share of itself (and never below the smallest L that meets the budget)
 HPL_REL_TOL = 1e-10
-#: evaluations of the integrity risk per epoch at most (Newton's steps converge in about eight; bisection is the fallback)
+#: evaluations of the integrity risk per epoch at most (Newton's steps converge in about seven; bisection the fallback)
 HPL_MAX_STEPS = 80
 
 
@@ -134,17 +134,18 @@ def _row_sums(a: np.ndarray) -> np.ndarray:
 
 def _solve_hpl(sigma_0: np.ndarray, prior: np.ndarray, threshold: np.ndarray, sigma_k: np.ndarray,
                budget: np.ndarray) -> np.ndarray:  # fmt: skip
-    """The smallest L whose integrity risk (:func:`_risk_and_slope`) is within ``budget`` (E,), for every epoch at once: the budget shared among
-    the fault-free case and the monitored modes as each needs it (NaN: no L does).
+    """The smallest L whose integrity risk (:func:`_risk_and_slope`) is within ``budget`` (E,), for every epoch at
+    once: the budget shared among the fault-free case and the monitored modes as each needs it (NaN: no L does).
 
     The risk falls as L grows. Each epoch keeps a bracket: ``hi`` an L within the budget (it starts at one where every
-    term is at most budget / (modes + 1)), ``lo`` one beyond it (it starts at 0). The next L tried is Newton's on the logarithm of the risk (nearly a parabola in L: each term a
-    Gaussian tail) from the last one tried, else the bracket's middle; where Newton's step is smaller than the
-    tolerance, the L inside the bracket by half the tolerance (below ``hi``, or above ``lo``: the side the last L was
-    on) is tried, which closes the bracket or moves its end. An
-    epoch is done when ``hi − lo ≤`` :data:`HPL_REL_TOL` · hi, and its protection level is ``hi``: always within the
-    budget, never above the exact L by more than that share. Eight or so evaluations instead of bisection's 48
-    (the bisection, to the same tolerance, is the property test's reference)."""
+    term is at most budget / (modes + 1)), ``lo`` one beyond it (it starts at 0). The next L tried is Newton's on the
+    logarithm of the risk (nearly a parabola in L: each term a Gaussian tail) from the last one tried, else the
+    bracket's middle; where Newton's step is smaller than the tolerance, the L inside the bracket by half the
+    tolerance (below ``hi``, or above ``lo``: the side the last L was on) is tried, which closes the bracket or moves
+    its end. An epoch is done when ``hi − lo ≤`` :data:`HPL_REL_TOL` · hi, and its protection level is ``hi``: always
+    within the budget, never above the exact L by more than that share. About seven evaluations instead of
+    bisection's 48 (bisection to the limit of the arithmetic is the property test's reference:
+    ``tests/test_protection_level_solve.py``)."""
     n_modes = np.maximum((prior > 0).sum(axis=1), 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         # an L that surely suffices: every term at most budget / (modes + 1)
