@@ -85,3 +85,16 @@ def test_an_epochs_level_is_the_same_in_any_block():
     at = np.sort(rng.integers(0, 31, pad))  # empty modes anywhere among the others, as a larger block's slots
     padded = [np.insert(a, at, fill, axis=1) for a, fill in ((prior, 0.0), (threshold, 0.0), (sigma_k, 1.0))]
     assert np.array_equal(ss._solve_hpl(sigma_0, padded[0], padded[1], padded[2], budget), whole)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (3, 7), (4880, 24), (50, 214), (9, 0)])
+def test_the_rows_are_summed_left_to_right(shape):
+    """Known answer: each row's sum is that of adding its terms one after another (the running sum's last value), to
+    the bit, over terms spanning twenty decades — whatever the block's rows and width (what the metamorphic test above
+    rests on)."""
+    rng = np.random.default_rng(shape[0] * 1000 + shape[1])
+    a = rng.normal(size=shape) * 10 ** rng.uniform(-10, 10, shape)
+    expected = np.zeros(shape[0])
+    for k in range(shape[1]):
+        expected = expected + a[:, k] if k else a[:, 0].copy()
+    assert np.array_equal(ss._row_sums(a), expected)

@@ -83,29 +83,46 @@ class ClockGroups:
     """Per epoch, the measurements of each clock group (constellation) summed (:func:`clock_group_terms`)."""
 
     total: np.ndarray  # (E, G) Σ w: the normal matrix's clock diagonal
-    centred: np.ndarray  # (E, N, 3) each measurement's [−e, −n, −u] row less its group's weighted mean h̄
+    centred: np.ndarray | None  # (E, N, 3) each measurement's [−e, −n, −u] row less its group's weighted mean h̄ (0 unused)
     scatter: np.ndarray  # (E, G, 3, 3) Σ w·(h − h̄)(h − h̄)ᵀ: summed over groups, the clock block's Schur complement
     squares: np.ndarray  # (E, G, 3) Σ w·h²: the position diagonal's share
     nonzero: np.ndarray  # (E, G, 3) some measurement of the group has that position entry
 
 
-def clock_group_terms(Hm: np.ndarray, weight: np.ndarray, group: np.ndarray, n_groups: int) -> ClockGroups:
+def clock_group_terms(Hm: np.ndarray, weight: np.ndarray, group: np.ndarray, n_groups: int, centred: bool = True) -> ClockGroups:
     """:class:`ClockGroups` of rows ``Hm`` (E, N, ≥3) with ``weight`` (E, N; 0 unused), ``group`` (E, N) each
     measurement's clock group (−1 none). The Schur complement S = P − B·D⁻¹·Bᵀ of a normal matrix's diagonal clock
     block is the sum of the groups' scatters: formed so, without the cancellation of the difference; the position
     block of the normal matrix's inverse is S⁻¹ (:func:`adjugate_inverse`), a measurement n's position gain
-    S⁻¹·w_n·(h_n − h̄ of its group)."""
+    S⁻¹·w_n·(h_n − h̄ of its group). Each sum is taken over the group's measurements in slot order (an epoch's terms
+    do not depend on the epochs beside it). ``centred``: False leaves :attr:`ClockGroups.centred` None."""
     n_epochs, n_slots = weight.shape
-    member = np.zeros((n_epochs, n_groups, n_slots))
-    e, n = np.nonzero((group >= 0) & (weight > 0))
-    member[e, group[e, n], n] = weight[e, n]
-    total = member.sum(axis=2)
-    h = Hm[..., :3]
-    mean = (member @ h) / np.where(total > 0, total, 1.0)[..., None]  # (E, G, 3)
-    d = h - np.take_along_axis(mean, np.maximum(group, 0)[..., None], axis=1)
-    outer = (d[..., :, None] * d[..., None, :]).reshape(n_epochs, n_slots, 9)
-    return ClockGroups(total, d, (member @ outer).reshape(n_epochs, n_groups, 3, 3), member @ (h * h),
-                       (member > 0).astype(float) @ np.abs(h) > 0)  # fmt: skip
+    taken = np.flatnonzero((group >= 0) & (weight > 0))  # flat (epoch, slot) places, in each epoch's slot order
+    key = (np.arange(n_epochs)[:, None] * n_groups + group).ravel()[taken]  # (epoch, group)
+    w = weight.ravel()[taken]
+    h = [np.take(Hm[..., k], taken) for k in range(3)]  # east, north, up rows: one contiguous array each
+    size = n_epochs * n_groups
+
+    def summed(values: np.ndarray) -> np.ndarray:  # Σ over each (epoch, group)'s measurements, slot after slot
+        return np.bincount(key, weights=values, minlength=size).reshape(n_epochs, n_groups)
+
+    total = summed(w)
+    wh = [w * hk for hk in h]
+    mean = np.stack([summed(whk) for whk in wh], axis=-1) / np.where(total > 0, total, 1.0)[..., None]  # (E, G, 3)
+    d = [hk - np.take(mean[..., k], key) for k, hk in enumerate(h)]
+    wd = [w * dk for dk in d]
+    scatter = np.empty((n_epochs, n_groups, 3, 3))
+    for i in range(3):
+        for j in range(i + 1):
+            scatter[..., i, j] = scatter[..., j, i] = summed(wd[i] * d[j])
+    squares = np.stack([summed(whk * hk) for whk, hk in zip(wh, h)], axis=-1)
+    nonzero = np.stack([summed(np.abs(hk)) for hk in h], axis=-1) > 0
+    rows = None
+    if centred:  # zero where no measurement is taken (its weight is zero there)
+        rows = np.zeros((n_epochs * n_slots, 3))
+        rows[taken] = np.stack(d, axis=-1)
+        rows = rows.reshape(n_epochs, n_slots, 3)
+    return ClockGroups(total, rows, scatter, squares, nonzero)
 
 
 def clock_groups(Hm: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
@@ -173,6 +190,30 @@ def wls_gain(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Gain:
     """The WLS gain of every epoch, as :func:`wls_geometry` computes it (the same numbers), without the rest."""
     mask, weight, _, _, A, singular = _gain_terms(H, sigma_m, mask)
     return Gain(A, singular, mask.sum(axis=1), weight)
+
+
+def horizontal_covariance(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The east-north block (E, 2, 2; m²) of the WLS position covariance (HᵀΣ⁻¹H)⁻¹ of every epoch, whether its
+    normal matrix is singular (E,), and its measurements (E,): what :func:`wls_gain` gives through A·Σ·Aᵀ, without the
+    gain. Where H's clocks are one-hot (the form :func:`observation_matrix` writes) the block is that of S⁻¹, S the
+    Schur complement of the clock block (:func:`clock_group_terms`, :func:`adjugate_inverse`): a 3×3 inverse per epoch,
+    not a U×U one and the N-wide products; else through the gain."""
+    mask = mask & np.isfinite(sigma_m) & (sigma_m > 0)
+    weight = np.where(mask, 1.0 / np.where(mask, sigma_m, 1.0) ** 2, 0.0)
+    Hm = np.where(mask[..., None], H, 0.0)
+    group = clock_groups(Hm, weight)
+    if group is None:
+        gain = wls_gain(H, sigma_m, mask)
+        A = gain.A[:, :2, :]
+        var = np.where(gain.weight > 0, np.nan_to_num(sigma_m), 0.0) ** 2
+        return np.einsum("eun,en,evn->euv", A, var, A), gain.singular, gain.n_meas
+    g = clock_group_terms(Hm, weight, group, Hm.shape[-1] - 3, centred=False)
+    S = g.scatter.sum(axis=1)
+    active = g.nonzero.any(axis=1)  # (E, 3) the position unknowns some measurement has
+    idx = np.arange(3)
+    S[:, idx, idx] += ~active  # an inactive unknown is decoupled, not singular (as wls_geometry)
+    s_inv, singular = adjugate_inverse(S, g.squares.sum(axis=1) + ~active)
+    return s_inv[:, :2, :2], singular, mask.sum(axis=1)
 
 
 def wls_geometry(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Geometry:

@@ -26,9 +26,14 @@ def sigma_major_m(geometry: Geometry | Gain, sigma_m: np.ndarray) -> np.ndarray:
     A = geometry.A[:, :2, :]
     var = np.where(geometry.weight > 0, np.nan_to_num(sigma_m), 0.0) ** 2
     cov = np.einsum("eun,en,evn->euv", A, var, A)
-    de, dn, den = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
+    return major_of_covariance_m(cov, geometry.singular | (geometry.n_meas == 0))
+
+
+def major_of_covariance_m(cov_en_m2: np.ndarray, void: np.ndarray) -> np.ndarray:
+    """σ_major (m) of east-north covariances (E, 2, 2); NaN where ``void`` (E,: singular or no measurement)."""
+    de, dn, den = cov_en_m2[:, 0, 0], cov_en_m2[:, 1, 1], cov_en_m2[:, 0, 1]
     d_major = np.sqrt(0.5 * (de + dn) + np.sqrt(0.25 * (de - dn) ** 2 + den**2))
-    return np.where(geometry.singular | (geometry.n_meas == 0), np.nan, d_major)
+    return np.where(void, np.nan, d_major)
 
 
 def model_hpl_m(geometry: Geometry | Gain, sigma_m: np.ndarray, p_md: float) -> np.ndarray:

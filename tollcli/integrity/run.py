@@ -23,7 +23,7 @@ import pandas as pd
 
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.receiver_outputs import GST_RMS_NOTES
-from tollcli.gnss.wls import Geometry, post_fit_residuals, wls_gain, wls_geometry, wsse
+from tollcli.gnss.wls import Geometry, horizontal_covariance, post_fit_residuals, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
 from tollcli.integrity.kalman_hit import hpl_sbas_m
 from tollcli.integrity.raim import (
@@ -52,6 +52,7 @@ from tollcli.integrity.sources import (
     RESIDUAL_SOURCES,
     bound_verdict,
     combine,
+    k_h,
     level_for,
     receiver_verdicts,
     strictest,
@@ -211,7 +212,7 @@ def model_hpl(meas: Measurements, geometry: Geometry, p_md: float) -> np.ndarray
     (:attr:`Measurements.model_sigma_m`; the urban σ where it is not set), else — where the receiver reports no
     satellites at all — K_H·HDOP·σ_worst, else NaN (satellites reported, too few used: ``insufficient``)."""
     from tollcli.gnss.sigma_models import urban_sigma_m
-    from tollcli.integrity.model_bound import hdop_hpl_m, model_hpl_m
+    from tollcli.integrity.model_bound import hdop_hpl_m, major_of_covariance_m, model_hpl_m
 
     if meas.model_sigma_m is not None:
         sigma = meas.model_sigma_m
@@ -221,8 +222,11 @@ def model_hpl(meas: Measurements, geometry: Geometry, p_md: float) -> np.ndarray
         sigma = np.where(meas.mask & ~open_sky[:, None], np.maximum(meas.sigma_m, urban_sigma_m(meas.sigma_m, meas.cn0_dbhz)),
                          meas.sigma_m)  # fmt: skip
     same = sigma is meas.sigma_m or np.array_equal(np.where(meas.mask, sigma, 0.0), np.where(meas.mask, meas.sigma_m, 0.0))
-    own = geometry if same else wls_gain(meas.H, sigma, meas.mask)  # its covariance only: the gain
-    hpl = model_hpl_m(own, sigma, p_md)
+    if same:
+        hpl = model_hpl_m(geometry, sigma, p_md)
+    else:  # its covariance only
+        cov_en_m2, singular, n_meas = horizontal_covariance(meas.H, sigma, meas.mask)
+        hpl = k_h(p_md) * major_of_covariance_m(cov_en_m2, singular | (n_meas == 0))
     if meas.receiver is not None and meas.receiver.hdop is not None:
         hpl = np.where(np.isfinite(hpl) | ~no_geometry(meas), hpl, hdop_hpl_m(meas.receiver.hdop, p_md, open_sky))
     return hpl

@@ -125,11 +125,13 @@ def _risk_and_slope(hpl: np.ndarray, sigma_0: np.ndarray, prior: np.ndarray, thr
 
 
 def _row_sums(a: np.ndarray) -> np.ndarray:
-    """The sums of the rows of ``a`` (E, K), each left to right (numpy's ``sum`` adds in pairs: padding moves its
-    partial sums)."""
+    """The sums of the rows of ``a`` (E, K), each left to right (numpy's ``sum`` along a row adds in pairs: padding
+    moves its partial sums). Its columns are laid out one after another and added column to column — a reduction
+    over the outer axis of a contiguous array, one term after another (the last column of ``cumsum``, to the bit;
+    ``tests/test_protection_level_solve.py``), without the running sums."""
     if a.shape[1] == 0:
         return np.zeros(a.shape[0])
-    return np.cumsum(a, axis=1)[:, -1]
+    return np.add.reduce(np.ascontiguousarray(a.T), axis=0)
 
 
 def _solve_hpl(sigma_0: np.ndarray, prior: np.ndarray, threshold: np.ndarray, sigma_k: np.ndarray,
@@ -343,9 +345,14 @@ def _subset_terms(H, sigma_m, used, var, const, n_const, geometry, i, j, dy_m, c
 
     def scaled_det_ok(det_r, removed_diag):
         d = diag[..., None, :] - removed_diag if removed_diag.ndim == 3 else diag - removed_diag
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scaled = det_g[..., None] * det_r / np.prod(np.where(d > 0, d, np.nan), axis=-1)
-        return (d > 0).all(axis=-1) & (scaled > SINGULAR_RCOND)
+        positive = d[..., 0] > 0
+        product = d[..., 0].copy()
+        for u in range(1, d.shape[-1]):  # the diagonal's product, column after column (as np.prod along it)
+            positive &= d[..., u] > 0
+            product *= d[..., u]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            scaled = det_g[..., None] * det_r / np.where(positive, product, np.nan)
+        return positive & (scaled > SINGULAR_RCOND)
 
     # --- single satellites
     lone = used & (np.take_along_axis(clock_count, np.maximum(const, 0), axis=1) <= 1) & (clock_cols > 0)
