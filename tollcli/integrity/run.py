@@ -164,8 +164,9 @@ class HalFreeTerms:
                             self.model_hpl_m[rows] if model and self.model_hpl_m is not None else None)  # fmt: skip
 
 
-def hal_free_terms(meas: Measurements, params: RaimParams, geometry: Geometry) -> HalFreeTerms | None:
-    """:class:`HalFreeTerms` of ``meas`` (None: positions the trajectory estimator placed, judged by its bound)."""
+def hal_free_terms(meas: Measurements, params: RaimParams, geometry: Geometry, model_hpl_m: np.ndarray | None = None) -> HalFreeTerms | None:
+    """:class:`HalFreeTerms` of ``meas`` (None: positions the trajectory estimator placed, judged by its bound);
+    ``model_hpl_m``: :func:`model_hpl` of ``meas`` when already computed (with ``params.p_md``)."""
     if meas.trajectory_hpl_m is not None:
         return None
     separation = None
@@ -174,7 +175,7 @@ def hal_free_terms(meas: Measurements, params: RaimParams, geometry: Geometry) -
         per_satellite = np.isfinite(wsse(residual, geometry))
         separation = epoch_separation(meas.H, meas.sigma_m, meas.mask, np.where(per_satellite[:, None], residual, np.nan),
                                       geometry, params)  # fmt: skip
-    return HalFreeTerms(separation, model_hpl(meas, geometry, params.p_md))
+    return HalFreeTerms(separation, model_hpl(meas, geometry, params.p_md) if model_hpl_m is None else model_hpl_m)
 
 
 def _names(verdict: np.ndarray):

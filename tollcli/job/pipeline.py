@@ -15,6 +15,7 @@ import os
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, replace
 
+import numpy as np
 import pandas as pd
 
 from tollcli.charging.invoice import (
@@ -35,11 +36,11 @@ from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
 from tollcli.gnss.pseudorange_inputs import NoOrbitsError, pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
-from tollcli.gnss.wls import wls_geometry
+from tollcli.gnss.wls import Geometry, wls_geometry
 from tollcli.integrity.environment import ENVIRONMENTS, EnvironmentCarry
 from tollcli.integrity.nav_authentication import epoch_authentication, not_checked
 from tollcli.integrity.raim import MODES, RaimParams
-from tollcli.integrity.run import hal_free_terms, level_name, run_raim, settle_sources
+from tollcli.integrity.run import hal_free_terms, level_name, model_hpl, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.integrity.trajectory import POSITIONINGS, with_trajectory
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
@@ -394,16 +395,33 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
         yield part, part_meas, None
 
 
-def _prepared_chunks(chunks, settings: ChargeSettings, params: RaimParams):
+@dataclass
+class PreparedChunk:
+    """A chunk of a log with what needs no geo-object (:func:`_prepared_chunks`)."""
+
+    epochs: pd.DataFrame
+    meas: Measurements
+    satellites: pd.DataFrame | None
+    params: RaimParams  # the integrity sources the log settled on so far
+    env_columns: pd.DataFrame  # the measured environment's column
+    geometry: Geometry  # the WLS geometry, once for the epoch RAIM and every HAL
+    cn0: pd.DataFrame  # the per-epoch C/N0 summary (:func:`~tollcli.enforcement.trip.cn0_summary`)
+    model_hpl_m: np.ndarray | None  # the model level's HPL (:func:`~tollcli.integrity.run.model_hpl`; None: a trajectory's positions)
+
+
+def _prepared_chunks(chunks, settings: ChargeSettings, params: RaimParams) -> Iterator[PreparedChunk]:
     """Each chunk (epochs, RAIM measurements, satellite table or None) with what needs no geo-object: the integrity
     sources the log settled on so far (``params``), its measured environment (the σ of the epochs the residuals say
-    urban, and that column) and its WLS geometry. Chunks in order: the environment carries from one to the next."""
+    urban, and that column), its WLS geometry, its C/N0 summary and its model level's HPL — made where the chunk is
+    read (a navigation log's on the reading thread). Chunks in order: the environment carries from one to the next."""
     env_carry = EnvironmentCarry()
     for epochs, meas, satellites in chunks:
         params = settle_sources(params, meas)  # the log's level, from its first epoch with a source
         meas, env_columns = measured_environment(epochs, meas, settings.environment, env_carry)
-        geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)  # once for the epoch RAIM and every HAL
-        yield epochs, meas, satellites, params, env_columns, geometry
+        geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
+        model = model_hpl(meas, geometry, params.p_md) if meas.trajectory_hpl_m is None else None
+        yield PreparedChunk(epochs, meas, satellites, params, env_columns, geometry,
+                            cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0])), model)  # fmt: skip
 
 
 def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, epoch_raim: RaimParams, charger: TailCharger,
@@ -420,13 +438,15 @@ def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, ep
     table_parts = []
     offset = 0
     warm_up(geo)  # while the first chunk is read
-    for epochs, meas, satellites, params, env_columns, geometry in chunks:
+    for chunk in chunks:
+        epochs, meas, satellites, params, env_columns, geometry = (chunk.epochs, chunk.meas, chunk.satellites, chunk.params,
+                                                                   chunk.env_columns, chunk.geometry)  # fmt: skip
         epoch_raim = replace(epoch_raim, sources=params.sources)
-        hal_free = hal_free_terms(meas, epoch_raim, geometry)  # once for the epoch RAIM and every HAL
+        hal_free = hal_free_terms(meas, epoch_raim, geometry, chunk.model_hpl_m)  # once for the epoch RAIM and every HAL
         raim = run_raim(meas, epoch_raim, geometry=geometry, hal_free=hal_free)
         pairs = inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry, environment=settings.environment,
                              hal_free=hal_free)  # fmt: skip
-        cn0 = cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0]))
+        cn0 = chunk.cn0
         kept = epochs[[c for c in KEPT_EPOCH_COLUMNS if c in epochs]]
         auth = None
         if osnma is not None or settings.require_authenticated:
@@ -447,7 +467,7 @@ def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, ep
                                           env_columns, raim.reset_index(drop=True), *([auth] if auth is not None else [])],
                                          axis=1))  # fmt: skip
         offset += len(epochs)
-        del epochs, meas, geometry, hal_free, raim, pairs, cn0  # freed before the next chunk is read, not after
+        del chunk, epochs, meas, geometry, hal_free, raim, pairs, cn0  # freed before the next chunk is read, not after
     if epoch_table is not None and table_parts:
         epoch_table.append(pd.concat(table_parts, ignore_index=True))
     return params
