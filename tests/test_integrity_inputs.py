@@ -203,3 +203,25 @@ def test_angle_lookup_takes_epochs_in_any_order():
     keys, values = np.array([3, 1, 7, 5]), np.array([30.0, 10.0, 70.0, 50.0])
     np.testing.assert_array_equal(_lookup(keys, values, np.array([5, 2, 3, 7, 9, 1])), [50.0, np.nan, 30.0, 70.0, np.nan, 10.0])
     np.testing.assert_array_equal(_lookup(np.sort(keys), np.sort(values), np.array([5, 2, 3])), [50.0, np.nan, 30.0])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_angle_lookup_of_consecutive_epochs_is_the_searched_one(seed):
+    """A chunk's epoch numbers are consecutive: looked up by their distance from the first, every wanted number
+    (repeated, out of range below and above, shuffled keys) gets what the sorted search gives."""
+    from tollcli.gnss.nmea_measurements import _lookup
+
+    rng = np.random.default_rng(seed)
+    first, n = int(rng.integers(0, 10**6)), int(rng.integers(1, 400))
+    keys = np.arange(first, first + n)
+    values = rng.normal(size=n)
+    if seed % 2:
+        order = rng.permutation(n)
+        keys, values = keys[order], values[order]
+    wanted = rng.integers(first - 20, first + n + 20, 2000)
+    gaps = np.delete(keys, rng.integers(0, n, min(n - 1, 3))) if n > 4 else keys  # not consecutive: the search
+    expected = np.array([values[keys == w][0] if (keys == w).any() else np.nan for w in wanted])
+    np.testing.assert_array_equal(_lookup(keys, values, wanted), expected)
+    kept = np.isin(keys, gaps)
+    expected = np.array([values[kept][gaps == w][0] if (gaps == w).any() else np.nan for w in wanted])
+    np.testing.assert_array_equal(_lookup(gaps, values[kept], wanted), expected)

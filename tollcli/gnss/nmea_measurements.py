@@ -97,6 +97,10 @@ def _lookup(keys: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndar
     if not (keys[1:] > keys[:-1]).all():  # the reader's epoch numbers are in order: no sort needed
         order = np.argsort(keys, kind="stable")
         keys, values = keys[order], values[order]
+    if keys.dtype.kind in "iu" and wanted.dtype.kind in "iu" and int(keys[-1]) - int(keys[0]) == keys.size - 1:  # consecutive:
+        pos = wanted - keys[0]  # (a chunk's epoch numbers) each key's place is its distance from the first
+        inside = (pos >= 0) & (pos < keys.size)
+        return np.where(inside, values[np.where(inside, pos, 0)], np.nan)
     pos = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)
     return np.where(keys[pos] == wanted, values[pos], np.nan)
 
