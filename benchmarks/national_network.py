@@ -2,6 +2,7 @@
 
     python benchmarks/national_network.py                          # 10k, 50k, 150k (≈ 10 min on 2 cores)
     python benchmarks/national_network.py --sections 10000 --hours 1
+    python benchmarks/national_network.py --sections 10000 150000 --mix neo-m9n   # the drive issue 49 was measured on
 
 The network is ``process_throughput.roads``: the motorway under the drive and parallel tolled roads 300 m apart, cut
 into 250 m sections, scaled to the section count (150 000 sections: 42 roads of 900 km). The drive is the 10 h
@@ -150,6 +151,9 @@ def main() -> None:
     parser.add_argument("--batch-logs", type=int, default=20)
     parser.add_argument("--batch-hours", type=float, default=0.5, help="each batch log's length, h")
     parser.add_argument("--workdir", default=tempfile.gettempdir())
+    parser.add_argument("--mix", choices=("ublox", "neo-m9n"), default="ublox",
+                        help="the drive's sentences: the ZED-F9P's, or the same without its second band's GSV lines (as "
+                             "process_throughput.py --mix neo-m9n: 828 000 lines in 10 h)")  # fmt: skip
     args = parser.parse_args()
     env0 = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     import tollcli as tollcli_package
@@ -159,16 +163,18 @@ def main() -> None:
     with tempfile.TemporaryDirectory(dir=args.workdir) as tmp:
         work = Path(tmp)
         drive = work / "drive.nmea"
-        ublox_drive(drive, int(args.hours * 3600))
+        single_band = args.mix == "neo-m9n"
+        ublox_drive(drive, int(args.hours * 3600), single_band=single_band)
         short = work / "short.nmea"
-        ublox_drive(short, int(args.batch_hours * 3600))
+        ublox_drive(short, int(args.batch_hours * 3600), single_band=single_band)
         (work / "logs").mkdir()
         batch_logs = []
         for i in range(args.batch_logs):
             log = work / "logs" / f"VEH-{i:03d}.nmea"
             os.link(short, log)
             batch_logs.append(log)
-        print(f"drive: {int(args.hours * 3600)} epochs, {drive.stat().st_size / 1e6:.0f} MB of u-blox ZED-F9P NMEA; "
+        print(f"drive: {int(args.hours * 3600)} epochs, {drive.stat().st_size / 1e6:.0f} MB of u-blox ZED-F9P NMEA"
+              f"{' without its second band' if single_band else ''}; "
               f"batch: {args.batch_logs} logs of {args.batch_hours:g} h, 2 workers")  # fmt: skip
         results = []
         for n in args.sections:
