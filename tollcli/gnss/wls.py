@@ -172,11 +172,16 @@ class Gain:
     weight: np.ndarray  # (E, N) 1/σ², 0 for empty slots
 
 
-def _gain_terms(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray):
-    """The mask of usable measurements, their weights, H masked, the active unknowns, the gain and singularity."""
+def _weighted_rows(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray):
+    """The mask of usable measurements (a finite, positive σ), their weights 1/σ² (0 elsewhere) and H masked."""
     mask = mask & np.isfinite(sigma_m) & (sigma_m > 0)
     weight = np.where(mask, 1.0 / np.where(mask, sigma_m, 1.0) ** 2, 0.0)
-    Hm = np.where(mask[..., None], H, 0.0)
+    return mask, weight, np.where(mask[..., None], H, 0.0)
+
+
+def _gain_terms(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray):
+    """The mask of usable measurements, their weights, H masked, the active unknowns, the gain and singularity."""
+    mask, weight, Hm = _weighted_rows(H, sigma_m, mask)
     active = np.abs(Hm).sum(axis=1) > 0  # (E, U)
     HwT = (Hm * weight[..., None]).transpose(0, 2, 1)  # (E, U, N) = HᵀW
     G = HwT @ Hm
@@ -192,21 +197,24 @@ def wls_gain(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> Gain:
     return Gain(A, singular, mask.sum(axis=1), weight)
 
 
+def gain_covariance_en(gain: Gain | Geometry, sigma_m: np.ndarray) -> np.ndarray:
+    """The east-north block (E, 2, 2; m²) of A·Σ·Aᵀ: the covariance of a WLS gain's position under σ (E, N)."""
+    A = gain.A[:, :2, :]
+    var = np.where(gain.weight > 0, np.nan_to_num(sigma_m), 0.0) ** 2
+    return np.einsum("eun,en,evn->euv", A, var, A)
+
+
 def horizontal_covariance(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The east-north block (E, 2, 2; m²) of the WLS position covariance (HᵀΣ⁻¹H)⁻¹ of every epoch, whether its
     normal matrix is singular (E,), and its measurements (E,): what :func:`wls_gain` gives through A·Σ·Aᵀ, without the
     gain. Where H's clocks are one-hot (the form :func:`observation_matrix` writes) the block is that of S⁻¹, S the
     Schur complement of the clock block (:func:`clock_group_terms`, :func:`adjugate_inverse`): a 3×3 inverse per epoch,
     not a U×U one and the N-wide products; else through the gain."""
-    mask = mask & np.isfinite(sigma_m) & (sigma_m > 0)
-    weight = np.where(mask, 1.0 / np.where(mask, sigma_m, 1.0) ** 2, 0.0)
-    Hm = np.where(mask[..., None], H, 0.0)
+    mask, weight, Hm = _weighted_rows(H, sigma_m, mask)
     group = clock_groups(Hm, weight)
     if group is None:
         gain = wls_gain(H, sigma_m, mask)
-        A = gain.A[:, :2, :]
-        var = np.where(gain.weight > 0, np.nan_to_num(sigma_m), 0.0) ** 2
-        return np.einsum("eun,en,evn->euv", A, var, A), gain.singular, gain.n_meas
+        return gain_covariance_en(gain, sigma_m), gain.singular, gain.n_meas
     g = clock_group_terms(Hm, weight, group, Hm.shape[-1] - 3, centred=False)
     S = g.scatter.sum(axis=1)
     active = g.nonzero.any(axis=1)  # (E, 3) the position unknowns some measurement has

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from tollcli.gnss.sigma_models import urban_sigma_m
-from tollcli.gnss.wls import Gain, Geometry
+from tollcli.gnss.wls import Gain, Geometry, gain_covariance_en
 from tollcli.integrity.sources import k_h
 
 #: σ (m) of the worst satellite a receiver can use under the nominal model (5° elevation, low latitude, single
@@ -23,10 +23,7 @@ NOMINAL_WORST_SIGMA_M = 27.6
 
 def sigma_major_m(geometry: Geometry | Gain, sigma_m: np.ndarray) -> np.ndarray:
     """σ_major (m) per epoch of a batched WLS geometry (or its gain alone) under σ (E, N); NaN where singular or empty."""
-    A = geometry.A[:, :2, :]
-    var = np.where(geometry.weight > 0, np.nan_to_num(sigma_m), 0.0) ** 2
-    cov = np.einsum("eun,en,evn->euv", A, var, A)
-    return major_of_covariance_m(cov, geometry.singular | (geometry.n_meas == 0))
+    return major_of_covariance_m(gain_covariance_en(geometry, sigma_m), geometry.singular | (geometry.n_meas == 0))
 
 
 def major_of_covariance_m(cov_en_m2: np.ndarray, void: np.ndarray) -> np.ndarray:
