@@ -14,6 +14,10 @@ a C compiler runs) on the log's first ``--twin-epochs`` epochs, with the compile
 ``--memory``: the estimator's peak memory and speed on the first N epochs (default 10 000, 20 000, 40 000) of a 40 000-epoch
 simulated drive (``--duration 8000``, written once into ``sim/city-long``), swept whole and in chunks
 (:mod:`tollcli.integrity.trajectory_sweep`): whole, the passes' covariances grow with the log; in chunks they do not.
+``--against TREE``: the estimator on the simulated drive timed in turn with the code in TREE (a git worktree with its
+kernel built: ``python setup.py build_ext --inplace``), each in a process of its own, ``--pairs`` times; prints both
+medians and the median of the pairs' ratios (this machine's speed drifts by a quarter within minutes: only times
+taken back to back compare code).
 """
 
 from __future__ import annotations
@@ -94,6 +98,42 @@ def _timed(fn, rounds):
     return statistics.median(times), out
 
 
+#: what each process of ``--against`` runs: the estimator on the log, median of the rounds after one untimed, in seconds
+ESTIMATOR_SECONDS = """
+import statistics, sys, time
+sys.path.insert(0, sys.argv[1])
+import tollcli
+assert tollcli.__file__.startswith(sys.argv[1]), tollcli.__file__
+from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+from tollcli.gnss.sigma_models import NominalModel
+from tollcli.integrity.trajectory import estimate_trajectory
+from tollcli.integrity.trajectory_inputs import trajectory_inputs
+epochs, meas = pseudorange_epochs(sys.argv[2], "librsf", None, "nominal", 5.0, NominalModel())
+estimate_trajectory(trajectory_inputs(epochs, meas), "smoothed")
+times = []
+for _ in range(int(sys.argv[3])):
+    t0 = time.perf_counter()
+    estimate_trajectory(trajectory_inputs(epochs, meas), "smoothed")
+    times.append(time.perf_counter() - t0)
+print(statistics.median(times), len(epochs))
+"""
+
+
+def against(tree: str, pairs: int, rounds: int) -> None:
+    """The estimator on the simulated drive, this code (A) and the code in ``tree`` (B) in turn, ``pairs`` times."""
+    log = simulated_drive()
+    rows = []
+    for _ in range(pairs):
+        pair = [subprocess.run([sys.executable, "-c", ESTIMATOR_SECONDS, root, log, str(rounds)], check=True, capture_output=True,
+                               text=True).stdout.split() for root in (ROOT, os.path.abspath(tree))]  # fmt: skip
+        rows.append([float(seconds) for seconds, _n in pair])
+        n = int(pair[0][1])
+    a, b = statistics.median(r[0] for r in rows), statistics.median(r[1] for r in rows)
+    print(f"estimator on {os.path.basename(os.path.dirname(log))} ({n} epochs), {pairs} pairs (median of {rounds} rounds each): "
+          f"this code {a * 1e3:.1f} ms ({n / a:,.0f} epochs/s), {tree} {b * 1e3:.1f} ms ({n / b:,.0f}); median of the pair ratios "
+          f"{statistics.median(r[0] / r[1] for r in rows):.3f}")  # fmt: skip
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--log", nargs="*", default=None, help="libRSF logs (default: Berlin and the simulated drive)")
@@ -103,7 +143,12 @@ def main() -> int:
     parser.add_argument("--memory", type=int, nargs="*", default=None,
                         help="also the peak memory on the first N epochs of a 40 000-epoch simulated drive, whole and in chunks "
                         "(no N: 10000 20000 40000)")  # fmt: skip
+    parser.add_argument("--against", metavar="TREE", help="time the estimator in turn with the code in TREE (see above)")
+    parser.add_argument("--pairs", type=int, default=8, help="pairs for --against (default 8)")
     args = parser.parse_args()
+    if args.against:
+        against(args.against, args.pairs, args.rounds)
+        return 0
     logs = args.log if args.log else [p for p in (BERLIN, simulated_drive()) if os.path.exists(p)]
     compiled = trajectory_filter._kernel() is not None
     print(f"compiled kernel: {'yes' if compiled else 'NOT BUILT (the Python twin runs)'}; median of {args.rounds} rounds")

@@ -290,7 +290,7 @@ def test_pseudoranges_below_the_cn0_mask_change_nothing():
     epochs, meas = librsf_epochs(read_librsf(str(shared(*BERLIN))))
     inp = trajectory_inputs(epochs, meas)
     n = 400  # the first two minutes and more
-    inp = replace(inp, **{f: getattr(inp, f)[:n] for f in ("t_s", "sat_ecef_m", "pr_m", "mask", "cn0_dbhz", "elev_deg", "sigma_m",
+    inp = replace(inp, **{f: getattr(inp, f)[:n] for f in ("t_s", "sat_ecef_m", "pr_m", "mask", "cn0_dbhz", "sigma_m",
                                                             "clock_index", "sv", "fix_enu_m", "speed_mps", "yaw_rate_radps",
                                                             "forward_m", "left_m")})  # fmt: skip
     weak = inp.mask & (inp.cn0_dbhz < MIN_CN0_DBHZ)

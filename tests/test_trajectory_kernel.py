@@ -29,7 +29,7 @@ from tollcli.integrity.trajectory_sweep import combined as _combined
 
 kernel = trajectory_filter._kernel()
 needs_kernel = pytest.mark.skipif(kernel is None, reason="trajectory kernel not built")
-FIELDS = ("prior_x", "prior_p", "post_x", "post_p", "z", "weight", "started", "relocked")
+FIELDS = ("prior_x", "prior_p", "post_x", "post_p", "z", "weight", "started", "relocked", "prior_y", "post_y")
 
 
 def test_the_install_built_the_trajectory_kernel():
@@ -115,7 +115,7 @@ def test_a_pass_keeping_half_its_states_keeps_them_as_a_whole_pass_does(berlin, 
     compiled, twin = _both(monkeypatch, lambda: run_pass(inp, sigma2, 1, *start_f, odometry, keep=keep))
     for half in (compiled, twin):
         for name in FIELDS:
-            kept = name not in ("prior_x", "prior_p", "post_x", "post_p") or name.split("_")[0] in keep
+            kept = name not in ("prior_x", "prior_p", "post_x", "post_p", "prior_y", "post_y") or name.split("_")[0] in keep
             assert (_same(getattr(half, name), getattr(whole, name)) if kept else getattr(half, name) is None), (keep, name)
 
 
@@ -162,3 +162,52 @@ def _omega_of(p, info_f, info_b) -> float:
     """The ω whose combination is ``p``: p⁻¹ = ω I_f + (1 − ω) I_b, solved by least squares."""
     d = (info_f - info_b).ravel()
     return float(d @ (np.linalg.inv(p) - info_b).ravel() / (d @ d))
+
+
+@needs_kernel
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(6, 10), st.integers(1, 6))
+def test_the_combinations_blocks_and_given_inverses_agree(seed, n, n_epochs):
+    """Property: the combination asked for the horizontal block only (``block=2``), or for nothing (``block=0``), gives
+    the same x to the bit, and the block is the whole matrix's to the bit; given the two estimates' information matrices
+    (what the passes made) it agrees with inverting their covariances to rounding, and an epoch whose given matrix is
+    NaN is inverted as if none were given — compiled and twin alike."""
+    rng = np.random.default_rng(seed)
+    pf = np.stack([_random_spd(rng, n) for _ in range(n_epochs)])
+    pb = np.stack([_random_spd(rng, n) for _ in range(n_epochs)])
+    xf, xb = rng.normal(size=(n_epochs, n)), rng.normal(size=(n_epochs, n))
+    yf, yb = np.linalg.inv(pf), np.linalg.inv(pb)
+    missing = yf.copy()
+    missing[0] = np.nan  # the first epoch: not given
+
+    def all_ways():
+        return (combine(xf, pf, xb, pb, OMEGAS), combine(xf, pf, xb, pb, OMEGAS, block=2), combine(xf, pf, xb, pb, OMEGAS, block=0),
+                combine(xf, pf, xb, pb, OMEGAS, None, yf, yb), combine(xf, pf, xb, pb, OMEGAS, None, missing, yb))  # fmt: skip
+
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        compiled, twin = _both(monkeypatch, all_ways)
+    for a, b in zip(compiled, twin):
+        assert _same(a[0], b[0]) and (a[1] is None and b[1] is None or _same(a[1], b[1]))
+    (x, p), (x2, p2), (x0, p0), (xy, py), (xm, pm) = compiled
+    assert _same(x2, x) and _same(x0, x) and p0 is None
+    assert _same(p2, p[:, :2, :2])
+    assert np.allclose(xy, x, rtol=1e-7, atol=1e-9) and np.allclose(py, p, rtol=1e-7, atol=1e-12)
+    assert _same(xm[0], x[0]) and _same(pm[0], p[0])  # not given: inverted
+    assert _same(xm[1:], xy[1:]) and _same(pm[1:], py[1:])  # given: taken
+
+
+@needs_kernel
+def test_the_passes_information_matrices_are_their_covariances_inverses(berlin):
+    """What a pass gives the combination instead of inverting again: at every epoch it updated, the prior's and the
+    posterior's information matrices are the inverses of the covariances it keeps (to rounding); NaN at an epoch
+    without measurements."""
+    inp, odometry = _cases(berlin)["late clock"]
+    inp = dataclasses.replace(inp, mask=np.where(np.arange(inp.mask.shape[0])[:, None] == 30, False, inp.mask))
+    sigma2 = np.where(inp.mask, 8.0**2, 900.0)
+    start_f, _ = _starts(inp, odometry, MOTION_STATES)
+    fp = run_pass(inp, sigma2, 1, *start_f, odometry)
+    updated = inp.mask.any(axis=1)
+    assert not updated[30] and np.isnan(fp.prior_y[30]).all() and np.isnan(fp.post_y[30]).all()
+    for y, p in ((fp.prior_y, fp.prior_p), (fp.post_y, fp.post_p)):
+        eye = np.einsum("eij,ejk->eik", y[updated], p[updated])
+        assert np.allclose(eye, np.eye(p.shape[1]), atol=1e-6)

@@ -20,7 +20,7 @@ from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.integrity import trajectory_noise, trajectory_sweep
 from tollcli.integrity.trajectory import _starts, estimate_trajectory
-from tollcli.integrity.trajectory_filter import MOTION_STATES, run_pass, state_after
+from tollcli.integrity.trajectory_filter import MOTION_STATES, PassBuffers, run_pass, state_after
 from tollcli.integrity.trajectory_inputs import trajectory_inputs
 from tollcli.integrity.trajectory_sweep import Sweep, sweep
 
@@ -107,3 +107,64 @@ def test_the_noise_correlation_is_the_same_whatever_the_series_taken_at_once(mon
     for factor, rho in results[1:]:
         assert factor == results[0][0] and _same(rho, results[0][1])
     assert results[0][0] == pytest.approx(1 + 2 * 0.8 * (1 - 0.8**13) / 0.2, rel=0.1)
+
+
+@pytest.mark.parametrize("odometry", [True, False])
+def test_a_light_sweep_gives_the_full_sweeps_state_and_weights(berlin, odometry):
+    """What a round of noise reads of a sweep (``full=False``: the combined state and the weights) is the full sweep's
+    to the bit, the rest not made; and passes writing into arrays taken again from a sweep before (``PassBuffers``)
+    give what fresh arrays give."""
+    inp = berlin
+    sigma2 = np.where(inp.mask, 8.0**2, 900.0)
+    start_f, start_b = _starts(inp, odometry, MOTION_STATES)
+    full = sweep(inp, sigma2, start_f, start_b, odometry)
+    buffers = PassBuffers()
+    sweep(inp, sigma2 * 4.0, start_f, start_b, odometry, buffers=buffers)  # the buffers written once by another sweep
+    light = sweep(inp, sigma2, start_f, start_b, odometry, full=False, buffers=buffers)
+    again = sweep(inp, sigma2, start_f, start_b, odometry, buffers=buffers)
+    assert _same(light.x, full.x) and _same(light.weight, full.weight)
+    assert light.cov_en_m2 is None and light.test_stat is None and light.relocked is None
+    for field in dataclasses.fields(Sweep):
+        assert _same(getattr(again, field.name), getattr(full, field.name)), field.name
+
+
+def _correlation_inflation_by_label(z, sv, mask):
+    """The noise correlation as it was first written: every label's series through a zeroed array and np.median (the
+    reference the faster one must match to the bit)."""
+    n_epochs = z.shape[0]
+    ok = mask & np.isfinite(z)
+    labels, inverse = np.unique(sv[ok], return_inverse=True)
+    rows, values = np.nonzero(ok)[0], z[ok]
+    size = 1 << int(np.ceil(np.log2(n_epochs + trajectory_noise.MAX_LAG + 1)))
+    power = None
+    for label in range(labels.size):
+        at = np.flatnonzero(inverse == label)
+        value, seen = np.zeros(n_epochs), np.zeros(n_epochs, bool)
+        value[rows[at]], seen[rows[at]] = values[at], True
+        spec = np.fft.rfft(np.where(seen, value - np.median(value[seen]), 0.0)[None], size, axis=1)
+        term = (np.square(spec.real) + np.square(spec.imag))[0]
+        power = term.copy() if power is None else power + term
+    acf = np.fft.irfft(power, size)[: min(trajectory_noise.MAX_LAG + 1, n_epochs)]
+    rho = acf / acf[0]
+    below = np.flatnonzero(rho < trajectory_noise.RHO_CUT)
+    cut = int(below[0]) if below.size else rho.size
+    return float(1.0 + 2.0 * rho[1:cut].sum()), rho
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_noise_correlation_is_the_reference_loops_bit_for_bit(seed):
+    """The correlation factor and ρ on residual series with gaps, labels that come and go, and a label twice in some
+    epochs (its last value counts): the same bits as the plain per-label loop, by label strings and by their codes."""
+    rng = np.random.default_rng(seed)
+    n_epochs, n_slots = 1500, 12
+    z = rng.standard_t(4, size=(n_epochs, n_slots))
+    names = np.array([f"G{i:02d}" for i in range(20)])
+    sv = np.stack([rng.permutation(names)[:n_slots] for _ in range(n_epochs)])  # a label once an epoch …
+    twice = rng.random(n_epochs) < 0.05
+    sv[twice, 1] = sv[twice, 0]  # … but in some epochs, for some labels, twice
+    mask = rng.random((n_epochs, n_slots)) > 0.1
+    codes = np.unique(sv, return_inverse=True)[1].reshape(sv.shape).astype(np.int32)
+    reference = _correlation_inflation_by_label(z, sv, mask)
+    for labels in (sv, codes):
+        factor, rho = trajectory_noise.correlation_inflation(z, labels, mask)
+        assert factor == reference[0] and _same(rho, reference[1])

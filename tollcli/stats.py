@@ -1,5 +1,5 @@
 """Small statistics shared by the integrity checks, the findings and the audit: the Wilson score interval,
-the binomial upper tail (numpy only: no scipy import on a command's start-up path)."""
+the binomial upper tail, the median of a vector (numpy only: no scipy import on a command's start-up path)."""
 
 from __future__ import annotations
 
@@ -39,3 +39,11 @@ def binomial_tail(k: np.ndarray, n: np.ndarray, p: np.ndarray) -> np.ndarray:
                     + np.where(nn - j > 0, (nn - j) * log_q, 0.0))  # fmt: skip
     terms = np.where((j >= kk) & (j <= nn), np.exp(log_term), 0.0)
     return np.minimum(terms.sum(axis=1), 1.0)
+
+
+def median(a: np.ndarray) -> float:
+    """``np.median`` of a non-empty 1-D array without NaN — the same number (the middle one, or the two middle ones'
+    sum halved) — from one partition and no checks: ~5× faster on the thousands of residuals of a satellite."""
+    k = a.size // 2
+    part = np.partition(a, k)
+    return part[k] if a.size % 2 else (part[:k].max() + part[k]) / 2

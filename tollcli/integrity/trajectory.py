@@ -22,12 +22,13 @@ The protection level is HPL = :data:`K_FUSED` · σ_major of the horizontal cova
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 
-from tollcli.integrity.trajectory_filter import MOTION_STATES, MotionNoise, run_pass
+from tollcli.integrity.trajectory_filter import MOTION_STATES, MotionNoise, PassBuffers, run_pass
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 from tollcli.integrity.trajectory_noise import (
     RHO_CUT,
@@ -37,6 +38,7 @@ from tollcli.integrity.trajectory_noise import (
     sigma_by_bin,
 )
 from tollcli.integrity.trajectory_sweep import sigma_major_m, sweep
+from tollcli.stats import median
 
 #: ``auto``: smoothed, with the log's odometry or without (the GNSS-only motion model): on the simulator's city drives
 #: without odometry the snapshot RAIM let 65–86 misleading epochs through in 10 000 and the GNSS-only trajectory none,
@@ -103,17 +105,22 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
     sigma = np.where(inp.mask & np.isfinite(inp.sigma_m) & (inp.sigma_m > 0), inp.sigma_m, FALLBACK_SIGMA_M)
     sigma2 = sigma**2
     sigma = None
-    sv_code = np.full(inp.mask.shape, -1, np.int32)  # the measurements' labels as numbers, in the labels' order
-    sv_code[inp.mask] = pd.factorize(inp.sv[inp.mask], sort=True)[0]
-    start_f, start_b = _starts(inp, odometry, m)
-    first = run_pass(inp, sigma2, 1, *start_f, odometry, noise, keep=())  # its innovations: the error model's scale
+    start_f = _start(inp, odometry, m, 1)
+    buffers = PassBuffers()  # the passes' arrays, the same for every round (each read before the next)
+    with ThreadPoolExecutor(max_workers=1) as pool:  # the first pass (compiled: it lets go of the interpreter) beside
+        # what does not depend on it
+        first_pass = pool.submit(run_pass, inp, sigma2, 1, *start_f, odometry, noise, keep=(), buffers=buffers)
+        start_b = _start(inp, odometry, m, -1)
+        sv_code = np.full(inp.mask.shape, -1, np.int32)  # the measurements' labels as numbers, in the labels' order
+        sv_code[inp.mask] = pd.factorize(inp.sv[inp.mask], sort=True)[0]
+        bins, n_bins, _by = noise_bins(inp.cn0_dbhz, lambda: inp.elev_deg, inp.mask)
+        first = first_pass.result()  # its innovations: the error model's scale
     kept = first.weight >= 0.5
     if kept.any():
-        sigma2 = sigma2 * max(1.0, float(np.median(first.z[kept] ** 2)) / CHI2_1_MEDIAN)
+        sigma2 = sigma2 * max(1.0, float(median(first.z[kept] ** 2)) / CHI2_1_MEDIAN)
     first = kept = None
-    passes = sweep(inp, sigma2, start_f, start_b, odometry, noise)
+    passes = sweep(inp, sigma2, start_f, start_b, odometry, noise, full=NOISE_ROUNDS == 0, buffers=buffers)  # a round reads x and weight only
     table, factor, rho = np.full(1, np.nan), 1.0, np.ones(1)
-    bins, n_bins, _by = noise_bins(inp.cn0_dbhz, inp.elev_deg, inp.mask)
     for round_ in range(NOISE_ROUNDS):
         res = postfit_residuals(inp, passes.x, m)  # the noise measured at the smoothed trajectory, whichever positioning
         table = sigma_by_bin(res, bins, n_bins, inp.mask)
@@ -125,7 +132,7 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
         z = kept = None
         white2 = np.where(inp.mask, table[bins] ** 2, FALLBACK_SIGMA_M**2)
         sigma2 = white2 * max(factor, 1.0)
-        passes = sweep(inp, sigma2, start_f, start_b, odometry, noise, white2)
+        passes = sweep(inp, sigma2, start_f, start_b, odometry, noise, white2, full=round_ == NOISE_ROUNDS - 1, buffers=buffers)
     x, cov = passes.x, passes.cov_en_m2
     major = sigma_major_m(cov)
     hpl = K_FUSED * major
@@ -164,30 +171,32 @@ def near(t_s: np.ndarray, events: np.ndarray, window_s: float) -> np.ndarray:
 
 def _starts(inp: TrajectoryInputs, odometry: bool, m: int):
     """The forward and backward passes' first states and covariances."""
+    return _start(inp, odometry, m, 1), _start(inp, odometry, m, -1)
+
+
+def _start(inp: TrajectoryInputs, odometry: bool, m: int, direction: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first state and covariance of the pass in ``direction`` (1 forward, -1 backward)."""
     n_states = m + inp.n_clocks
     fixed = np.flatnonzero(np.isfinite(inp.fix_enu_m).all(axis=1))
     if fixed.size == 0:
         raise ValueError("no snapshot fix to start the trajectory from")
-    p0 = np.zeros((n_states, n_states))
-    p0[[0, 1, 2], [0, 1, 2]] = 30.0**2
-    p0[m - 1, m - 1] = DRIFT0_MPS**2  # drift
-    p0[np.arange(m, n_states), np.arange(m, n_states)] = 100.0**2
-    starts = []
-    for window in (fixed[:HEADING_WINDOW], fixed[-HEADING_WINDOW:][::-1]):
-        x0 = np.zeros(n_states)
-        p = p0.copy()
-        if odometry:
-            psi, start, misfit = _fitted_start(inp, window)
-            x0[3], x0[:2] = psi, start
-            p[0, 0] = p[1, 1] = max(p0[0, 0], misfit**2)  # an odometry that does not fit the fixes: a start as uncertain
-            p[3, 3] = 0.3**2
-            p[4, 4] = GYRO_BIAS0_RADPS**2
-        else:
-            x0[:2] = inp.fix_enu_m[window[0], :2]
-            p[3, 3] = p[4, 4] = 20.0**2  # the velocity
-        x0[2] = np.median(inp.fix_enu_m[window[: min(30, window.size)], 2])
-        starts.append((x0, p))
-    return starts[0], starts[1]
+    p = np.zeros((n_states, n_states))
+    p[[0, 1, 2], [0, 1, 2]] = 30.0**2
+    p[m - 1, m - 1] = DRIFT0_MPS**2  # drift
+    p[np.arange(m, n_states), np.arange(m, n_states)] = 100.0**2
+    window = fixed[:HEADING_WINDOW] if direction > 0 else fixed[-HEADING_WINDOW:][::-1]
+    x0 = np.zeros(n_states)
+    if odometry:
+        psi, start, misfit = _fitted_start(inp, window)
+        x0[3], x0[:2] = psi, start
+        p[0, 0] = p[1, 1] = max(30.0**2, misfit**2)  # an odometry that does not fit the fixes: a start as uncertain
+        p[3, 3] = 0.3**2
+        p[4, 4] = GYRO_BIAS0_RADPS**2
+    else:
+        x0[:2] = inp.fix_enu_m[window[0], :2]
+        p[3, 3] = p[4, 4] = 20.0**2  # the velocity
+    x0[2] = np.median(inp.fix_enu_m[window[: min(30, window.size)], 2])
+    return x0, p
 
 
 def _fitted_start(inp: TrajectoryInputs, window: np.ndarray) -> tuple[float, np.ndarray, float]:
@@ -210,13 +219,15 @@ def _fitted_start(inp: TrajectoryInputs, window: np.ndarray) -> tuple[float, np.
     dn = np.cos(psi0) * along_cos - np.sin(psi0) * along_sin
     at = window - lo
     fe, fn = inp.fix_enu_m[window, 0], inp.fix_enu_m[window, 1]
-    off_e = np.median(fe[None, :] - de[:, at], axis=1)
-    off_n = np.median(fn[None, :] - dn[:, at], axis=1)
-    r = np.hypot(fe[None, :] - de[:, at] - off_e[:, None], fn[None, :] - dn[:, at] - off_n[:, None])
-    best = int(np.argmin(np.log1p((r / 15.0) ** 2).sum(axis=1)))
+    ex, nx = fe[None, :] - de[:, at], fn[None, :] - dn[:, at]
+    off_e, off_n = np.median(ex, axis=1), np.median(nx, axis=1)
+    ex -= off_e[:, None]
+    nx -= off_n[:, None]
+    best = int(np.argmin(np.log1p((np.square(ex) + np.square(nx)) / 15.0**2).sum(axis=1)))
     first = at[0]  # window[0]: the pass's first epoch (the span's last for a backward pass)
     heading = float(psi0[best, 0] + turn[first])
-    return heading, np.array([off_e[best] + de[best, first], off_n[best] + dn[best, first]]), float(np.median(r[best]))
+    misfit = float(np.median(np.hypot(ex[best], nx[best])))
+    return heading, np.array([off_e[best] + de[best, first], off_n[best] + dn[best, first]]), misfit
 
 
 #: the fewest snapshot fixes a log needs for a trajectory (fewer: its snapshot positions stay)

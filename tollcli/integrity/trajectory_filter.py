@@ -75,7 +75,8 @@ class MotionNoise:
 class FilterPass:
     """One pass's states per epoch (E, S), their covariances (E, S, S), and each measurement's normalised innovation
     and Cauchy weight (E, N; NaN/0 for empty slots). The priors or the posteriors are None where the pass was asked
-    not to keep them (:func:`run_pass`)."""
+    not to keep them (:func:`run_pass`). ``prior_y``/``post_y`` (E, S, S), kept with them: their information matrices
+    (the covariances' inverses) as the update made them, all NaN at an epoch it did not update."""
 
     prior_x: np.ndarray | None
     prior_p: np.ndarray | None
@@ -86,6 +87,25 @@ class FilterPass:
     odometry: bool
     started: np.ndarray  # (E, C) the clock groups the pass had started by each epoch (a clock it has not tells nothing)
     relocked: np.ndarray  # (E,) epochs where the pass had lost the vehicle and its prior was widened (:func:`_widened`)
+    prior_y: np.ndarray | None = None
+    post_y: np.ndarray | None = None
+
+
+class PassBuffers:
+    """The arrays the passes of one sweep write, taken again by the next sweep's passes of the same shapes: their
+    memory is touched once, not once a sweep (fresh pages, faulted in by the two passes on their two threads at once,
+    cost a sweep about a fifth of its time). A pass's results must be read before the next pass of the same direction
+    and kind runs (the estimator's rounds read each sweep before the next)."""
+
+    def __init__(self) -> None:
+        self._arrays: dict[tuple, np.ndarray] = {}
+
+    def take(self, key: tuple, shape: tuple[int, ...], dtype=np.float64) -> np.ndarray:
+        """An array of ``shape`` for ``key`` (uninitialised): the one taken before where it has that shape."""
+        a = self._arrays.get(key)
+        if a is None or a.shape != shape or a.dtype != dtype:
+            a = self._arrays[key] = np.empty(shape, dtype)
+        return a
 
 
 @dataclass(frozen=True)
@@ -105,7 +125,7 @@ MOTION_STATES = 6
 def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start_x: np.ndarray, start_p: np.ndarray,
              odometry: bool, noise: MotionNoise = MotionNoise(), robust_sigma2_m2: np.ndarray | None = None,
              keep: tuple[str, ...] = ("prior", "post"), rows: tuple[int, int] | None = None,
-             resume: PassState | None = None) -> FilterPass:  # fmt: skip
+             resume: PassState | None = None, buffers: PassBuffers | None = None) -> FilterPass:  # fmt: skip
     """The filter over every epoch, forward (``direction`` 1) or backward (-1), from ``start_x``/``start_p`` at the
     first epoch it visits (its clocks are started from that epoch's measurements).
 
@@ -122,6 +142,8 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
     1`` forward, ``end`` backward): then the pass's states, innovations and weights are those of one pass over the whole
     log, bit for bit (tested), and a long log can be swept in chunks (:mod:`tollcli.integrity.trajectory_sweep`).
 
+    ``buffers``: where the pass's arrays come from (:class:`PassBuffers`; default fresh ones).
+
     The pass itself is the compiled kernel (``_trajectory_kernel.c``) where it was built, else its Python twin
     (:mod:`tollcli.integrity.trajectory_pass_twin`): the same bits either way."""
     robust = sigma2_m2 if robust_sigma2_m2 is None else robust_sigma2_m2
@@ -134,29 +156,39 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
     n_states = MOTION_STATES + inp.n_clocks
     keep_prior, keep_post = "prior" in keep, "post" in keep
 
-    def states(kept: bool) -> tuple[np.ndarray, np.ndarray]:  # every epoch written, or nothing
-        e = n_epochs if kept else 0
-        return np.empty((e, n_states)), np.empty((e, n_states, n_states))
+    def array(kind: str, shape: tuple[int, ...], fill: float | None = None, dtype=np.float64) -> np.ndarray:
+        if buffers is None:
+            return np.empty(shape, dtype) if fill is None else np.full(shape, fill, dtype)
+        a = buffers.take((direction, kind), shape, dtype)
+        if fill is not None:
+            a.fill(fill)
+        return a
 
-    out = FilterPass(*states(keep_prior), *states(keep_post), np.full((n_epochs, n_slots), np.nan), np.zeros((n_epochs, n_slots)),
-                     odometry, np.zeros((n_epochs, inp.n_clocks), np.uint8), np.zeros(n_epochs, np.uint8))  # fmt: skip
+    def states(kept: bool, kind: str) -> tuple[np.ndarray, np.ndarray]:  # every epoch written, or nothing
+        e = n_epochs if kept else 0
+        return array(kind + "_x", (e, n_states)), array(kind + "_p", (e, n_states, n_states))
+
+    out = FilterPass(*states(keep_prior, "prior"), *states(keep_post, "post"), array("z", (n_epochs, n_slots), np.nan),
+                     array("weight", (n_epochs, n_slots), 0.0), odometry,
+                     array("started", (n_epochs, inp.n_clocks), 0, np.uint8), array("relocked", (n_epochs,), 0, np.uint8),
+                     states(keep_prior, "prior_y")[1], states(keep_post, "post_y")[1])  # fmt: skip
     t, sat, pr, mask, clock, speed, yaw, forward, left, origin, rot = inp.kernel_arrays
     started0 = np.zeros(inp.n_clocks, np.uint8) if resume is None else np.ascontiguousarray(resume.started, np.uint8)
     args = (t[span], sat[span], pr[span], mask[span], clock[span], _c64(sigma2_m2[span]), _c64(robust[span]), speed[span],
             yaw[span], forward[span], left[span], origin, rot, np.array([getattr(noise, f) for f in NOISE_FIELDS], np.float64),
             _c64(start_x), _c64(start_p), started0, out.prior_x, out.prior_p, out.post_x, out.post_p, out.z, out.weight,
-            out.started, out.relocked, int(direction), int(bool(odometry)), int(inp.n_clocks), ITERATIONS, LOST_LOCK_MIN,
+            out.started, out.relocked, out.prior_y, out.post_y, int(direction), int(bool(odometry)), int(inp.n_clocks), ITERATIONS, LOST_LOCK_MIN,
             int(keep_prior), int(keep_post), int(resume is not None), OMEGA_EARTH_RADPS, C_MPS, CAUCHY_C, RELINEARISE_M)  # fmt: skip
     kernel = _kernel()
     (kernel.run_pass if kernel is not None else run_pass_twin)(*args)
     out.started, out.relocked = out.started.astype(bool), out.relocked.astype(bool)
     if not keep_prior:
-        out.prior_x = out.prior_p = None
+        out.prior_x = out.prior_p = out.prior_y = None
     if not keep_post:
-        out.post_x = out.post_p = None
+        out.post_x = out.post_p = out.post_y = None
     if resume is not None:  # the epoch resumed from is not this pass's
         inner = slice(1, None) if direction > 0 else slice(0, -1)
-        for name in ("prior_x", "prior_p", "post_x", "post_p", "z", "weight", "started", "relocked"):
+        for name in ("prior_x", "prior_p", "post_x", "post_p", "z", "weight", "started", "relocked", "prior_y", "post_y"):
             value = getattr(out, name)
             if value is not None:
                 setattr(out, name, value[inner])
@@ -173,12 +205,13 @@ def _c64(a: np.ndarray) -> np.ndarray:
 
 
 def run_both(inp: TrajectoryInputs, sigma2_m2: np.ndarray, start_f, start_b, odometry: bool, noise: MotionNoise = MotionNoise(),
-             robust_sigma2_m2: np.ndarray | None = None) -> tuple[FilterPass, FilterPass]:  # fmt: skip
+             robust_sigma2_m2: np.ndarray | None = None, buffers: PassBuffers | None = None) -> tuple[FilterPass, FilterPass]:  # fmt: skip
     """The forward and the backward pass (:func:`run_pass`; ``start_f``/``start_b``: each one's (x, P) at its first
     epoch), the forward keeping its posteriors and the backward its priors (what the combination reads). The two are independent: with the compiled kernel (which lets go of the interpreter) they run at once on
     two threads, each writing only its own arrays, so the result is the same as one after the other."""
     def one(direction, start):  # what the combination reads: the forward posteriors, the backward priors
-        return run_pass(inp, sigma2_m2, direction, *start, odometry, noise, robust_sigma2_m2, keep=("post",) if direction > 0 else ("prior",))
+        return run_pass(inp, sigma2_m2, direction, *start, odometry, noise, robust_sigma2_m2, keep=("post",) if direction > 0 else ("prior",),
+                        buffers=buffers)  # fmt: skip
 
     if _kernel() is None or inp.mask.shape[0] < PARALLEL_MIN_EPOCHS:
         return one(1, start_f), one(-1, start_b)
@@ -194,31 +227,43 @@ def run_both(inp: TrajectoryInputs, sigma2_m2: np.ndarray, start_f, start_b, odo
 PARALLEL_MIN_EPOCHS = 500
 
 
-def combine(xf: np.ndarray, pf: np.ndarray, xb: np.ndarray, pb: np.ndarray, omegas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def combine(xf: np.ndarray, pf: np.ndarray, xb: np.ndarray, pb: np.ndarray, omegas: np.ndarray,
+            block: int | None = None, yf: np.ndarray | None = None, yb: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:  # fmt: skip
     """Covariance intersection of two estimates (E, S) with covariances (E, S, S) at every epoch: of the weights
-    ``omegas``, the first whose (ω P_f⁻¹ + (1 − ω) P_b⁻¹)⁻¹ has the least horizontal variance; returns that matrix
-    and x = P (ω P_f⁻¹ x_f + (1 − ω) P_b⁻¹ x_b) (NaN at an epoch where a matrix is not positive definite). Compiled
-    where built, else the Python twin: the same bits."""
+    ``omegas``, the first whose (ω P_f⁻¹ + (1 − ω) P_b⁻¹)⁻¹ has the least horizontal variance; returns that matrix and
+    x = P (ω P_f⁻¹ x_f + (1 − ω) P_b⁻¹ x_b) (NaN at an epoch where a matrix is not positive definite). ``block`` 2:
+    only each matrix's horizontal (east-north) block is returned, (E, 2, 2); 0: none (None); x is the same. ``yf``,
+    ``yb`` (E, S, S): P_f⁻¹ and P_b⁻¹ where the passes made them (:class:`FilterPass` ``post_y``/``prior_y``; all NaN at
+    an epoch where not): taken instead of inverting ``pf`` and ``pb`` there. Compiled where built, else the Python
+    twin: the same bits."""
     n_epochs, n_states = xf.shape
-    x, p, w = np.empty((n_epochs, n_states)), np.empty((n_epochs, n_states, n_states)), np.empty(n_epochs)
+    side = n_states if block is None else block
+    if side not in (0, 2, n_states):
+        raise ValueError(f"combine: a block of {side} of {n_states} states")
+    x, w = np.empty((n_epochs, n_states)), np.empty(n_epochs)
+    p = np.empty((n_epochs if side else 0, side, side))
     args = [np.ascontiguousarray(a, np.float64) for a in (xf, pf, xb, pb, omegas)]
+    none = np.empty((0, n_states, n_states))
+    given = [np.ascontiguousarray(a, np.float64) if a is not None and yf is not None and yb is not None else none for a in (yf, yb)]
     kernel = _kernel()
     if kernel is None:
-        combine_twin(*args, x, p, w)
-        return x, p
-    if n_epochs < PARALLEL_MIN_EPOCHS:
-        kernel.combine(*args, x, p, w)
-        return x, p
-    # epochs are independent: two threads, each on its own half (the kernel lets go of the interpreter)
-    from concurrent.futures import ThreadPoolExecutor
+        combine_twin(*args, x, p, w, *given)
+    elif n_epochs < PARALLEL_MIN_EPOCHS:
+        kernel.combine(*args, x, p, w, *given)
+    else:  # epochs are independent: the first half on another thread (the kernel lets go of the interpreter)
+        from concurrent.futures import ThreadPoolExecutor
 
-    half = n_epochs // 2
-    parts = [(slice(0, half)), slice(half, n_epochs)]
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        done = [pool.submit(kernel.combine, *(a[part] for a in args[:4]), args[4], x[part], p[part], w[part]) for part in parts]
-        for job in done:
-            job.result()
-    return x, p
+        half = n_epochs // 2
+
+        def part(rows: slice) -> None:
+            kernel.combine(*(a[rows] for a in args[:4]), args[4], x[rows], p[rows] if side else p, w[rows],
+                           *(a[rows] if a.size else a for a in given))  # fmt: skip
+
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            first = pool.submit(part, slice(0, half))
+            part(slice(half, n_epochs))
+            first.result()
+    return x, p if side else None
 
 
 def residuals(inp: TrajectoryInputs, x: np.ndarray) -> np.ndarray:

@@ -30,7 +30,6 @@ class TrajectoryInputs:
     pr_m: np.ndarray  # (E, N) corrected pseudorange
     mask: np.ndarray  # (E, N) real measurements
     cn0_dbhz: np.ndarray  # (E, N) NaN where not reported
-    elev_deg: np.ndarray  # (E, N) the satellite's elevation seen from the frame's origin
     sigma_m: np.ndarray  # (E, N) the error model's σ (the estimator's first guess)
     clock_index: np.ndarray  # (E, N) receiver-clock group
     sv: np.ndarray  # (E, N) measurement labels ('' for empty slots)
@@ -41,6 +40,14 @@ class TrajectoryInputs:
     yaw_rate_radps: np.ndarray  # (E,) mean yaw rate (counter-clockwise positive) over that interval (NaN: none)
     forward_m: np.ndarray  # (E,) distance driven forward over that interval, in the frame of its start heading (NaN: none)
     left_m: np.ndarray  # (E,) and to the left
+
+    @cached_property
+    def elev_deg(self) -> np.ndarray:
+        """(E, N) each satellite's elevation (deg) seen from the frame's origin (made when first asked: only a log
+        whose C/N0 tells nothing needs it)."""
+        los = self.sat_ecef_m - self.origin_ecef_m
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.degrees(np.arcsin(np.clip((los @ self.ecef2enu[2]) / np.linalg.norm(los, axis=-1), -1.0, 1.0)))
 
     @cached_property
     def n_clocks(self) -> int:
@@ -100,10 +107,7 @@ def trajectory_inputs(epochs: pd.DataFrame, meas: Measurements) -> TrajectoryInp
         bad = implausible_odometry(t, fix_enu[:, :2], forward)
         speed, yaw, forward, left = (np.where(bad, np.nan, a) for a in (speed, yaw, forward, left))
     cn0 = meas.cn0_dbhz if meas.cn0_dbhz is not None else np.full(meas.mask.shape, np.nan)
-    los = meas.sat_ecef_m - origin
-    with np.errstate(invalid="ignore", divide="ignore"):
-        elev = np.degrees(np.arcsin(np.clip((los @ rot[2]) / np.linalg.norm(los, axis=-1), -1.0, 1.0)))
-    return TrajectoryInputs(t, meas.sat_ecef_m, meas.pr_m, meas.mask & np.isfinite(meas.pr_m), cn0, elev, meas.sigma_m,
+    return TrajectoryInputs(t, meas.sat_ecef_m, meas.pr_m, meas.mask & np.isfinite(meas.pr_m), cn0, meas.sigma_m,
                             meas.clock_index, meas.sv, origin, rot, fix_enu, speed, yaw, forward, left)  # fmt: skip
 
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from tollcli.integrity.trajectory_filter import residuals
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
+from tollcli.stats import median
 
 #: C/N0 bin edges (dB-Hz)
 CN0_BINS_DBHZ = np.array([25.0, 30.0, 35.0, 40.0, 45.0])
@@ -44,14 +45,16 @@ def cn0_bins(cn0_dbhz: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(cn0_dbhz), b, CN0_BINS_DBHZ.size + 1)
 
 
-def noise_bins(cn0_dbhz: np.ndarray, elev_deg: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, int, str]:
+def noise_bins(cn0_dbhz: np.ndarray, elev_deg, mask: np.ndarray) -> tuple[np.ndarray, int, str]:
     """The bins the noise is measured in: C/N0 (:func:`cn0_bins`) where at least two of them hold
     :data:`MIN_BIN_COUNT` measurements, else elevation (:data:`ELEVATION_BINS_DEG`: a log without C/N0, or with one
-    value for all, still tells a low satellite from a high one). Returns (bins, their number, ``cn0``/``elevation``)."""
+    value for all, still tells a low satellite from a high one; ``elev_deg`` the array, or what makes it when called).
+    Returns (bins, their number, ``cn0``/``elevation``)."""
     bins = cn0_bins(cn0_dbhz)
     counts = np.bincount(bins[mask], minlength=CN0_BINS_DBHZ.size + 2)
     if (counts[: CN0_BINS_DBHZ.size + 1] >= MIN_BIN_COUNT).sum() >= 2:
         return bins, CN0_BINS_DBHZ.size + 2, "cn0"
+    elev_deg = elev_deg() if callable(elev_deg) else elev_deg
     return np.searchsorted(ELEVATION_BINS_DEG, np.nan_to_num(elev_deg, nan=0.0), side="right"), ELEVATION_BINS_DEG.size + 1, "elevation"
 
 
@@ -63,8 +66,8 @@ def sigma_by_bin(residual_m: np.ndarray, bins: np.ndarray, n_bins: int, mask: np
     for b in range(n_bins):  # a handful of bins
         r = residual_m[ok & (bins == b)]
         if r.size >= MIN_BIN_COUNT:
-            med = np.median(r)
-            table[b] = np.hypot(med, 1.4826 * np.median(np.abs(r - med)))
+            med = median(r)
+            table[b] = np.hypot(med, 1.4826 * median(np.abs(r - med)))
     worst = np.nanmax(table) if np.isfinite(table).any() else 30.0
     return np.maximum(np.where(np.isfinite(table), table, worst), SIGMA_FLOOR_M)
 
@@ -87,6 +90,8 @@ def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tu
     if labels.size == 0 or n_epochs < 3:
         return 1.0, np.ones(1)
     rows, values = np.nonzero(ok)[0], z[ok]
+    if labels.size < 1 << 15:  # (a stable sort of small numbers is a radix sort: the same order, sooner)
+        inverse = inverse.astype(np.int16)
     order = np.argsort(inverse, kind="stable")  # each label's values in the log's order
     edges = np.searchsorted(inverse[order], np.arange(labels.size + 1))
     size = 1 << int(np.ceil(np.log2(n_epochs + MAX_LAG + 1)))  # zeros enough that no lag counted wraps round
@@ -96,9 +101,14 @@ def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tu
         series = np.zeros((len(group), n_epochs))
         for row, label in enumerate(group):
             at = order[edges[label] : edges[label + 1]]
-            value, seen = np.zeros(n_epochs), np.zeros(n_epochs, bool)
-            value[rows[at]], seen[rows[at]] = values[at], True
-            series[row] = np.where(seen, value - np.median(value[seen]), 0.0)
+            when = rows[at]  # (the log's order)
+            if when.size > 1 and not (when[1:] > when[:-1]).all():  # a label twice in an epoch: its last value counts
+                value, seen = np.zeros(n_epochs), np.zeros(n_epochs, bool)
+                value[when], seen[when] = values[at], True
+                series[row] = np.where(seen, value - np.median(value[seen]), 0.0)
+                continue
+            own = values[at]
+            series[row, when] = own - median(own)
         spec = np.fft.rfft(series, size, axis=1)
         for term in np.square(spec.real) + np.square(spec.imag):  # |X|², in real arithmetic: the same bits in any group
             if power is None:

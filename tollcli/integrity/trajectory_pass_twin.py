@@ -205,12 +205,13 @@ def _start_clocks(c, x, p, started, k, used):
 
 
 def _update(c, xp, pp, k, used):
-    """The robust update of epoch ``k``: (ok, x, p, z, w) as the kernel's ``update``."""
+    """The robust update of epoch ``k``: (ok, x, p, z, w, the prior's information matrix, the posterior's) as the
+    kernel's ``update`` (an information matrix None where not made)."""
     ns, n = c["n_states"], len(used)
     base, clock, pr, robust2, sigma2, cauchy = k * c["n_slots"], c["clock"], c["pr"], c["robust2"], c["sigma2"], c["cauchy"]
     info = list(pp)
     if not _cholesky(info, ns):
-        return False, list(xp), list(pp), [math.nan] * n, [0.0] * n
+        return False, list(xp), list(pp), [math.nan] * n, [0.0] * n, None, None
     info = _cholesky_inverse(info, ns)
     x = list(xp)
     a_mat = info
@@ -245,8 +246,9 @@ def _update(c, xp, pp, k, used):
                 for bb in range(4):
                     a_mat[row + idx[bb]] += wh * h[bb]
                 b[idx[a]] += (wd * r) * h[a]
+        a_info = list(a_mat)
         if not _cholesky(a_mat, ns):
-            return False, list(xp), list(pp), [math.nan] * n, [0.0] * n
+            return False, list(xp), list(pp), [math.nan] * n, [0.0] * n, info, None
         _cholesky_solve(a_mat, ns, b)
         change = 0.0
         for a in range(ns):
@@ -256,7 +258,7 @@ def _update(c, xp, pp, k, used):
             x[a] = xn
         if change < c["relinearise"]:
             break
-    return True, x, _cholesky_inverse(a_mat, ns), z, w
+    return True, x, _cholesky_inverse(a_mat, ns), z, w, info, a_info
 
 
 def _widen(p, ns, odometry):
@@ -269,7 +271,7 @@ def _widen(p, ns, odometry):
 
 
 def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left, origin, rot, noise, start_x, start_p,
-             start_started, prior_x, prior_p, post_x, post_p, z_all, w_all, started_all, relocked,
+             start_started, prior_x, prior_p, post_x, post_p, z_all, w_all, started_all, relocked, prior_y, post_y,
              direction, odometry, n_clocks, iterations, lost_min, keep_prior, keep_post, resume, omega, c_mps, cauchy,
              relinearise):  # fmt: skip
     """The kernel's ``run_pass``: the inputs as contiguous arrays (``sat`` (E, N, 3), ``mask`` uint8, ``clock``
@@ -287,6 +289,8 @@ def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left
     started = [1 if v else 0 for v in start_started.tolist()]
     prior_p2 = prior_p.reshape(n_epochs, ns * ns) if keep_prior else None
     post_p2 = post_p.reshape(n_epochs, ns * ns) if keep_post else None
+    prior_y2 = prior_y.reshape(n_epochs, ns * ns) if keep_prior else None
+    post_y2 = post_y.reshape(n_epochs, ns * ns) if keep_post else None
     previous = -1
     for step in range(n_epochs):
         k = step if direction > 0 else n_epochs - 1 - step
@@ -301,52 +305,67 @@ def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left
         if keep_prior:
             prior_x[k], prior_p2[k] = x, p
         started_all[k] = started
+        info = a_info = None
         if used:
-            ok, xq, pq, z, w = _update(c, x, p, k, used)
+            ok, xq, pq, z, w, info, a_info = _update(c, x, p, k, used)
             low = sum(1 for v in w if v < 0.5)
             if ok and len(used) >= lost_min and 2 * low > len(used):
                 _widen(p, ns, odometry)
                 if keep_prior:
                     prior_p2[k] = p
                 relocked[k] = 1
-                _, xq, pq, z, w = _update(c, x, p, k, used)
+                _, xq, pq, z, w, info, a_info = _update(c, x, p, k, used)
             x, p = xq, pq
             z_all[k, used], w_all[k, used] = z, w
+        if keep_prior:
+            prior_y2[k] = math.nan if info is None else info
         if keep_post:
             post_x[k], post_p2[k] = x, p
+            post_y2[k] = math.nan if a_info is None else a_info
         previous = k
 
 
 def _horizontal_trace(a, n, order):
-    """East + north variance of ``a``⁻¹ (the kernel's ``horizontal_trace``); inf where not positive definite."""
+    """East + north variance of ``a``⁻¹ (the kernel's ``horizontal_trace``), and the Cholesky factor of ``a`` with its
+    states in ``order`` it came from; inf (and None) where not positive definite."""
     work = [a[order[i] * n + order[j]] for i in range(n) for j in range(n)]
     if not _cholesky(work, n):
-        return math.inf
+        return math.inf, None
     ea, eb, ec = work[(n - 2) * n + n - 2], work[(n - 1) * n + n - 2], work[(n - 1) * n + n - 1]
     a2, c2 = ea * ea, ec * ec
-    return (1.0 / a2 + 1.0 / c2) + (eb * eb) / (a2 * c2)
+    return (1.0 / a2 + 1.0 / c2) + (eb * eb) / (a2 * c2), work
 
 
-def combine(xf, pf, xb, pb, omegas, x_out, p_out, w_out):
+def combine(xf, pf, xb, pb, omegas, x_out, p_out, w_out, yf, yb):
     """The kernel's ``combine``: covariance intersection of (xf, pf) and (xb, pb) at every epoch, into ``x_out``,
-    ``p_out`` and ``w_out`` (ω; NaN where a matrix is not positive definite)."""
+    ``p_out`` ((E, S, S); (E, 2, 2): each matrix's horizontal block; empty: not kept) and ``w_out`` (ω; NaN where a
+    matrix is not positive definite). x is solved, and p inverted, from the factor of the weight's matrix (states
+    reordered, the horizontal two last) its trace came from. ``yf``, ``yb`` (E, S, S; or empty): P_f⁻¹ and P_b⁻¹ where
+    known (NaN where not), taken instead of inverting."""
     n_epochs, ns = xf.shape
     nn = ns * ns
     order = list(range(2, ns)) + [0, 1]
     grid = omegas.tolist()
-    pf2, pb2, po2 = pf.reshape(n_epochs, nn), pb.reshape(n_epochs, nn), p_out.reshape(n_epochs, nn)
+    pf2, pb2 = pf.reshape(n_epochs, nn), pb.reshape(n_epochs, nn)
+    block = ns if p_out.size == n_epochs * nn else 2 if p_out.size else 0
+    po2 = p_out.reshape(n_epochs, block * block)
+    yf2, yb2 = (y.reshape(n_epochs, nn) if y.size else None for y in (yf, yb))
     for e in range(n_epochs):
-        inf, inb = pf2[e].tolist(), pb2[e].tolist()
-        ok = _cholesky(inf, ns) and _cholesky(inb, ns)
-        best, omega = math.inf, math.nan
+        best, omega, factors = math.inf, math.nan, {}
+        if yf2 is not None and yb2 is not None and math.isfinite(yf2[e, 0]) and math.isfinite(yb2[e, 0]):
+            ok, inf, inb = True, yf2[e].tolist(), yb2[e].tolist()
+        else:
+            inf, inb = pf2[e].tolist(), pb2[e].tolist()
+            ok = _cholesky(inf, ns) and _cholesky(inb, ns)
+            if ok:
+                inf, inb = _cholesky_inverse(inf, ns), _cholesky_inverse(inb, ns)
         if ok:
-            inf, inb = _cholesky_inverse(inf, ns), _cholesky_inverse(inb, ns)
             traces = [math.nan] * len(grid)
 
             def trace(k):
                 if math.isnan(traces[k]):
                     wf, wb = grid[k], 1.0 - grid[k]
-                    traces[k] = _horizontal_trace([wf * inf[i] + wb * inb[i] for i in range(nn)], ns, order)
+                    traces[k], factors[k] = _horizontal_trace([wf * inf[i] + wb * inb[i] for i in range(nn)], ns, order)
                 return traces[k]
 
             lo, hi = 0, len(grid) - 1  # the first of the least of a convex sequence: where it first stops falling
@@ -359,30 +378,42 @@ def combine(xf, pf, xb, pb, omegas, x_out, p_out, w_out):
                     lo = mid + 1
             best, omega = trace(lo), grid[lo]
         if ok and math.isfinite(best):
+            lf = factors[lo]
             wf, wb = omega, 1.0 - omega
-            a = [wf * inf[i] + wb * inb[i] for i in range(nn)]
-            ok = _cholesky(a, ns)
-            if ok:
-                po = _cholesky_inverse(a, ns)
-                xfe, xbe = xf[e].tolist(), xb[e].tolist()
-                t = []
+            xfe, xbe = xf[e].tolist(), xb[e].tolist()
+            t = []
+            for i in range(ns):
+                sf = sb = 0.0
+                for j in range(ns):
+                    sf += inf[i * ns + j] * xfe[j]
+                    sb += inb[i * ns + j] * xbe[j]
+                t.append(wf * sf + wb * sb)
+            u = [t[order[i]] for i in range(ns)]
+            _cholesky_solve(lf, ns, u)
+            xo = [0.0] * ns
+            for i in range(ns):
+                xo[order[i]] = u[i]
+            x_out[e] = xo
+            if block == ns:
+                inv = _cholesky_inverse(lf, ns)
+                po = [0.0] * nn
                 for i in range(ns):
-                    sf = sb = 0.0
                     for j in range(ns):
-                        sf += inf[i * ns + j] * xfe[j]
-                        sb += inb[i * ns + j] * xbe[j]
-                    t.append(wf * sf + wb * sb)
-                u = []
-                for i in range(ns):
-                    s = 0.0
-                    for j in range(ns):
-                        s += po[i * ns + j] * t[j]
-                    u.append(s)
-                x_out[e], po2[e] = u, po
+                        po[order[i] * ns + order[j]] = inv[i * ns + j]
+                po2[e] = po
+            elif block == 2:  # cholesky_inverse's steps on the factor's last two rows
+                la, lc = 1.0 / lf[(ns - 2) * ns + ns - 2], 1.0 / lf[(ns - 1) * ns + ns - 1]
+                s = 0.0
+                s -= lf[(ns - 1) * ns + ns - 2] * la
+                lb = s * lc
+                off = 0.0 + lc * lb
+                po2[e] = [(0.0 + la * la) + lb * lb, off, off, 0.0 + lc * lc]
         else:
             ok = False
         if not ok:
-            x_out[e], po2[e], omega = math.nan, math.nan, math.nan
+            x_out[e], omega = math.nan, math.nan
+            if block:
+                po2[e] = math.nan
         w_out[e] = omega
 
 
