@@ -168,3 +168,29 @@ def test_the_noise_correlation_is_the_reference_loops_bit_for_bit(seed):
     for labels in (sv, codes):
         factor, rho = trajectory_noise.correlation_inflation(z, labels, mask)
         assert factor == reference[0] and _same(rho, reference[1])
+
+
+def test_the_first_pass_is_let_go_before_the_sweeps(berlin, monkeypatch):
+    """The noise-scaling pass (run beside the set-up on a thread of its own) holds every measurement's innovation and
+    weight; nothing may keep it once its scale is read — not the future it came from — or a long log's peak grows by
+    them (0.3 kB an epoch, found by ``trajectory_cost.py --memory``)."""
+    import weakref
+
+    from tollcli.integrity import trajectory
+
+    made, alive_at_sweep = [], []
+    real_pass, real_sweep = trajectory.run_pass, trajectory.sweep
+
+    def recorded_pass(*args, **kwargs):
+        out = real_pass(*args, **kwargs)
+        made.append(weakref.ref(out))
+        return out
+
+    def checked_sweep(*args, **kwargs):
+        alive_at_sweep.append(sum(ref() is not None for ref in made))
+        return real_sweep(*args, **kwargs)
+
+    monkeypatch.setattr(trajectory, "run_pass", recorded_pass)
+    monkeypatch.setattr(trajectory, "sweep", checked_sweep)
+    estimate_trajectory(berlin, "smoothed")
+    assert len(made) == 1 and alive_at_sweep == [0] * (1 + trajectory.NOISE_ROUNDS)

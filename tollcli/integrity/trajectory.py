@@ -37,7 +37,7 @@ from tollcli.integrity.trajectory_noise import (
     postfit_residuals,
     sigma_by_bin,
 )
-from tollcli.integrity.trajectory_sweep import sigma_major_m, sweep
+from tollcli.integrity.trajectory_sweep import sigma_major_m, sweep, swept_whole
 from tollcli.stats import median
 
 #: ``auto``: smoothed, with the log's odometry or without (the GNSS-only motion model): on the simulator's city drives
@@ -106,7 +106,8 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
     sigma2 = sigma**2
     sigma = None
     start_f = _start(inp, odometry, m, 1)
-    buffers = PassBuffers()  # the passes' arrays, the same for every round (each read before the next)
+    # the passes' arrays, the same for every round (each read before the next); a log swept in chunks keeps none
+    buffers = PassBuffers() if swept_whole(inp.mask.shape[0]) else None
     with ThreadPoolExecutor(max_workers=1) as pool:  # the first pass (compiled: it lets go of the interpreter) beside
         # what does not depend on it
         first_pass = pool.submit(run_pass, inp, sigma2, 1, *start_f, odometry, noise, keep=(), buffers=buffers)
@@ -115,6 +116,7 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
         sv_code[inp.mask] = pd.factorize(inp.sv[inp.mask], sort=True)[0]
         bins, n_bins, _by = noise_bins(inp.cn0_dbhz, lambda: inp.elev_deg, inp.mask)
         first = first_pass.result()  # its innovations: the error model's scale
+        first_pass = None  # (the future holds the pass: let both go once read)
     kept = first.weight >= 0.5
     if kept.any():
         sigma2 = sigma2 * max(1.0, float(median(first.z[kept] ** 2)) / CHI2_1_MEDIAN)

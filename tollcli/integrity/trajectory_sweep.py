@@ -8,7 +8,7 @@ A round of noise reads only the combined state and the weights: its sweep is not
 
 A log of up to :data:`CHUNKED_FROM_EPOCHS` epochs is swept whole: the two passes at once on two threads, then their
 combination over the whole log (its two halves on two threads; of each combined covariance only the horizontal block
-is made). A longer one in chunks of :data:`CHUNK_EPOCHS` (the Build item "overlapping chunks for the backward
+is made: the passes' own matrices are the memory, not the combination's). A longer one in chunks of :data:`CHUNK_EPOCHS` (the Build item "overlapping chunks for the backward
 pass", done exactly rather than with an overlap):
 
 1. the backward pass over the whole log, chunk by chunk from the end, keeping only its state at each chunk's edge
@@ -79,7 +79,7 @@ def sweep(inp: TrajectoryInputs, sigma2_m2: np.ndarray, start_f, start_b, odomet
     out = Sweep(np.empty((n_epochs, n_states)), empty((n_epochs, 2, 2)), empty((n_epochs, n_states)), empty((n_epochs, 2, 2)),
                 np.empty((n_epochs, n_slots)), empty((n_epochs, n_slots)), empty(n_epochs), empty(n_epochs, np.int64),
                 empty(n_epochs, bool))  # fmt: skip
-    chunk = chunk_epochs or (n_epochs if n_epochs <= CHUNKED_FROM_EPOCHS else CHUNK_EPOCHS)
+    chunk = chunk_epochs or (n_epochs if swept_whole(n_epochs) else CHUNK_EPOCHS)
     bounds = [(a, min(a + chunk, n_epochs)) for a in range(0, n_epochs, max(chunk, 1))]
     if len(bounds) <= 1:
         forward, backward = run_both(inp, sigma2_m2, start_f, start_b, odometry, noise, robust_sigma2_m2, buffers)
@@ -109,6 +109,11 @@ def sweep(inp: TrajectoryInputs, sigma2_m2: np.ndarray, start_f, start_b, odomet
         for job in [pool.submit(one, bound) for bound in bounds]:
             job.result()
     return out
+
+
+def swept_whole(n_epochs: int) -> bool:
+    """Whether a log of ``n_epochs`` is swept whole by default (else in chunks of :data:`CHUNK_EPOCHS`)."""
+    return n_epochs <= CHUNKED_FROM_EPOCHS
 
 
 def _rows(fp: FilterPass, rows: slice) -> FilterPass:
