@@ -194,3 +194,21 @@ def test_the_first_pass_is_let_go_before_the_sweeps(berlin, monkeypatch):
     monkeypatch.setattr(trajectory, "sweep", checked_sweep)
     estimate_trajectory(berlin, "smoothed")
     assert len(made) == 1 and alive_at_sweep == [0] * (1 + trajectory.NOISE_ROUNDS)
+
+
+def test_the_noise_bins_ask_for_elevations_only_without_c_n0(berlin):
+    """The real Berlin drive: with its C/N0 the noise is binned by C/N0 and the elevations are never made; with the
+    C/N0 taken away, by the satellites' elevations seen from the frame's origin (above the horizon where measured)."""
+    asked = []
+
+    def elevations():
+        asked.append(1)
+        return berlin.elev_deg
+
+    bins, n_bins, by = trajectory_noise.noise_bins(berlin.cn0_dbhz, elevations, berlin.mask)
+    assert by == "cn0" and not asked
+    bins, n_bins, by = trajectory_noise.noise_bins(np.full(berlin.mask.shape, np.nan), elevations, berlin.mask)
+    assert by == "elevation" and asked == [1] and n_bins == trajectory_noise.ELEVATION_BINS_DEG.size + 1
+    elev = berlin.elev_deg[berlin.mask]
+    assert (elev > 0).all() and (elev < 90).all()
+    assert _same(bins[berlin.mask], np.searchsorted(trajectory_noise.ELEVATION_BINS_DEG, elev, side="right"))

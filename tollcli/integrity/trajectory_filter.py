@@ -93,9 +93,10 @@ class FilterPass:
 
 class PassBuffers:
     """The arrays the passes of one sweep write, taken again by the next sweep's passes of the same shapes: their
-    memory is touched once, not once a sweep (fresh pages, faulted in by the two passes on their two threads at once,
-    cost a sweep about a fifth of its time). A pass's results must be read before the next pass of the same direction
-    and kind runs (the estimator's rounds read each sweep before the next)."""
+    memory is touched once, not once a sweep (fresh pages, faulted in by the two passes on their two threads at once:
+    a pair of passes over 10 000 epochs took 30 ms with fresh arrays against 24–25 ms with reused ones). A pass's results
+    must be read before the next pass of the same direction and kind runs (the estimator's rounds read each sweep
+    before the next)."""
 
     def __init__(self) -> None:
         self._arrays: dict[tuple, np.ndarray] = {}
@@ -243,8 +244,8 @@ def combine(xf: np.ndarray, pf: np.ndarray, xb: np.ndarray, pb: np.ndarray, omeg
     x, w = np.empty((n_epochs, n_states)), np.empty(n_epochs)
     p = np.empty((n_epochs if side else 0, side, side))
     args = [np.ascontiguousarray(a, np.float64) for a in (xf, pf, xb, pb, omegas)]
-    none = np.empty((0, n_states, n_states))
-    given = [np.ascontiguousarray(a, np.float64) if a is not None and yf is not None and yb is not None else none for a in (yf, yb)]
+    none = np.empty((0, n_states, n_states))  # (the kernel's "not given")
+    given = (none, none) if yf is None or yb is None else (np.ascontiguousarray(yf, np.float64), np.ascontiguousarray(yb, np.float64))
     kernel = _kernel()
     if kernel is None:
         combine_twin(*args, x, p, w, *given)

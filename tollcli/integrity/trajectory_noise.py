@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from tollcli.integrity.trajectory_filter import residuals
@@ -45,17 +47,16 @@ def cn0_bins(cn0_dbhz: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(cn0_dbhz), b, CN0_BINS_DBHZ.size + 1)
 
 
-def noise_bins(cn0_dbhz: np.ndarray, elev_deg, mask: np.ndarray) -> tuple[np.ndarray, int, str]:
+def noise_bins(cn0_dbhz: np.ndarray, elev_deg: Callable[[], np.ndarray], mask: np.ndarray) -> tuple[np.ndarray, int, str]:
     """The bins the noise is measured in: C/N0 (:func:`cn0_bins`) where at least two of them hold
     :data:`MIN_BIN_COUNT` measurements, else elevation (:data:`ELEVATION_BINS_DEG`: a log without C/N0, or with one
-    value for all, still tells a low satellite from a high one; ``elev_deg`` the array, or what makes it when called).
+    value for all, still tells a low satellite from a high one; ``elev_deg`` makes them, called only then).
     Returns (bins, their number, ``cn0``/``elevation``)."""
     bins = cn0_bins(cn0_dbhz)
     counts = np.bincount(bins[mask], minlength=CN0_BINS_DBHZ.size + 2)
     if (counts[: CN0_BINS_DBHZ.size + 1] >= MIN_BIN_COUNT).sum() >= 2:
         return bins, CN0_BINS_DBHZ.size + 2, "cn0"
-    elev_deg = elev_deg() if callable(elev_deg) else elev_deg
-    return np.searchsorted(ELEVATION_BINS_DEG, np.nan_to_num(elev_deg, nan=0.0), side="right"), ELEVATION_BINS_DEG.size + 1, "elevation"
+    return np.searchsorted(ELEVATION_BINS_DEG, np.nan_to_num(elev_deg(), nan=0.0), side="right"), ELEVATION_BINS_DEG.size + 1, "elevation"
 
 
 def sigma_by_bin(residual_m: np.ndarray, bins: np.ndarray, n_bins: int, mask: np.ndarray) -> np.ndarray:

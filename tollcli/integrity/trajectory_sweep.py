@@ -8,8 +8,9 @@ A round of noise reads only the combined state and the weights: its sweep is not
 
 A log of up to :data:`CHUNKED_FROM_EPOCHS` epochs is swept whole: the two passes at once on two threads, then their
 combination over the whole log (its two halves on two threads; of each combined covariance only the horizontal block
-is made: the passes' own matrices are the memory, not the combination's). A longer one in chunks of :data:`CHUNK_EPOCHS` (the Build item "overlapping chunks for the backward
-pass", done exactly rather than with an overlap):
+is made: the passes' own matrices are the memory, not the combination's). A longer one in chunks of
+:data:`CHUNK_EPOCHS` (the Build item "overlapping chunks for the backward pass", done exactly rather than with an
+overlap):
 
 1. the backward pass over the whole log, chunk by chunk from the end, keeping only its state at each chunk's edge
    (:class:`~tollcli.integrity.trajectory_filter.PassState`), and beside it the forward pass the same way;
@@ -32,8 +33,8 @@ import numpy as np
 from tollcli.integrity.trajectory_filter import MOTION_STATES, FilterPass, MotionNoise, PassBuffers, PassState, combine, run_both, run_pass, state_after
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 
-#: a log longer than this (epochs) is swept in chunks: ~8 matrices (S × S) per epoch kept at once whole, 4.3 kB with
-#: two clocks — 70 MB at 16 384 epochs (4.5 h at 1 Hz), the price of chunks being twice the passes' time
+#: a log longer than this (epochs) is swept in chunks: ~8 matrices (S × S) per epoch kept at once whole, 4.5 kB with
+#: two clocks — 74 MB at 16 384 epochs (4.5 h at 1 Hz), the price of chunks being twice the passes' time
 CHUNKED_FROM_EPOCHS = 16_384
 #: the epochs of a chunk
 CHUNK_EPOCHS = 4096
