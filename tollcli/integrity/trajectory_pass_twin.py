@@ -23,6 +23,8 @@ import numpy as np
 
 #: motion states before the clocks (``trajectory_filter.MOTION_STATES``)
 M = 6
+#: the Earth's mean radius (m): the tangent plane's fall below the road, (e² + n²) / 2R (:func:`_follow_surface`)
+EARTH_RADIUS_M = 6_371_000.0
 ALONG, SHARE, POSITION, NO_ODO, YAW, HEADING, UP, CLOCK, DRIFT, ACCEL, GYRO_BIAS = range(11)
 
 
@@ -122,6 +124,11 @@ def _transition(p, n, entries):
     return out
 
 
+def _follow_surface(x, e0, n0):
+    """The height falls as the road leaves the tangent plane (the kernel's ``follow_surface``)."""
+    x[2] -= ((x[0] * x[0] + x[1] * x[1]) - (e0 * e0 + n0 * n0)) / (2.0 * EARTH_RADIUS_M)
+
+
 def _predict(c, x, p, dt, interval):
     n, drift, nz = c["n_states"], M - 1, c["noise"]
     d = float(c["direction"])
@@ -142,8 +149,10 @@ def _predict(c, x, p, dt, interval):
                 psi, dpsi = x[3] + (w - x[4]) * s, 0.0
             sn, cs = math.sin(psi), math.cos(psi)
             de, dn = fw * sn - lf * cs, fw * cs + lf * sn
+            e0, n0 = x[0], x[1]
             x[0] += d * de
             x[1] += d * dn
+            _follow_surface(x, e0, n0)
             entries += [(0, 3, d * dn), (1, 3, -(d * de)), (0, 4, d * dn * dpsi), (1, 4, -(d * de) * dpsi)]
             sv = nz[ALONG] + nz[SHARE] * abs(v)
             lat = 0.5 * nz[YAW] * dt * abs(fw)
@@ -164,8 +173,10 @@ def _predict(c, x, p, dt, interval):
         for a in range(n):
             p[a * n + a] += q[a]
         return p
+    e0, n0 = x[0], x[1]
     x[0] += x[3] * s
     x[1] += x[4] * s
+    _follow_surface(x, e0, n0)
     entries += [(0, 3, s), (1, 4, s)]
     p = _transition(p, n, entries)
     qa = nz[ACCEL]
