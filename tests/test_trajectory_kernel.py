@@ -191,7 +191,9 @@ def test_the_combinations_blocks_and_given_inverses_agree(seed, n, n_epochs):
     (x, p), (x2, p2), (x0, p0), (xy, py), (xm, pm) = compiled
     assert _same(x2, x) and _same(x0, x) and p0 is None
     assert _same(p2, p[:, :2, :2])
-    assert np.allclose(xy, x, rtol=1e-7, atol=1e-9) and np.allclose(py, p, rtol=1e-7, atol=1e-12)
+    # inverting a matrix loses digits in proportion to its condition number (random ones here reach 4·10⁵)
+    rtol = 1e-11 * max(np.linalg.cond(pf).max(), np.linalg.cond(pb).max(), 1e4)
+    assert np.allclose(xy, x, rtol=rtol, atol=rtol * np.abs(x).max()) and np.allclose(py, p, rtol=rtol, atol=rtol * np.abs(p).max())
     assert _same(xm[0], x[0]) and _same(pm[0], p[0])  # not given: inverted
     assert _same(xm[1:], xy[1:]) and _same(pm[1:], py[1:])  # given: taken
 

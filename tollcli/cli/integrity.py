@@ -116,15 +116,19 @@ def integrity(
                 writer.write(table)
             elif kind in NAVIGATION_KINDS:
                 _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
-            else:
-                table = _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment, strict, positioning)
-                used = table["positioning"].iat[0] if "positioning" in table and len(table) else table.attrs.get("positioning_used", "snapshot")
-                note_why = table.attrs.get("positioning_note")
+            else:  # chunk by chunk: a long libRSF log is placed segment by segment, and its table written as it comes
+                used, note_why = "snapshot", None
+                for i, chunk in enumerate(iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, nav=nav,
+                                                         environment=environment, positioning=positioning)):  # fmt: skip
+                    table = chunk.table
+                    if i == 0:
+                        used = table["positioning"].iat[0] if "positioning" in table and len(table) else table.attrs.get("positioning_used", "snapshot")
+                        note_why = table.attrs.get("positioning_note")
+                        counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
+                    _tally(table, counts)
+                    writer.write(table)
                 if note_why:
                     note_why = note_why.replace(run.replay_path(), run.name)
-                counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
-                _tally(table, counts)
-                writer.write(table)
             writer.commit()
     if kind in NAVIGATION_KINDS:
         counts["skipped", "lines"] += stats.skipped  # the malformed lines the reader passed over
@@ -195,12 +199,3 @@ def _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, str
     note(stats.summary(), quiet)
 
 
-def _pseudoranges(run, kind, nav, params, sigma_model, sigma, nominal, environment="auto", strict=False,
-                  positioning="auto") -> pd.DataFrame:  # fmt: skip
-    tables = [c.table for c in iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, nav=nav, environment=environment,
-                                              positioning=positioning)]  # fmt: skip
-    if len(tables) == 1:
-        return tables[0]
-    table = pd.concat(tables, ignore_index=True)  # (a u-blox log read through its own solutions: chunks)
-    table.attrs = dict(tables[0].attrs)
-    return table

@@ -12,13 +12,13 @@ import pandas as pd
 from tollcli.errors import UsageError
 from tollcli.geodesy import enu_shift2geodetic
 from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
-from tollcli.gnss.pseudorange_inputs import NoOrbitsError, pseudorange_epochs
-from tollcli.integrity.trajectory import with_trajectory
+from tollcli.gnss.pseudorange_inputs import NoOrbitsError
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.integrity.environment import EnvironmentCarry, with_environment
 from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.run import run_raim, settle_sources
 from tollcli.io.prefetch import read_ahead
+from tollcli.job.pseudorange_segments import placed_log
 from tollcli.readers.navigation import NAVIGATION_KINDS, iter_navigation_tables
 from tollcli.readers.nmea import ReadStats
 
@@ -44,13 +44,6 @@ def with_raim_position(table: pd.DataFrame) -> pd.DataFrame:
 RAIM_CHUNK_EPOCHS = 3_600
 
 
-def epoch_chunks(epochs: pd.DataFrame, meas, chunk_epochs: int) -> Iterator[tuple[pd.DataFrame, object]]:
-    """A whole log's epoch table and measurements, ``chunk_epochs`` epochs at a time (each table indexed from 0)."""
-    for start in range(0, len(epochs), chunk_epochs):
-        rows = np.arange(start, min(start + chunk_epochs, len(epochs)))
-        yield epochs.iloc[rows].reset_index(drop=True), meas.take(rows)
-
-
 def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nominal", sigma_m: float = 5.0,
                    nominal: NominalModel | None = None, strict: bool = False, stats: ReadStats | None = None,
                    nav: str | tuple[str, ...] | None = None, date: dt.date | None = None, environment: str = "auto",
@@ -72,7 +65,7 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
         return
     if kind not in NAVIGATION_KINDS:
         try:
-            epochs, meas = pseudorange_epochs(log, kind, nav, sigma_model, sigma_m, nominal, strict)
+            placed = placed_log(log, kind, nav, sigma_model, sigma_m, nominal, strict, positioning)
         except NoOrbitsError as exc:
             from tollcli.job.file_info import solutions_instead
 
@@ -84,16 +77,15 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
                 chunk.table.attrs.update(positioning_note=note, positioning_used="receiver")
                 yield chunk
             return
-        epochs, meas, _used = with_trajectory(epochs, meas, positioning)
         env_carry = EnvironmentCarry()
-        chunks = epoch_chunks(epochs, meas, RAIM_CHUNK_EPOCHS) if len(epochs) else [(epochs, meas)]
-        for part, part_meas in chunks:  # the RAIM's working set a chunk's, not the log's
-            part_meas, env_columns = measured_environment(part, part_meas, environment, env_carry)
-            table = with_raim_position(pd.concat([part, env_columns, run_raim(part_meas, params)], axis=1))
-            table.attrs["skipped_lines"] = int(epochs.attrs.get("skipped_lines", 0))
-            if "positioning_note" in epochs.attrs:  # why no trajectory placed the epochs
-                table.attrs["positioning_note"] = epochs.attrs["positioning_note"]
-            yield IntegrityChunk(table, None)
+        with placed:  # (a long libRSF log placed segment by segment: its segments removed on leaving)
+            for part, part_meas in placed.chunks(RAIM_CHUNK_EPOCHS):  # the RAIM's working set a chunk's, not the log's
+                part_meas, env_columns = measured_environment(part, part_meas, environment, env_carry)
+                table = with_raim_position(pd.concat([part, env_columns, run_raim(part_meas, params)], axis=1))
+                table.attrs["skipped_lines"] = placed.skipped_lines
+                if placed.note:  # why no trajectory placed the epochs
+                    table.attrs["positioning_note"] = placed.note
+                yield IntegrityChunk(table, None)
         return
     if sigma_model == "input":
         raise UsageError("--sigma-model input: NMEA logs carry no per-measurement σ; use nominal or constant")

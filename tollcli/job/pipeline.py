@@ -34,7 +34,7 @@ from tollcli.enforcement.trip import cn0_summary
 from tollcli.errors import DataError, UsageError
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.nmea_measurements import AngleCarry, nmea_measurements
-from tollcli.gnss.pseudorange_inputs import NoOrbitsError, pseudorange_epochs
+from tollcli.gnss.pseudorange_inputs import NoOrbitsError
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.gnss.wls import Geometry, wls_geometry
 from tollcli.integrity.environment import ENVIRONMENTS, EnvironmentCarry
@@ -42,10 +42,11 @@ from tollcli.integrity.nav_authentication import epoch_authentication, not_check
 from tollcli.integrity.raim import MODES, RaimParams
 from tollcli.integrity.run import hal_free_terms, level_name, model_hpl, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
-from tollcli.integrity.trajectory import POSITIONINGS, with_trajectory
+from tollcli.integrity.trajectory import POSITIONINGS
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
 from tollcli.io.sources import INPUT_KINDS, printable_path
-from tollcli.job.log_integrity import epoch_chunks, measured_environment
+from tollcli.job.log_integrity import measured_environment
+from tollcli.job.pseudorange_segments import placed_log as placed_pseudorange_log
 from tollcli.job.osnma_evidence import OsnmaEvidence, failure_findings, fixes_before, osnma_evidence, record_in_invoice
 from tollcli.job.osnma_evidence import inputs_record as osnma_inputs
 from tollcli.io.log_run import LogRun
@@ -363,13 +364,14 @@ def _navigation_chunks(run: LogRun, kind: str, settings: ChargeSettings, nominal
 def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | None, settings: ChargeSettings,
                         nominal: NominalModel, placed: dict[str, str], charger: TailCharger) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
     """A pseudorange log's (RINEX, GnssLogger, GSDC, u-blox RAWX, libRSF) epochs and measurements, in chunks of
-    :data:`CHUNK_EPOCHS` epochs. The positions are solved for the whole log at once (its reader and solver read it
-    whole, from the run's replay) — each epoch alone (snapshot WLS), then placed by the trajectory estimator
-    (``settings.positioning``, :func:`~tollcli.integrity.trajectory.with_trajectory`; ``placed`` receives the positioning
+    :data:`CHUNK_EPOCHS` epochs. The positions are solved from the run's replay, a libRSF log's segment by segment and
+    any other's whole (:mod:`tollcli.job.pseudorange_segments`) — each epoch alone (snapshot WLS), then placed by the
+    trajectory estimator (``settings.positioning``, :func:`~tollcli.integrity.trajectory.with_trajectory`; ``placed`` receives the positioning
     it used and the note why a trajectory was refused, and ``charger`` counts positions as independent evidence only the trajectory's correlation time apart);
     from there on the chunks take the same path as a navigation log's."""
     try:
-        epochs, meas = pseudorange_epochs(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict)
+        placed_log = placed_pseudorange_log(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict,
+                                            settings.positioning)  # fmt: skip
     except NoOrbitsError as exc:
         solutions = solutions_instead(run.replay_path(), kind, nav)
         if not solutions:
@@ -380,19 +382,21 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
                           f"with its NAV-SAT residuals where it wrote them) were charged instead; --nav gives the orbits")  # fmt: skip
         yield from _navigation_chunks(run, "ubx-nav", settings, nominal, ReadStats())
         return
-    epochs, meas, positioning = with_trajectory(epochs, meas, settings.positioning)
-    if kind in RELATIVE_CLOCK_KINDS:
-        epochs = on_the_clock(epochs, run.name, settings)
-    elif settings.date is not None:
-        check_given_date(epochs, run.name, settings.date)
-    check_not_future(epochs, run.name)
-    placed["positioning"] = positioning
-    if "positioning_note" in epochs.attrs:
-        placed["note"] = epochs.attrs["positioning_note"]
-    if "trajectory_correlation_s" in epochs.attrs:
-        charger.independent_after(epochs.attrs["trajectory_correlation_s"])
-    for part, part_meas in epoch_chunks(epochs, meas, CHUNK_EPOCHS):
-        yield part, part_meas, None
+    with placed_log:
+        placed["positioning"] = placed_log.positioning
+        if placed_log.note:
+            placed["note"] = placed_log.note
+        if placed_log.correlation_s is not None:
+            charger.independent_after(placed_log.correlation_s)
+        first = True
+        for part, part_meas in placed_log.chunks(CHUNK_EPOCHS):
+            if kind in RELATIVE_CLOCK_KINDS:
+                part = on_the_clock(part, run.name, settings)
+            elif settings.date is not None and first:
+                check_given_date(part, run.name, settings.date)
+            check_not_future(part, run.name)
+            first = False
+            yield part, part_meas, None
 
 
 @dataclass

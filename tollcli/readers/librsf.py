@@ -16,6 +16,7 @@ skipped and counted (``--strict``: an error naming its line).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,21 +49,85 @@ def read_librsf(path: str, strict: bool = False) -> LibrsfLog:
     Its fields are parsed as numbers as they are read; a file with a field that is not one (a malformed line, or a
     line of another kind) is read again as text, each line's fields then tried one by one (the same numbers: 8 times
     slower, and a Python string per field)."""
+    raw, numbers = _read_all(path)
+    log = _tables(raw, numbers, 0, path, strict)
+    if not (len(log.pseudoranges) or len(log.odometry) or len(log.points)):
+        raise DataError(f"{path}: no pseudorange3, odom3 or point3 line: not a libRSF log")
+    return log
+
+
+#: rows of a libRSF file parsed at a time by :func:`iter_librsf`
+BLOCK_ROWS = 50_000
+
+
+def iter_librsf(path: str, strict: bool = False, block_rows: int | None = None) -> Iterator[LibrsfLog]:
+    """A libRSF file's tables :data:`BLOCK_ROWS` rows at a time, in file order: the parts :func:`read_librsf` reads
+    whole, row for row the same numbers, malformed lines counted and named the same way (each in the part that holds
+    it). Memory is a block's. A part with a field that is not a number is read again as text from its first row on."""
+    block_rows = block_rows or BLOCK_ROWS
+    row0, numbers, seen = 0, True, False
+    while True:
+        try:
+            with _opened(path, numbers, block_rows) as reader:
+                for raw in _rows_from(reader, row0):
+                    part = _tables(raw.reset_index(drop=True), numbers, row0, path, strict)
+                    row0 += len(raw)
+                    seen |= bool(len(part.pseudoranges) or len(part.odometry) or len(part.points))
+                    yield part
+            break
+        except ValueError as exc:  # a field that is not a number: this block and the rest read as text
+            if not numbers or isinstance(exc, pd.errors.ParserError):
+                raise DataError(f"{path}: not a readable libRSF text file ({str(exc).splitlines()[0]})") from None
+            numbers = False
+        except (OSError, UnicodeDecodeError) as exc:
+            raise DataError(f"{path}: not a readable libRSF text file ({str(exc).splitlines()[0]})") from None
+    if not seen:
+        raise DataError(f"{path}: no pseudorange3, odom3 or point3 line: not a libRSF log")
+
+
+def _csv_options(numbers: bool) -> dict:
+    return {"sep": r"\s+", "header": None, "names": range(15), "engine": "c", "comment": "#",
+            "dtype": {0: str, **dict.fromkeys(range(1, 15), np.float64)} if numbers else str}  # fmt: skip
+
+
+def _read_all(path: str) -> tuple[pd.DataFrame, bool]:
     try:
-        raw = pd.read_csv(path, sep=r"\s+", header=None, names=range(15), dtype={0: str, **dict.fromkeys(range(1, 15), np.float64)},
-                          engine="c", comment="#")  # fmt: skip
-        numbers = True
+        return pd.read_csv(path, **_csv_options(True)), True
     except (ValueError, OSError):  # a field that is not a number; or the file unreadable, said and named below
-        numbers = False
+        pass
     try:
-        if not numbers:
-            raw = pd.read_csv(path, sep=r"\s+", header=None, names=range(15), dtype=str, engine="c", comment="#")
+        return pd.read_csv(path, **_csv_options(False)), False
     except FileNotFoundError:
         raise UsageError(f"{path}: no such file") from None
     except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: not a readable libRSF text file ({str(exc).splitlines()[0]})") from None
     except pd.errors.EmptyDataError:
         raise DataError(f"{path}: empty: no libRSF measurements") from None
+
+
+def _opened(path: str, numbers: bool, block_rows: int):
+    """A chunked reader of ``path`` (a context manager: closed on leaving)."""
+    try:
+        return pd.read_csv(path, chunksize=block_rows, **_csv_options(numbers))
+    except FileNotFoundError:
+        raise UsageError(f"{path}: no such file") from None
+    except pd.errors.EmptyDataError:
+        raise DataError(f"{path}: empty: no libRSF measurements") from None
+
+
+def _rows_from(reader, skip: int):
+    """The blocks of ``reader`` from its row ``skip`` on (rows: the lines pandas reads, comments and blank lines not
+    counted; those before ``skip`` were read already, as numbers)."""
+    for raw in reader:
+        if skip >= len(raw):
+            skip -= len(raw)
+            continue
+        yield raw.iloc[skip:]
+        skip = 0
+
+
+def _tables(raw: pd.DataFrame, numbers: bool, row0: int, path: str, strict: bool) -> LibrsfLog:
+    """The tables of the rows ``raw`` (the file's rows ``row0`` on; ``numbers``: parsed as numbers, else text)."""
     kind = raw[0].to_numpy(object)
     tables, malformed = {}, 0
     for name, columns in (("pseudorange3", PSEUDORANGE_COLUMNS), ("odom3", ODOMETRY_COLUMNS), ("point3", POINT_COLUMNS)):
@@ -75,11 +140,9 @@ def read_librsf(path: str, strict: bool = False) -> LibrsfLog:
             with np.errstate(invalid="ignore"):
                 bad |= ~((ids >= 0) & (ids < SATELLITE_ID_LIMIT) & (np.floor(ids) == ids)).all(axis=1)
         if bad.any() and strict:
-            raise DataError(f"{path}:{int(rows[np.argmax(bad)]) + 1}: a {name} line whose fields are not {len(columns)} numbers")
+            raise DataError(f"{path}:{row0 + int(rows[np.argmax(bad)]) + 1}: a {name} line whose fields are not {len(columns)} numbers")
         malformed += int(bad.sum())
         tables[name] = pd.DataFrame(values[~bad], columns=list(columns))
-    if not any(len(t) for t in tables.values()):
-        raise DataError(f"{path}: no pseudorange3, odom3 or point3 line: not a libRSF log")
     pr = tables["pseudorange3"]
     pr["sat"], pr["sys"] = pr["sat"].astype(np.int64), pr["sys"].astype(np.int64)
     return LibrsfLog(pr, tables["odom3"], tables["point3"], malformed)

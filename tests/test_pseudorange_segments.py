@@ -1,0 +1,215 @@
+"""A libRSF log read in blocks and placed segment by segment (``tollcli/job/pseudorange_segments.py``).
+
+What must hold: the blocks are the whole file's rows, malformed lines counted and named as before; a log of one segment
+(every real one in ../shared/data) is placed exactly as before segments existed; a longer one keeps every epoch once, in
+order, numbered on, each within its bound against the truth; a segment written to disk comes back the same; a log
+out of time order is read whole; nothing is left on disk.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import shared
+
+from tollcli.errors import DataError
+from tollcli.geodesy import geodetic2enu
+from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+from tollcli.gnss.sigma_models import NominalModel
+from tollcli.integrity.trajectory import with_trajectory
+from tollcli.job import pseudorange_segments as segments
+from tollcli.readers.librsf import iter_librsf, librsf_truth, read_librsf
+
+BERLIN = "smartloc", "Berlin_Potsdamer_Platz_Input.txt"
+
+
+def _placed(path: str, positioning: str = "auto", chunk_epochs: int = 700):
+    with segments.placed_log(path, "librsf", None, "nominal", 5.0, NominalModel(), False, positioning) as placed:
+        parts = list(placed.chunks(chunk_epochs))
+        folder = placed._folder
+    assert folder is None or not os.path.exists(folder)  # the stored segments are gone once the log is placed
+    return placed, parts
+
+
+def _same_measurements(a, b) -> None:
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        assert (x is None) == (y is None), f.name
+        if x is not None:
+            assert x.dtype == y.dtype and x.shape == y.shape, f.name
+            assert (x == y).all() if x.dtype == object else np.array_equal(x, y, equal_nan=True), f.name
+
+
+def test_the_blocks_are_the_whole_files_rows_even_past_a_malformed_line(tmp_path):
+    """Real Berlin drive, with a field that is no number in its 15 000th line: read in blocks of 4 000 rows (the
+    blocks from the bad one on read as text) the tables, the malformed count and the strict error's line are the
+    whole file's."""
+    lines = shared(*BERLIN).read_text().splitlines(keepends=True)
+    lines[14_999] = lines[14_999].replace(lines[14_999].split()[2], "12x34.5", 1)
+    bad = tmp_path / "bad.txt"
+    bad.write_text("".join(lines))
+    for path in (str(shared(*BERLIN)), str(bad)):
+        whole = read_librsf(path)
+        parts = list(iter_librsf(path, block_rows=4_000))
+        assert len(parts) > 3
+        for table in ("pseudoranges", "odometry", "points"):
+            pd.testing.assert_frame_equal(pd.concat([getattr(p, table) for p in parts], ignore_index=True), getattr(whole, table))
+        assert sum(p.malformed for p in parts) == whole.malformed == (path == str(bad))
+    with pytest.raises(DataError) as whole_error:
+        read_librsf(str(bad), strict=True)
+    with pytest.raises(DataError) as block_error:
+        list(iter_librsf(str(bad), strict=True, block_rows=4_000))
+    assert str(block_error.value) == str(whole_error.value)
+    assert f"{bad}:15000:" in str(block_error.value)
+
+
+def test_a_log_of_one_segment_is_placed_as_before():
+    """The real Berlin drive (1 372 epochs) is one segment: its placed epochs and measurements are, to the bit, those of
+    the log read and solved whole and placed by the trajectory estimator — chunked as the caller asks."""
+    path = str(shared(*BERLIN))
+    epochs, meas, used = with_trajectory(*pseudorange_epochs(path, "librsf", None, "nominal", 5.0, NominalModel()), "auto")
+    placed, parts = _placed(path)
+    assert (placed.segments, placed.positioning, used) == (1, "smoothed", "smoothed")
+    assert [len(p) for p, _ in parts] == [700, 672]
+    pd.testing.assert_frame_equal(pd.concat([p for p, _ in parts], ignore_index=True), epochs)
+    rows = np.arange(700, len(epochs))
+    _same_measurements(parts[1][1], meas.take(rows))
+    assert placed.correlation_s == epochs.attrs["trajectory_correlation_s"]
+    assert parts[0][0].attrs["skipped_lines"] == 0
+
+
+@pytest.fixture(scope="module")
+def long_drive(tmp_path_factory):
+    """A simulated city drive (reflections, odometry with its errors) of 2 400 s at 1 Hz, 24 km straight on."""
+    from tollcli.simulate.drive import SimConfig
+    from tollcli.simulate.route import straight
+    from tollcli.simulate.run import write_drive
+
+    folder = tmp_path_factory.mktemp("long")
+    write_drive(straight(48.137, 11.575, 30.0, 10.0, 2_400.0, 1.0), SimConfig(env="urban", nlos=True, odometry=True, seed=5), str(folder))
+    return folder
+
+
+@pytest.mark.parametrize("size", [(600, 600.0, 150), (400, 400.0, 100)])
+def test_a_long_log_is_placed_in_segments_each_epoch_once_within_its_bound(long_drive, monkeypatch, size):
+    """Cut into segments (cores of 600 or 400 epochs and seconds, margins of 150 or 100), the 2 400-epoch drive keeps
+    every epoch once, in order, numbered on from 0, at its own time; every position is within its bound against the
+    simulator's truth (as whole: 0 misleading), and every epoch stays valid at HAL 50 m."""
+    monkeypatch.setattr(segments, "SEGMENT_EPOCHS", size[0])
+    monkeypatch.setattr(segments, "SEGMENT_MIN_S", size[1])
+    monkeypatch.setattr(segments, "MARGIN_EPOCHS", size[2])
+    path = str(long_drive / "drive-librsf.txt")
+    placed, parts = _placed(path)
+    epochs = pd.concat([p for p, _ in parts], ignore_index=True)
+    whole = pseudorange_epochs(path, "librsf", None, "nominal", 5.0, NominalModel())[0]
+    assert placed.segments == 2_400 // size[0]  # the last core takes the rest: never a short one
+    assert placed.positioning == "smoothed" and placed.note is None
+    assert (epochs["epoch"].to_numpy() == np.arange(len(whole))).all()
+    assert (epochs["time_utc"].to_numpy() == whole["time_utc"].to_numpy()).all()
+    assert (epochs["positioning"] == "smoothed").all()
+    hpl = np.concatenate([m.trajectory_hpl_m for _, m in parts])
+    truth = librsf_truth(str(long_drive / "truth-librsf.txt")).set_index("time_utc").reindex(epochs["time_utc"])
+    zero = np.zeros(len(epochs))
+    e, n, _ = geodetic2enu(epochs["lat_deg"].to_numpy(), epochs["lon_deg"].to_numpy(), zero, truth["lat_deg"].to_numpy(),
+                           truth["lon_deg"].to_numpy(), zero)  # fmt: skip
+    hpe = np.hypot(e, n)
+    assert np.isfinite(hpe).all() and (hpe < hpl).all() and (hpl < 50.0).all()
+    assert np.percentile(hpe, 95) < 10.0
+
+
+def test_a_stored_segment_comes_back_the_same(tmp_path):
+    """The arrays a segment is stored as give back its epoch table (its dtypes: UTC times in µs, text, int16) and every
+    measurement array, text ones included, to the bit — and no pickle is read."""
+    path = str(shared(*BERLIN))
+    epochs, meas, _ = with_trajectory(*pseudorange_epochs(path, "librsf", None, "nominal", 5.0, NominalModel()), "auto")
+    segments._store(str(tmp_path / "s"), epochs, meas)
+    back, back_meas = segments._load(str(tmp_path / "s"))
+    back.attrs = epochs.attrs
+    pd.testing.assert_frame_equal(back, epochs)
+    _same_measurements(back_meas, meas)
+
+
+def test_a_log_out_of_time_order_is_read_whole(tmp_path, monkeypatch):
+    """Berlin with its last epoch's lines moved to the top cannot be cut by time: it is placed whole, as before."""
+    monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 300)
+    monkeypatch.setattr(segments, "SEGMENT_MIN_S", 60.0)
+    monkeypatch.setattr(segments, "MARGIN_EPOCHS", 50)
+    lines = shared(*BERLIN).read_text().splitlines(keepends=True)
+    last = lines[-1].split()[1]
+    tail = [line for line in lines if line.split()[1] == last]
+    shuffled = tmp_path / "shuffled.txt"
+    shuffled.write_text("".join(tail + [line for line in lines if line.split()[1] != last]))
+    placed, parts = _placed(str(shuffled))
+    assert placed.segments == 1
+    epochs, _, _ = with_trajectory(*pseudorange_epochs(str(shuffled), "librsf", None, "nominal", 5.0, NominalModel()), "auto")
+    pd.testing.assert_frame_equal(pd.concat([p for p, _ in parts], ignore_index=True), epochs)
+
+
+def test_nothing_is_left_on_disk_when_the_reader_stops_midway(long_drive, monkeypatch):
+    """A caller that stops after the first chunk (an error of its own) leaves no stored segment behind."""
+    monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 600)
+    monkeypatch.setattr(segments, "SEGMENT_MIN_S", 600.0)
+    monkeypatch.setattr(segments, "MARGIN_EPOCHS", 150)
+    with pytest.raises(RuntimeError):
+        with segments.placed_log(str(long_drive / "drive-librsf.txt"), "librsf", None, "nominal", 5.0, NominalModel(), False,
+                                 "auto") as placed:  # fmt: skip
+            folder = placed._folder
+            assert os.path.isdir(folder) and len(os.listdir(folder)) == 4
+            for _ in placed.chunks(100):
+                raise RuntimeError("the caller's own error")
+    assert not os.path.exists(folder)
+
+
+def _roads_along(truth: pd.DataFrame, path, offset_m: float) -> None:
+    """Tolled roads: the drive's own straight line cut into four sections, and a parallel ``offset_m`` to its left."""
+    from tollcli.geodesy import enu_shift2geodetic
+
+    lat, lon = truth["lat_deg"].to_numpy(), truth["lon_deg"].to_numpy()
+    e, n, _ = geodetic2enu(lat, lon, np.zeros(lat.size), lat[0], lon[0], 0.0)
+    d = np.array([e[-1], n[-1]]) / np.hypot(e[-1], n[-1])
+    left = np.array([-d[1], d[0]]) * offset_m
+    cuts = np.linspace(0, lat.size - 1, 5).astype(int)
+    features = []
+    for k, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
+        for name, shift in ((f"DRIVEN{k}", np.zeros(2)), (f"PARALLEL{k}", left)):
+            la, lo = enu_shift2geodetic(lat[0], lon[0], e[[a, b]] + shift[0], n[[a, b]] + shift[1])
+            features.append({"type": "Feature", "properties": {"id": name, "road_class": "primary"},
+                             "geometry": {"type": "LineString", "coordinates": [[lo[0], la[0]], [lo[1], la[1]]]}})  # fmt: skip
+    path.write_text(__import__("json").dumps({"type": "FeatureCollection", "features": features}))
+
+
+def test_a_long_log_placed_in_segments_is_charged_for_the_road_driven_and_the_same_in_any_chunks(long_drive, tmp_path, monkeypatch):
+    """Metamorphic: the 2 400 s drive placed in four segments is charged each of the four sections it drove, once, and
+    not the parallel road 150 m away — as placed whole; and charging it 3 600 or 333 epochs at a time gives the same
+    invoice, byte for byte."""
+    import json
+
+    from conftest import BERLIN_START, run_cli
+
+    from tollcli.job import pipeline
+
+    roads, geo, tariff = tmp_path / "roads.geojson", tmp_path / "geo.geojson", tmp_path / "t.toml"
+    _roads_along(librsf_truth(str(long_drive / "truth-librsf.txt")), roads, 150.0)
+    assert run_cli("geoobjects", "build", str(roads), "-o", str(geo), "--hal", "50", "-q").returncode == 0
+    tariff.write_text('currency = "EUR"\n[road_class.primary]\ncar = 1.00\n')
+    settings = pipeline.ChargeSettings(start_time=BERLIN_START)
+    log = str(long_drive / "drive-librsf.txt")
+
+    def charged() -> tuple[list[str], str]:
+        invoice, _ = pipeline.charge_log(log, str(geo), str(tariff), settings)
+        return sorted(line["geoobject"] for line in invoice["lines"]), json.dumps(invoice, sort_keys=True)
+
+    whole, _ = charged()
+    monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 600)
+    monkeypatch.setattr(segments, "SEGMENT_MIN_S", 600.0)
+    monkeypatch.setattr(segments, "MARGIN_EPOCHS", 150)
+    in_segments, invoice = charged()
+    monkeypatch.setattr(pipeline, "CHUNK_EPOCHS", 333)
+    _, small_chunks = charged()
+    assert whole == in_segments == ["DRIVEN0", "DRIVEN1", "DRIVEN2", "DRIVEN3"]
+    assert small_chunks == invoice
+    assert json.loads(invoice)["parameters"]["positioning_used"] == "smoothed"
