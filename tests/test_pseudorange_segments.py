@@ -213,3 +213,45 @@ def test_a_long_log_placed_in_segments_is_charged_for_the_road_driven_and_the_sa
     assert whole == in_segments == ["DRIVEN0", "DRIVEN1", "DRIVEN2", "DRIVEN3"]
     assert small_chunks == invoice
     assert json.loads(invoice)["parameters"]["positioning_used"] == "smoothed"
+
+
+def test_a_gsdc_derived_csv_is_read_in_blocks_and_placed_in_segments(long_drive, tmp_path, monkeypatch):
+    """GSDC derived CSVs the same way: the real GSDC 2021 file (and the simulated drive's, with a row whose pseudorange
+    is no number) read in blocks are the whole file's rows and lines, malformed rows counted and named alike; a log of
+    one segment placed to the bit as before; the simulated drive in four segments, without odometry (the GNSS-only
+    motion model), every epoch once and within its bound against the truth."""
+    from tollcli.readers.gsdc import iter_gsdc_derived, read_gsdc_derived
+
+    lines = (long_drive / "drive-derived.csv").read_text().splitlines(keepends=True)
+    column = lines[0].strip().split(",").index("rawPrM")
+    fields = lines[5_000].split(",")
+    fields[column] = "2.1e7x"
+    lines[5_000] = ",".join(fields)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("".join(lines))
+    for path in (str(shared("gsdc2021", "Pixel4_derived.csv")), str(bad)):
+        whole = read_gsdc_derived(path)
+        parts = list(iter_gsdc_derived(path, block_rows=1_997))
+        pd.testing.assert_frame_equal(pd.concat(parts, ignore_index=True), whole)
+        assert sum(p.attrs["skipped_lines"] for p in parts) == whole.attrs["skipped_lines"] == (path == str(bad))
+    with pytest.raises(DataError, match=rf"{bad.name}:5001: rawPrM is not a number"):
+        list(iter_gsdc_derived(str(bad), strict=True, block_rows=1_997))
+    real = str(shared("gsdc2021", "Pixel4_derived.csv"))
+    epochs, _, _ = with_trajectory(*pseudorange_epochs(real, "gsdc-derived", None, "nominal", 5.0, NominalModel()), "auto")
+    with segments.placed_log(real, "gsdc-derived", None, "nominal", 5.0, NominalModel(), False, "auto") as placed:
+        pd.testing.assert_frame_equal(pd.concat([p for p, _ in placed.chunks(700)], ignore_index=True), epochs)
+    monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 600)
+    monkeypatch.setattr(segments, "SEGMENT_MIN_S", 600.0)
+    monkeypatch.setattr(segments, "MARGIN_EPOCHS", 150)
+    with segments.placed_log(str(long_drive / "drive-derived.csv"), "gsdc-derived", None, "nominal", 5.0, NominalModel(), False,
+                             "auto") as placed:  # fmt: skip
+        parts = list(placed.chunks(700))
+    assert placed.segments == 4 and placed.positioning == "smoothed"
+    placed_epochs = pd.concat([p for p, _ in parts], ignore_index=True)
+    assert (placed_epochs["epoch"].to_numpy() == np.arange(2_400)).all() and placed_epochs["gps_millis"].is_monotonic_increasing
+    truth = pd.read_csv(long_drive / "truth.csv", parse_dates=["time_utc"]).set_index("time_utc").reindex(placed_epochs["time_utc"])
+    zero = np.zeros(len(placed_epochs))
+    e, n, _ = geodetic2enu(placed_epochs["lat_deg"].to_numpy(), placed_epochs["lon_deg"].to_numpy(), zero, truth["lat_deg"].to_numpy(),
+                           truth["lon_deg"].to_numpy(), zero)  # fmt: skip
+    hpl = np.concatenate([m.trajectory_hpl_m for _, m in parts])
+    assert np.isfinite(np.hypot(e, n)).all() and (np.hypot(e, n) < hpl).all()

@@ -1,9 +1,11 @@
 """A pseudorange log solved and placed segment by segment: memory flat in the log's length.
 
-Today only libRSF logs (:data:`SEGMENTED_KINDS`) are read this way; the other pseudorange formats are read and solved
-whole (:func:`~tollcli.gnss.pseudorange_inputs.pseudorange_epochs`).
+libRSF logs and GSDC derived CSVs (:data:`SEGMENTED_KINDS`) are read this way; the other pseudorange formats (RINEX,
+GnssLogger, GSDC ``device_gnss.csv``, u-blox RAWX) are read and solved whole
+(:func:`~tollcli.gnss.pseudorange_inputs.pseudorange_epochs`).
 
-The log is read :data:`~tollcli.readers.librsf.BLOCK_ROWS` rows at a time. Its epochs are cut into segments of
+The log is read in blocks of rows (:func:`~tollcli.readers.librsf.iter_librsf`,
+:func:`~tollcli.readers.gsdc.iter_gsdc_derived`). Its epochs are cut into segments of
 :data:`SEGMENT_EPOCHS` (the segment's *core*); each segment is solved (snapshot WLS) and placed by the trajectory
 estimator (:func:`~tollcli.integrity.trajectory.with_trajectory`) together with :data:`MARGIN_EPOCHS` epochs before
 and after its core — the passes converge there, the backward one from the future — and only its core is kept. The
@@ -26,7 +28,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -36,7 +38,7 @@ from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.sigma_models import NominalModel
 
 #: pseudorange formats read and placed segment by segment
-SEGMENTED_KINDS = ("librsf",)
+SEGMENTED_KINDS = ("librsf", "gsdc-derived")
 #: the epochs of a segment's core, at least …
 SEGMENT_EPOCHS = 8_192
 #: … and at least this long (s): the estimator measures the noise from a segment's own residuals, and on the Berlin
@@ -110,7 +112,7 @@ def placed_log(log: str, kind: str, nav, sigma_model: str, sigma_m: float, nomin
     :func:`~tollcli.integrity.trajectory.with_trajectory` takes it): segment by segment where the format allows
     (see the module), else whole. Raises what :func:`~tollcli.gnss.pseudorange_inputs.pseudorange_epochs` raises."""
     if kind in SEGMENTED_KINDS:
-        segmented = _librsf_segments(log, sigma_model, sigma_m, nominal, strict, positioning)
+        segmented = _segments(_FORMATS[kind](), log, sigma_model, sigma_m, nominal, strict, positioning)
         if segmented is not None:
             return segmented
     from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
@@ -132,29 +134,78 @@ class _Unordered(Exception):
     """The log's lines are not in time order: it cannot be cut into segments."""
 
 
-def _librsf_segments(log: str, sigma_model: str, sigma_m: float, nominal: NominalModel, strict: bool,
-                     positioning: str) -> PlacedLog | None:  # fmt: skip
-    """A libRSF log placed segment by segment; None where its lines are not in time order (read it whole)."""
-    from tollcli.errors import DataError
-    from tollcli.gnss.librsf_positions import librsf_epochs
-    from tollcli.readers.librsf import LibrsfLog, iter_librsf
+@dataclass(frozen=True)
+class _Format:
+    """How a segmented format is read and solved: ``blocks(path, strict)`` its rows in file order, a block at a time
+    (measurement rows, odometry rows or None, malformed lines); ``keys(rows)`` each row's epoch key (ms, int64);
+    ``solve(rows, odometry, sigma_model, sigma_m, nominal)`` a segment's (epochs, measurements), and ``epoch_keys``
+    those epochs' keys; ``no_rows``: the error of a log without a measurement."""
 
-    cutter = _Cutter()
-    placer = _Placer(positioning, sigma_model, sigma_m, nominal)
+    blocks: Callable[[str, bool], Iterator[tuple[pd.DataFrame, pd.DataFrame | None, int]]]
+    keys: Callable[[pd.DataFrame], np.ndarray]
+    solve: Callable[..., tuple[pd.DataFrame, Measurements]]
+    epoch_keys: Callable[[pd.DataFrame], np.ndarray]
+    no_rows: str
+
+
+def _librsf() -> _Format:
+    from tollcli.gnss.librsf_positions import librsf_epochs
+    from tollcli.readers.librsf import LIBRSF_T0, ODOMETRY_COLUMNS, LibrsfLog, iter_librsf
+
+    def blocks(path, strict):
+        for part in iter_librsf(path, strict):
+            yield part.pseudoranges, part.odometry, part.malformed
+
+    def solve(rows, odometry, sigma_model, sigma_m, nominal):
+        if odometry is None:
+            odometry = pd.DataFrame(np.zeros((0, len(ODOMETRY_COLUMNS))), columns=list(ODOMETRY_COLUMNS))
+        return librsf_epochs(LibrsfLog(rows, odometry, pd.DataFrame(), 0), sigma_model, sigma_m, nominal)
+
+    def epoch_keys(epochs):  # (librsf_epochs places epoch k ms after LIBRSF_T0 at time_utc: the key back, exactly)
+        return ((epochs["time_utc"] - LIBRSF_T0) // pd.Timedelta(milliseconds=1)).to_numpy(np.int64)
+
+    return _Format(blocks, lambda rows: np.round(rows["t_s"].to_numpy(float) * 1e3).astype(np.int64), solve, epoch_keys,
+                   "no pseudorange3 line: a libRSF ground-truth file is a --truth, not a log")  # fmt: skip
+
+
+def _gsdc_derived() -> _Format:
+    from tollcli.gnss.gsdc_positions import gsdc_epochs
+    from tollcli.readers.gsdc import iter_gsdc_derived
+
+    def blocks(path, strict):
+        for table in iter_gsdc_derived(path, strict):
+            yield table, None, int(table.attrs["skipped_lines"])
+
+    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
+        return gsdc_epochs(rows, sigma_model, sigma_m, nominal)
+
+    return _Format(blocks, lambda rows: rows["millisSinceGpsEpoch"].to_numpy(np.int64), solve,
+                   lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no usable rows")  # fmt: skip
+
+
+_FORMATS = {"librsf": _librsf, "gsdc-derived": _gsdc_derived}
+
+
+def _segments(fmt: _Format, log: str, sigma_model: str, sigma_m: float, nominal: NominalModel, strict: bool,
+              positioning: str) -> PlacedLog | None:  # fmt: skip
+    """A log placed segment by segment; None where its lines are not in time order (read it whole)."""
+    from tollcli.errors import DataError
+
+    cutter = _Cutter(fmt.keys)
+    placer = _Placer(fmt, positioning, sigma_model, sigma_m, nominal)
     skipped = 0
     try:
-        for part in iter_librsf(log, strict):
-            skipped += part.malformed
-            for pr, odo, core in cutter.add(part.pseudoranges, part.odometry):
-                placer.place(pr, odo, core)
-        pr, odo, core = cutter.rest()
-        if pr is None:
-            placer.close()
-            raise DataError(f"{log}: no pseudorange3 line: a libRSF ground-truth file is a --truth, not a log")
+        for rows, odometry, malformed in fmt.blocks(log, strict):
+            skipped += malformed
+            for part, odo, core in cutter.add(rows, odometry):
+                placer.place(part, odo, core)
+        rows, odometry, core = cutter.rest()
+        if rows is None:
+            raise DataError(f"{log}: {fmt.no_rows}")
         if placer.n_segments == 0:  # one segment: the log solved and placed whole, as before segments existed
             placer.close()
-            return _whole(*librsf_epochs(LibrsfLog(pr, odo, pd.DataFrame(), 0), sigma_model, sigma_m, nominal), positioning, skipped)
-        placer.place(pr, odo, core)
+            return _whole(*fmt.solve(rows, odometry, sigma_model, sigma_m, nominal), positioning, skipped)
+        placer.place(rows, odometry, core)
     except _Unordered:
         placer.close()
         return None
@@ -167,34 +218,30 @@ def _librsf_segments(log: str, sigma_model: str, sigma_m: float, nominal: Nomina
     return placer.finish(skipped)
 
 
-def _keys(t_s: np.ndarray) -> np.ndarray:
-    """Epoch keys (ms) of libRSF time stamps (s), as :func:`~tollcli.gnss.librsf_positions.librsf_epochs` makes them."""
-    return np.round(t_s * 1e3).astype(np.int64)
-
-
 class _Cutter:
-    """Rows in, segments out: the pseudorange and odometry rows of each segment (its margins included) and its core's
-    first and last epoch key (None: the log's end)."""
+    """Rows in, segments out: the measurement and odometry rows of each segment (its margins included) and its core's
+    first epoch key and the first after it (None: the log's end). ``keys``: the rows' epoch keys (ms)."""
 
-    def __init__(self):
-        self.pr: list[pd.DataFrame] = []
+    def __init__(self, keys: Callable[[pd.DataFrame], np.ndarray]):
+        self.row_keys = keys
+        self.rows: list[pd.DataFrame] = []
         self.odo: list[pd.DataFrame] = []
         self.keys = np.zeros(0, np.int64)  # the distinct epoch keys of the rows held, in order
-        self.last_pr = self.last_odo = np.iinfo(np.int64).min
+        self.last_row = self.last_odo = np.iinfo(np.int64).min
         self.lead = 0  # the epochs of the held rows before the next core (its margin before)
 
-    def add(self, pr: pd.DataFrame, odo: pd.DataFrame):
-        for rows, attr in ((pr, "last_pr"), (odo, "last_odo")):
-            k = _keys(rows["t_s"].to_numpy(float))
+    def add(self, rows: pd.DataFrame, odo: pd.DataFrame | None):
+        for table, attr in ((rows, "last_row"), (odo, "last_odo")):
+            k = self.row_keys(table) if table is not None and len(table) else np.zeros(0, np.int64)
             if k.size and (k[0] < getattr(self, attr) or (np.diff(k) < 0).any()):
                 raise _Unordered
             if k.size:
                 setattr(self, attr, int(k[-1]))
-        if len(pr):
-            self.pr.append(pr)
-            k = np.unique(_keys(pr["t_s"].to_numpy(float)))
+        if len(rows):
+            self.rows.append(rows)
+            k = np.unique(self.row_keys(rows))
             self.keys = np.concatenate([self.keys, k[k > self.keys[-1]] if self.keys.size else k])
-        if len(odo):
+        if odo is not None and len(odo):
             self.odo.append(odo)
         # a core is cut once half a segment is held beyond it and its margin after: the last core is never short
         while (hi := self._core_end()) is not None:
@@ -215,37 +262,32 @@ class _Cutter:
     def _cut(self, hi: int):
         core_lo, core_hi = int(self.keys[self.lead]), int(self.keys[hi])
         end = int(self.keys[hi + MARGIN_EPOCHS])  # the first key after the segment
-        pr = pd.concat(self.pr, ignore_index=True)
-        odo = pd.concat(self.odo, ignore_index=True) if self.odo else pd.DataFrame(columns=["t_s"])
-        pk, ok = _keys(pr["t_s"].to_numpy(float)), _keys(odo["t_s"].to_numpy(float))
-        segment = (pr[pk < end].reset_index(drop=True), odo[ok < end + ODOMETRY_PAD_MS].reset_index(drop=True), (core_lo, core_hi))
         start = int(self.keys[hi - MARGIN_EPOCHS])  # the next segment's first epoch
-        self.pr = [pr[pk >= start].reset_index(drop=True)]
-        self.odo = [odo[ok >= start - ODOMETRY_PAD_MS].reset_index(drop=True)]
+        rows = pd.concat(self.rows, ignore_index=True)
+        rk = self.row_keys(rows)
+        segment_rows, self.rows = rows[rk < end].reset_index(drop=True), [rows[rk >= start].reset_index(drop=True)]
+        segment_odo = None
+        if self.odo:
+            odo = pd.concat(self.odo, ignore_index=True)
+            ok = self.row_keys(odo)
+            segment_odo, self.odo = odo[ok < end + ODOMETRY_PAD_MS].reset_index(drop=True), [odo[ok >= start - ODOMETRY_PAD_MS].reset_index(drop=True)]
         self.keys = self.keys[self.keys >= start]
         self.lead = MARGIN_EPOCHS
-        return segment
+        return segment_rows, segment_odo, (core_lo, core_hi)
 
     def rest(self):
-        """The last segment (the log's only one when none was cut): rows and core (its first key, None)."""
-        if not self.pr:
+        """The last segment (the log's only one when none was cut): rows, odometry (None: none) and core."""
+        if not self.rows:
             return None, None, None
-        pr = pd.concat(self.pr, ignore_index=True)
-        odo = pd.concat(self.odo, ignore_index=True) if self.odo else _empty_like_odometry()
-        return pr, odo, (int(self.keys[self.lead]), None)
-
-
-def _empty_like_odometry() -> pd.DataFrame:
-    from tollcli.readers.librsf import ODOMETRY_COLUMNS
-
-    return pd.DataFrame(np.zeros((0, len(ODOMETRY_COLUMNS))), columns=list(ODOMETRY_COLUMNS))
+        odo = pd.concat(self.odo, ignore_index=True) if self.odo else None
+        return pd.concat(self.rows, ignore_index=True), odo, (int(self.keys[self.lead]), None)
 
 
 class _Placer:
     """Each segment solved, placed and its core stored; what the segments said, gathered."""
 
-    def __init__(self, positioning: str, sigma_model: str, sigma_m: float, nominal: NominalModel):
-        self.positioning, self.sigma_model, self.sigma_m, self.nominal = positioning, sigma_model, sigma_m, nominal
+    def __init__(self, fmt: _Format, positioning: str, sigma_model: str, sigma_m: float, nominal: NominalModel):
+        self.fmt, self.positioning, self.sigma_model, self.sigma_m, self.nominal = fmt, positioning, sigma_model, sigma_m, nominal
         self.folder: str | None = None
         self.stored: list[str] = []
         self.n_segments = 0
@@ -254,22 +296,18 @@ class _Placer:
         self.notes: list[str] = []
         self.correlation_s: float | None = None
 
-    def place(self, pr: pd.DataFrame, odo: pd.DataFrame, core: tuple[int, int | None]) -> None:
-        """Solve and place a segment's rows ``pr`` and ``odo``, and store the epochs of its ``core`` (its first epoch
-        key and the first key after it, ms; None: to the end)."""
-        from tollcli.gnss.librsf_positions import librsf_epochs
+    def place(self, rows: pd.DataFrame, odo: pd.DataFrame | None, core: tuple[int, int | None]) -> None:
+        """Solve and place a segment's ``rows`` (and odometry ``odo``), and store the epochs of its ``core`` (its first
+        epoch key and the first key after it, ms; None: to the end)."""
         from tollcli.integrity.trajectory import with_trajectory
-        from tollcli.readers.librsf import LibrsfLog, librsf_times
 
-        epochs, meas = librsf_epochs(LibrsfLog(pr, odo, pd.DataFrame(), 0), self.sigma_model, self.sigma_m, self.nominal)
+        epochs, meas = self.fmt.solve(rows, odo, self.sigma_model, self.sigma_m, self.nominal)
         epochs, meas, used = with_trajectory(epochs, meas, self.positioning)
         if used == "snapshot" and self.positioning != "snapshot":  # refused here: the columns of the placed segments
             epochs = epochs.assign(snapshot_lat_deg=epochs["lat_deg"].to_numpy(float), snapshot_lon_deg=epochs["lon_deg"].to_numpy(float),
                                    sigma_major_m=np.nan, positioning=np.full(len(epochs), "snapshot", dtype=object))  # fmt: skip
-        t = epochs["time_utc"]
-        lo, hi = librsf_times([core[0] / 1e3])[0], (librsf_times([core[1] / 1e3])[0] if core[1] is not None else None)
-        keep = (t >= lo).to_numpy() & ((t < hi).to_numpy() if hi is not None else True)
-        rows = np.flatnonzero(keep)
+        keys = self.fmt.epoch_keys(epochs)
+        rows = np.flatnonzero((keys >= core[0]) & (keys < core[1] if core[1] is not None else True))
         part = epochs.iloc[rows].reset_index(drop=True)
         part["epoch"] = np.arange(self.n_epochs, self.n_epochs + len(part), dtype=np.int64)
         if self.folder is None:

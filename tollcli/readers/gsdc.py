@@ -7,6 +7,8 @@ measurements are made from it in :mod:`tollcli.gnss.gsdc_positions`.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import pandas as pd
 
 from tollcli.errors import DataError
@@ -38,3 +40,32 @@ def read_gsdc_derived(path, strict: bool = False) -> pd.DataFrame:
     if table.empty:
         raise DataError(f"{path}: no usable rows (the first bad one at line {table.attrs['first_skipped_line']})")
     return table
+
+
+#: rows of a derived CSV checked at a time by :func:`iter_gsdc_derived`
+BLOCK_ROWS = 50_000
+
+
+def iter_gsdc_derived(path, strict: bool = False, block_rows: int | None = None) -> Iterator[pd.DataFrame]:
+    """:func:`read_gsdc_derived` :data:`BLOCK_ROWS` rows at a time, in file order: the same rows and numbers, each
+    block's ``attrs['skipped_lines']`` its own malformed rows and ``line`` the file's line numbers; the same errors
+    (a file none of whose rows is usable: after its last block). Memory is a block's."""
+    wanted = set(REQUIRED)
+    floats = tuple(c for c in REQUIRED if c not in INTEGERS and c != "signalType")
+    line, usable, first_bad = 2, 0, None
+    try:
+        reader = pd.read_csv(path, dtype=str, usecols=lambda c: c in wanted, chunksize=block_rows or BLOCK_ROWS)
+        with reader:
+            for table in reader:
+                missing = [c for c in REQUIRED if c not in table.columns]
+                if missing:
+                    raise DataError(f"{path}: not a GSDC derived file, missing columns {', '.join(missing)}")
+                checked = checked_numbers(table.reset_index(drop=True), path, floats, INTEGERS, strict, first_line=line)
+                line += len(table)
+                usable += len(checked)
+                first_bad = first_bad or checked.attrs["first_skipped_line"]
+                yield checked
+    except (OSError, pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
+        raise DataError(f"{path}: not a readable CSV ({' '.join(str(exc).split())})") from None
+    if not usable:
+        raise DataError(f"{path}: no usable rows (the first bad one at line {first_bad})")
