@@ -1,14 +1,16 @@
 """The trajectory's bound on parts of the real Berlin drive: each part a log of its own, as a user could give it.
 
-    python benchmarks/berlin_cuts.py [--lengths 130 160 200 240] [--step 15] [--positioning auto]
+    python benchmarks/berlin_cuts.py [--lengths 130 160 200 240] [--step 15] [--positioning auto] [--hal 50]
+                                     [--without-odometry]
 
 The Potsdamer Platz drive (``../shared/data/smartloc/Berlin_Potsdamer_Platz_Input.txt``, 283 s at ~5 Hz) cut into
 every window of each length, its starts ``--step`` s apart (whole lines: a window is the lines whose time stamp is in
 it). Each part is run through the tool's own commands, as a user's log would be: ``tollcli integrity PART -o e.csv``
-(defaults), then ``tollcli audit --epochs e.csv --truth Berlin_Potsdamer_Platz_GT.txt`` (the truth read by the audit
+(defaults; ``--hal``, ``--positioning`` as given; ``--without-odometry``: the parts without their ``odom3`` lines),
+then ``tollcli audit --epochs e.csv --truth Berlin_Potsdamer_Platz_GT.txt`` (the truth read by the audit
 only). Printed per part: valid epochs, misleading (HPE > HPL among valid), hazardous (HPE > HAL), alarms and the
 largest error; then the totals, and where (the drive's own seconds) the misleading epochs were. Writes the table to
-``benchmarks/integrity_truth/berlin_cuts.md``.
+``benchmarks/integrity_truth/berlin_cuts.md`` (with the defaults; other settings to ``berlin_cuts-<settings>.md``).
 
 Every bound must hold against every truth: a part of a real drive is a real log. The whole drive is 0 misleading; its
 parts are the test the whole is not.
@@ -41,6 +43,8 @@ def main() -> int:
     parser.add_argument("--lengths", type=float, nargs="+", default=[130.0, 160.0, 200.0, 240.0], help="the parts' lengths (s)")
     parser.add_argument("--step", type=float, default=15.0, help="between the parts' starts (s)")
     parser.add_argument("--positioning", default="auto", help="tollcli integrity's --positioning")
+    parser.add_argument("--hal", type=float, default=50.0, help="tollcli integrity's --hal (m)")
+    parser.add_argument("--without-odometry", action="store_true", help="the parts without their odom3 lines")
     args = parser.parse_args()
     lines = LOG.read_text().splitlines(keepends=True)
     t_s = np.array([float(line.split()[1]) for line in lines])
@@ -52,8 +56,8 @@ def main() -> int:
             for start in np.arange(0.0, end - length + 1e-9, args.step):
                 part, table, audit = Path(tmp, "part.txt"), Path(tmp, "e.csv"), Path(tmp, "a.json")
                 keep = (t_s >= start) & (t_s <= start + length)
-                part.write_text("".join(line for line, k in zip(lines, keep) if k))
-                tollcli("integrity", str(part), "-o", str(table), "-q", "--positioning", args.positioning)
+                part.write_text("".join(line for line, k in zip(lines, keep) if k and not (args.without_odometry and line.startswith("odom3"))))
+                tollcli("integrity", str(part), "-o", str(table), "-q", "--positioning", args.positioning, "--hal", f"{args.hal:g}")
                 tollcli("audit", "--epochs", str(table), "--truth", str(TRUTH), "-q", "-o", str(audit))
                 got = json.loads(audit.read_text())["integrity"]
                 regions = got["regions"]
@@ -95,17 +99,22 @@ def _misleading_by_10_s(table: Path, n_bins: int) -> np.ndarray:
 
 
 def _write(rows, totals, busy, args) -> None:
+    settings = [f"--positioning {args.positioning}"] if args.positioning != "auto" else []
+    settings += [f"--hal {args.hal:g}"] if args.hal != 50.0 else []
+    settings += ["--without-odometry"] if args.without_odometry else []
+    out = OUT if not settings else OUT.with_name(f"berlin_cuts-{'-'.join(s.lstrip('-').replace(' ', '-') for s in settings)}.md")
     lines = ["# The trajectory's bound on parts of the Berlin drive", "",
-             f"`python benchmarks/berlin_cuts.py` (lengths {', '.join(f'{x:g}' for x in args.lengths)} s, starts {args.step:g} s apart, "
-             f"`--positioning {args.positioning}`): each part of `Berlin_Potsdamer_Platz_Input.txt` a log of its own, through "
-             "`tollcli integrity` and `tollcli audit --epochs … --truth Berlin_Potsdamer_Platz_GT.txt` (HAL 50 m).", "",
+             f"`python benchmarks/berlin_cuts.py {' '.join(settings)}` (lengths {', '.join(f'{x:g}' for x in args.lengths)} s, starts "
+             f"{args.step:g} s apart): each part of `Berlin_Potsdamer_Platz_Input.txt`"
+             f"{' without its odom3 lines' if args.without_odometry else ''} a log of its own, through `tollcli integrity` "
+             f"(HAL {args.hal:g} m) and `tollcli audit --epochs … --truth Berlin_Potsdamer_Platz_GT.txt`.", "",
              "| part | epochs | valid | misleading | hazardous | alarms | largest error (m) |", "|---|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
     lines += [f"| {r['part']} | {r['epochs']} | {r['valid']} | {r['misleading']} | {r['hazardous']} | {r['alarm']} | {r['max_error_m']:.1f} |"
               for r in rows]  # fmt: skip
     lines += [f"| **all {len(rows)}** | {totals['epochs']} | {totals['valid']} | **{totals['misleading']}** | {totals['hazardous']} | "
               f"{totals['alarm']} | |", "", "Misleading epochs by the drive's own time: " + ("; ".join(busy) or "none") + "."]  # fmt: skip
-    OUT.write_text("\n".join(lines) + "\n")
-    print(f"written {os.path.relpath(OUT, ROOT)}")
+    out.write_text("\n".join(lines) + "\n")
+    print(f"written {os.path.relpath(out, ROOT)}")
 
 
 if __name__ == "__main__":
