@@ -116,7 +116,7 @@ def integrity(
                 writer.write(table)
             elif kind in NAVIGATION_KINDS:
                 _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
-            else:  # chunk by chunk: a long libRSF log is placed segment by segment, and its table written as it comes
+            else:  # chunk by chunk: a long libRSF or GSDC log is placed segment by segment, its table written as it comes
                 used, note_why = "snapshot", None
                 for i, chunk in enumerate(iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, nav=nav,
                                                          environment=environment, positioning=positioning)):  # fmt: skip

@@ -6,7 +6,6 @@ import datetime as dt
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-import numpy as np
 import pandas as pd
 
 from tollcli.errors import UsageError
@@ -78,7 +77,7 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
                 yield chunk
             return
         env_carry = EnvironmentCarry()
-        with placed:  # (a long libRSF log placed segment by segment: its segments removed on leaving)
+        with placed:  # (a long libRSF or GSDC log placed segment by segment: its segments removed on leaving)
             for part, part_meas in placed.chunks(RAIM_CHUNK_EPOCHS):  # the RAIM's working set a chunk's, not the log's
                 part_meas, env_columns = measured_environment(part, part_meas, environment, env_carry)
                 table = with_raim_position(pd.concat([part, env_columns, run_raim(part_meas, params)], axis=1))

@@ -83,7 +83,7 @@ class PlacedLog:
         parts = [self._whole] if self._whole is not None else (_load(path) for path in self._stored)
         for epochs, meas in parts:
             for part, part_meas in epoch_chunks(epochs, meas, chunk_epochs):
-                part.attrs = dict(attrs)
+                part.attrs = {**epochs.attrs, **attrs}  # (a log placed whole keeps whatever else its table says)
                 yield part, part_meas
 
     def close(self) -> None:
