@@ -30,6 +30,12 @@ RAWX_COLUMNS = ("rcvTow", "week", "leapS", "prMes", "cpMes", "doMes", "gnssId", 
                 "cno", "prStd", "cpStd", "doStd", "prValid", "cpValid")  # fmt: skip
 
 
+#: RAWX rows gathered as tuples before they are made a table (then the next block): the memory of a long log's
+#: measurements is its table's, not its Python tuples' (28.7 MB at the peak on a 536-epoch walk of 37 850 measurements,
+#: a 5.5 MB table)
+RAWX_BLOCK_ROWS = 5_000
+
+
 @dataclass
 class UbxRead:
     rawx: pd.DataFrame  # one row per RXM-RAWX measurement (RAWX_COLUMNS + ``message``)
@@ -59,6 +65,7 @@ def read_ubx(path: str, strict: bool = False) -> UbxRead:
         raise UsageError("reading UBX needs pyubx2 (pip install pyubx2)") from None
     errors: list[str] = []
     rawx: list[tuple] = []
+    rawx_blocks: list[pd.DataFrame] = []
     sfrbx: list[tuple] = []
     pvt: list[tuple] = []
     n = 0
@@ -89,6 +96,9 @@ def read_ubx(path: str, strict: bool = False) -> UbxRead:
                 for k in range(1, int(msg.numMeas) + 1):
                     s = f"_{k:02d}"
                     rawx.append((*base, *(getattr(msg, c + s, np.nan) for c in RAWX_COLUMNS[3:]), n))
+                if len(rawx) >= RAWX_BLOCK_ROWS:  # a block of rows as columns: a tuple of Python numbers is 4× their size
+                    rawx_blocks.append(pd.DataFrame(rawx, columns=[*RAWX_COLUMNS, "message"]))
+                    rawx = []
             elif ident == "RXM-SFRBX":
                 words = tuple(int(getattr(msg, f"dwrd_{k:02d}", 0)) for k in range(1, int(msg.numWords) + 1))
                 sfrbx.append((_int_id(msg.gnssId), int(msg.svId), _int_id(getattr(msg, "sigId", 0)), words, n))
@@ -101,6 +111,8 @@ def read_ubx(path: str, strict: bool = False) -> UbxRead:
     if n == 0 and not rawx:
         raise DataError(f"{path}: no UBX messages")
     raw_table = pd.DataFrame(rawx, columns=[*RAWX_COLUMNS, "message"])
+    if rawx_blocks:
+        raw_table = pd.concat([*rawx_blocks, raw_table], ignore_index=True)
     for name in ("gnssId", "sigId"):
         raw_table[name] = [_int_id(v) for v in raw_table[name]]
     sf = pd.DataFrame(sfrbx, columns=["gnssId", "svId", "sigId", "words", "message"])
