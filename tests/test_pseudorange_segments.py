@@ -255,3 +255,35 @@ def test_a_gsdc_derived_csv_is_read_in_blocks_and_placed_in_segments(long_drive,
                            truth["lon_deg"].to_numpy(), zero)  # fmt: skip
     hpl = np.concatenate([m.trajectory_hpl_m for _, m in parts])
     assert np.isfinite(np.hypot(e, n)).all() and (np.hypot(e, n) < hpl).all()
+
+
+def test_a_full_disk_is_said_in_one_line_and_leaves_nothing(tmp_path, monkeypatch):
+    """Where the segments' temporary store has no room, `integrity` says so in one line naming the file and TMPDIR, exits
+    with the system's code (4), and leaves neither a stored segment nor a table behind."""
+    import subprocess
+    import sys
+
+    from conftest import REPO
+
+    store = tmp_path / "store"
+    store.mkdir()
+    code = f"""
+import errno, sys, numpy as np
+import tollcli.job.pseudorange_segments as segments
+segments.SEGMENT_EPOCHS, segments.SEGMENT_MIN_S, segments.MARGIN_EPOCHS = 300, 60.0, 50
+save = np.save
+def full(path, *args, **kwargs):
+    if "tollcli-segments-" in str(path):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+    return save(path, *args, **kwargs)
+np.save = full
+from tollcli.cli.main import main
+main(["integrity", {str(shared(*BERLIN))!r}, "-q", "-o", {str(tmp_path / "table.csv")!r}])
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO,
+                          env={**os.environ, "TMPDIR": str(store)}, timeout=300)  # fmt: skip
+    assert done.returncode == 4, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "No space left on device" in lines[0] and "TMPDIR" in lines[0] and str(store) in lines[0]
+    assert "Traceback" not in done.stderr
+    assert not list(store.iterdir()) and not (tmp_path / "table.csv").exists()

@@ -313,7 +313,11 @@ class _Placer:
         if self.folder is None:
             self.folder = tempfile.mkdtemp(prefix="tollcli-segments-")
         path = os.path.join(self.folder, f"segment-{self.n_segments:05d}")
-        _store(path, part, meas.take(rows))
+        try:
+            _store(path, part, meas.take(rows))
+        except OSError as exc:  # (a disk full: said as the system's refusal, with where the segments go)
+            raise OSError(exc.errno, f"{exc.strerror or exc} (a long log's segments wait there, about 2.3 kB an epoch, until "
+                                     "they are charged: TMPDIR names a larger disk)", exc.filename) from None  # fmt: skip
         self.stored.append(path)
         self.used.append(used)
         note = epochs.attrs.get("positioning_note")
