@@ -88,9 +88,7 @@ class PlacedLog:
 
     def close(self) -> None:
         """Remove the stored segments (if any)."""
-        if self._folder is not None:
-            shutil.rmtree(self._folder, ignore_errors=True)
-            self._folder = None
+        self._folder = _removed(self._folder)
 
     def __enter__(self) -> PlacedLog:
         return self
@@ -206,14 +204,12 @@ def _segments(fmt: _Format, log: str, sigma_model: str, sigma_m: float, nominal:
             placer.close()
             return _whole(*fmt.solve(rows, odometry, sigma_model, sigma_m, nominal), positioning, skipped)
         placer.place(rows, odometry, core)
-    except _Unordered:
+    except BaseException as exc:  # nothing stored is left behind, whatever stopped the placing
         placer.close()
-        return None
-    except DataError as exc:
-        placer.close()
-        raise DataError(exc.args[0] if exc.args[0].startswith(log) else f"{log}: {exc}") from None
-    except BaseException:
-        placer.close()
+        if isinstance(exc, _Unordered):
+            return None
+        if isinstance(exc, DataError):
+            raise DataError(exc.args[0] if exc.args[0].startswith(log) else f"{log}: {exc}") from None
         raise
     return placer.finish(skipped)
 
@@ -335,9 +331,13 @@ class _Placer:
         return PlacedLog(positioning, note, self.correlation_s, skipped, self.n_segments, _folder=self.folder, _stored=self.stored)
 
     def close(self) -> None:
-        if self.folder is not None:
-            shutil.rmtree(self.folder, ignore_errors=True)
-            self.folder = None
+        self.folder = _removed(self.folder)
+
+
+def _removed(folder: str | None) -> None:
+    """Remove the segments' folder (if any); None, the folder it leaves."""
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _store(path: str, epochs: pd.DataFrame, meas: Measurements) -> None:

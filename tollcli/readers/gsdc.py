@@ -24,21 +24,13 @@ INTEGERS = ("millisSinceGpsEpoch", "constellationType", "svid")
 
 
 def read_gsdc_derived(path, strict: bool = False) -> pd.DataFrame:
-    """The derived CSV with the columns the WLS needs, checked: a row whose number fields are not numbers is skipped
-    and counted (``attrs['skipped_lines']``), or with ``strict`` an error naming its line. Only those columns are
-    read (the others would be a Python string per field: most of the memory of a long drive's file)."""
-    wanted = set(REQUIRED)
-    try:
-        table = pd.read_csv(path, dtype=str, usecols=lambda c: c in wanted)
-    except (OSError, pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
-        raise DataError(f"{path}: not a readable CSV ({' '.join(str(exc).split())})") from None
-    missing = [c for c in REQUIRED if c not in table.columns]
-    if missing:
-        raise DataError(f"{path}: not a GSDC derived file, missing columns {', '.join(missing)}")
-    floats = tuple(c for c in REQUIRED if c not in INTEGERS and c != "signalType")
-    table = checked_numbers(table, path, floats, INTEGERS, strict)
-    if table.empty:
-        raise DataError(f"{path}: no usable rows (the first bad one at line {table.attrs['first_skipped_line']})")
+    """The derived CSV with the columns the WLS needs, checked: its blocks (:func:`iter_gsdc_derived`) joined, a row
+    whose number fields are not numbers skipped and counted (``attrs['skipped_lines']``, the first at
+    ``attrs['first_skipped_line']``), or with ``strict`` an error naming its line."""
+    parts = list(iter_gsdc_derived(path, strict))
+    table = pd.concat(parts, ignore_index=True)
+    table.attrs = {"skipped_lines": sum(p.attrs["skipped_lines"] for p in parts),
+                   "first_skipped_line": next((p.attrs["first_skipped_line"] for p in parts if p.attrs["first_skipped_line"]), None)}  # fmt: skip
     return table
 
 
@@ -47,9 +39,10 @@ BLOCK_ROWS = 50_000
 
 
 def iter_gsdc_derived(path, strict: bool = False, block_rows: int | None = None) -> Iterator[pd.DataFrame]:
-    """:func:`read_gsdc_derived` :data:`BLOCK_ROWS` rows at a time, in file order: the same rows and numbers, each
-    block's ``attrs['skipped_lines']`` its own malformed rows and ``line`` the file's line numbers; the same errors
-    (a file none of whose rows is usable: after its last block). Memory is a block's."""
+    """The derived CSV :data:`BLOCK_ROWS` rows at a time, in file order, only the columns the WLS needs (the others
+    would be a Python string per field), checked (:func:`~tollcli.readers.csv_numbers.checked_numbers`): each block's
+    ``attrs['skipped_lines']`` its own malformed rows, ``line`` the file's line numbers. A file none of whose rows is
+    usable is an error after its last block. Memory is a block's."""
     wanted = set(REQUIRED)
     floats = tuple(c for c in REQUIRED if c not in INTEGERS and c != "signalType")
     line, usable, first_bad = 2, 0, None

@@ -44,16 +44,13 @@ SATELLITE_ID_LIMIT = 1000
 
 
 def read_librsf(path: str, strict: bool = False) -> LibrsfLog:
-    """The three kinds of measurement of a libRSF file as tables (rows in file order).
-
-    Its fields are parsed as numbers as they are read; a file with a field that is not one (a malformed line, or a
-    line of another kind) is read again as text, each line's fields then tried one by one (the same numbers: 8 times
-    slower, and a Python string per field)."""
-    raw, numbers = _read_all(path)
-    log = _tables(raw, numbers, 0, path, strict)
-    if not (len(log.pseudoranges) or len(log.odometry) or len(log.points)):
-        raise DataError(f"{path}: no pseudorange3, odom3 or point3 line: not a libRSF log")
-    return log
+    """The three kinds of measurement of a libRSF file as tables (rows in file order): its blocks
+    (:func:`iter_librsf`) joined. Its fields are parsed as numbers as they are read; from a block with a field that is
+    not one (a malformed line, or a line of another kind) on, the file is read as text, each line's fields then tried
+    one by one (the same numbers: 8 times slower, and a Python string per field)."""
+    parts = list(iter_librsf(path, strict))
+    return LibrsfLog(*(pd.concat([getattr(p, name) for p in parts], ignore_index=True) for name in ("pseudoranges", "odometry", "points")),
+                     sum(p.malformed for p in parts))  # fmt: skip
 
 
 #: rows of a libRSF file parsed at a time by :func:`iter_librsf`
@@ -61,9 +58,9 @@ BLOCK_ROWS = 50_000
 
 
 def iter_librsf(path: str, strict: bool = False, block_rows: int | None = None) -> Iterator[LibrsfLog]:
-    """A libRSF file's tables :data:`BLOCK_ROWS` rows at a time, in file order: the parts :func:`read_librsf` reads
-    whole, row for row the same numbers, malformed lines counted and named the same way (each in the part that holds
-    it). Memory is a block's. A part with a field that is not a number is read again as text from its first row on."""
+    """A libRSF file's tables :data:`BLOCK_ROWS` rows at a time, in file order, malformed lines counted (each in the
+    part that holds it) and, with ``strict``, named by their row. Memory is a block's. A part with a field that is not
+    a number is read again as text from its first row on, and so is the rest of the file."""
     block_rows = block_rows or BLOCK_ROWS
     row0, numbers, seen = 0, True, False
     while True:
@@ -88,21 +85,6 @@ def iter_librsf(path: str, strict: bool = False, block_rows: int | None = None) 
 def _csv_options(numbers: bool) -> dict:
     return {"sep": r"\s+", "header": None, "names": range(15), "engine": "c", "comment": "#",
             "dtype": {0: str, **dict.fromkeys(range(1, 15), np.float64)} if numbers else str}  # fmt: skip
-
-
-def _read_all(path: str) -> tuple[pd.DataFrame, bool]:
-    try:
-        return pd.read_csv(path, **_csv_options(True)), True
-    except (ValueError, OSError):  # a field that is not a number; or the file unreadable, said and named below
-        pass
-    try:
-        return pd.read_csv(path, **_csv_options(False)), False
-    except FileNotFoundError:
-        raise UsageError(f"{path}: no such file") from None
-    except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: not a readable libRSF text file ({str(exc).splitlines()[0]})") from None
-    except pd.errors.EmptyDataError:
-        raise DataError(f"{path}: empty: no libRSF measurements") from None
 
 
 def _opened(path: str, numbers: bool, block_rows: int):
