@@ -16,7 +16,7 @@ from conftest import run_cli, shared
 
 from tollcli.gnss.odometry import implausible_odometry, interval_odometry
 from tollcli.integrity.trajectory import sigma_major_m
-from tollcli.integrity.trajectory_noise import correlation_inflation, sigma_by_cn0
+from tollcli.integrity.trajectory_noise import correlation_inflation, position_inflation, sigma_by_cn0
 
 BERLIN = ("smartloc", "Berlin_Potsdamer_Platz_Input.txt")
 TRUTH = ("smartloc", "Berlin_Potsdamer_Platz_GT.txt")
@@ -59,6 +59,20 @@ def test_berlin_filtered_forward_only(tmp_path):
     summary, audit = _audited(tmp_path, shared(*BERLIN), "--positioning", "filtered")
     assert summary["positioning_used"] == "filtered" and summary["statuses"].get("valid", 0) >= 0.80 * 1372
     assert audit["horizontal_error_m"]["median"] > 1.2 * smoothed["horizontal_error_m"]["median"]
+    assert audit["regions"]["misleading"] == 0 and audit["regions"]["hazardous"] == 0
+
+
+@pytest.mark.parametrize("part_s", [(60, 190), (105, 235)])
+def test_parts_of_berlin_are_never_misleading(tmp_path, part_s):
+    """A part of the real drive is a real log (``benchmarks/berlin_cuts.py`` runs 29 of them): these two, whose
+    satellites' errors lean north together at 170–190 s, had 85 and 137 epochs beyond their bound while the noise
+    was measured per satellite only; with the position's own series (:func:`position_inflation`) none."""
+    start, end = part_s
+    lines = shared(*BERLIN).read_text().splitlines(keepends=True)
+    part = tmp_path / "part.txt"
+    part.write_text("".join(line for line in lines if start <= float(line.split()[1]) <= end))
+    summary, audit = _audited(tmp_path, part)
+    assert summary["positioning_used"] == "smoothed" and summary["statuses"].get("valid", 0) >= 0.95 * audit["epochs"]
     assert audit["regions"]["misleading"] == 0 and audit["regions"]["hazardous"] == 0
 
 
@@ -107,6 +121,73 @@ def test_noise_per_cn0_bin_and_its_correlation():
     assert table[4] == pytest.approx(3.0, abs=0.3)  # 40–45 dB-Hz: σ 2 m, floored at 3 m
     assert table[1] == pytest.approx(np.hypot(30.0, 10.0), rel=0.05)  # 25–30 dB-Hz: bias and spread
     assert table[0] == table.max()
+
+
+def test_errors_leaning_together_inflate_the_noise_as_the_position_sees_them():
+    """Known answer: every satellite's error the projection of one east offset c (unit variance, held 20 epochs)
+    plus white noise. Each satellite alone sees a little of c; the position sees all of it: its east series
+    δ / √Q_EE = c √s + white (s = 1 / Q_EE) has mean square 1 + s and ρ(lag) = (1 − lag/20) s / (1 + s), so the
+    factor is (1 + s)(1 + 19 s / (1 + s)) = 1 + 20 s. White errors alone give 1. An epoch with no more measurements
+    than unknowns + 1 tells nothing (its offset would be its residuals' fit)."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(7)
+    n_epochs, n_sats = 8000, 9
+    az = np.radians(np.arange(n_sats) * 40.0 + 5.0)
+    el = np.radians(np.array([15, 25, 35, 45, 55, 65, 75, 30, 50], float))
+    unit = np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=1)  # ENU, to the satellites
+    inp = SimpleNamespace(origin_ecef_m=np.zeros(3), ecef2enu=np.eye(3), n_clocks=2,
+                          sat_ecef_m=np.broadcast_to(2.0e7 * unit, (n_epochs, n_sats, 3)),
+                          clock_index=np.broadcast_to((np.arange(n_sats) >= 6).astype(int), (n_epochs, n_sats)))  # fmt: skip
+    x = np.zeros((n_epochs, 9))
+    mask = np.ones((n_epochs, n_sats), bool)
+    white = rng.normal(size=(n_epochs, n_sats))
+    factor, _ = position_inflation(white, inp, x, mask)
+    assert 0.85 < factor < 1.2
+    h = np.column_stack([-unit, np.arange(n_sats) < 6, np.arange(n_sats) >= 6])
+    s = 1.0 / np.linalg.inv(h.T @ h)[0, 0]
+    c = np.repeat(rng.normal(size=n_epochs // 20), 20)
+    leaning = white + c[:, None] * -unit[None, :, 0]  # a range error of −u_E c: the position c east
+    factor, rho = position_inflation(leaning, inp, x, mask)
+    assert factor == pytest.approx(1.0 + 20.0 * s, rel=0.15) and rho[10] > 0.2
+    assert factor > 3 * correlation_inflation(leaning, np.tile(np.arange(n_sats), (n_epochs, 1)), mask)[0]
+    few = mask.copy()
+    few[:, 1:4] = False  # 6 measurements, 3 + 2 clocks unknowns: no offset anywhere
+    assert position_inflation(leaning, inp, x, few) == (1.0, pytest.approx(np.ones(1)))
+
+
+def test_the_offsets_are_each_epochs_least_squares():
+    """The offsets :func:`position_inflation` solves (clocks taken out by their groups' means, a 3 × 3 system in
+    closed form) are each epoch's least squares with a column per clock group, solved directly, over random
+    geometries with slots missing and a constellation absent at some epochs; too few measurements give none."""
+    from types import SimpleNamespace
+
+    from tollcli.integrity.trajectory_noise import _offsets
+
+    rng = np.random.default_rng(3)
+    n_epochs, n_sats, n_clocks = 300, 12, 3
+    sat = rng.normal(size=(n_epochs, n_sats, 3))
+    sat[..., 2] = np.abs(sat[..., 2]) + 0.2
+    sat *= 2.0e7 / np.linalg.norm(sat, axis=-1, keepdims=True)
+    inp = SimpleNamespace(origin_ecef_m=np.array([1.0e6, -2.0e6, 3.0e6]), ecef2enu=np.linalg.qr(rng.normal(size=(3, 3)))[0].T)
+    enu = rng.normal(scale=50.0, size=(n_epochs, 3))
+    clock = rng.integers(0, n_clocks, size=(n_epochs, n_sats))
+    clock[::4] = np.where(clock[::4] == 2, 1, clock[::4])  # no third constellation at every fourth epoch
+    mask = rng.random((n_epochs, n_sats)) < 0.7
+    z = np.where(mask, rng.normal(size=(n_epochs, n_sats)), np.nan)
+    got = _offsets(z, mask, sat @ inp.ecef2enu + inp.origin_ecef_m, clock, enu, inp, n_clocks)
+    for k in range(n_epochs):
+        ok = mask[k]
+        los = sat[k, ok] - enu[k]  # ENU (the frame's rotation undone above)
+        unit = los / np.linalg.norm(los, axis=1, keepdims=True)
+        groups = np.unique(clock[k, ok])
+        h = np.column_stack([-unit] + [clock[k, ok] == g for g in groups]).astype(float)
+        if ok.sum() < h.shape[1] + 2:
+            assert np.isnan(got[k]).all()
+            continue
+        q = np.linalg.inv(h.T @ h)
+        delta = q @ h.T @ z[k, ok]
+        np.testing.assert_allclose(got[k], delta[:2] / np.sqrt(np.diag(q)[:2]), rtol=1e-9, atol=1e-9)
 
 
 def test_sigma_major_is_the_ellipse_semi_major_axis():

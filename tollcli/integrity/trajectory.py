@@ -12,7 +12,8 @@
 
 The noise is the log's own (:mod:`tollcli.integrity.trajectory_noise`): the error model's σ scaled so the median
 normalised innovation is χ²₁'s, then :data:`NOISE_ROUNDS` times σ per C/N0 bin from the residuals at the smoothed
-trajectory, inflated for their time correlation. ``filtered`` is calibrated the same way, as an on-board unit is
+trajectory, inflated for their time correlation — each satellite's, or the position's where the satellites' errors
+lean together more (the larger). ``filtered`` is calibrated the same way, as an on-board unit is
 calibrated on earlier drives: measured at the forward pass's own positions, the residuals carry that pass's errors
 (p50 15 m on Berlin) and the noise looks twice as large as it is (the forward pass then valid at HAL 50 m in 65 % of
 Berlin's epochs, against 92 % calibrated at the smoothed trajectory; 0 misleading either way).
@@ -34,6 +35,7 @@ from tollcli.integrity.trajectory_noise import (
     RHO_CUT,
     correlation_inflation,
     noise_bins,
+    position_inflation,
     postfit_residuals,
     sigma_by_bin,
 )
@@ -127,11 +129,17 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
         res = postfit_residuals(inp, passes.x, m)  # the noise measured at the smoothed trajectory, whichever positioning
         table = sigma_by_bin(res, bins, n_bins, inp.mask)
         kept = inp.mask & (passes.weight >= 0.5)
+        smoothed_x = passes.x
         passes = None  # (let go before the next sweep is made)
         z = np.clip(res / table[bins], -5.0, 5.0)
         res = sigma2 = None
         factor, rho = correlation_inflation(z, sv_code, kept)  # the kept, not the outliers
-        z = kept = None
+        leaning, leaning_rho = position_inflation(z, inp, smoothed_x, kept)  # the satellites' errors leaning together
+        if leaning > factor:
+            factor = leaning
+        if _lags(leaning_rho) > _lags(rho):
+            rho = leaning_rho
+        z = kept = smoothed_x = None
         white2 = np.where(inp.mask, table[bins] ** 2, FALLBACK_SIGMA_M**2)
         sigma2 = white2 * max(factor, 1.0)
         passes = sweep(inp, sigma2, start_f, start_b, odometry, noise, white2, full=round_ == NOISE_ROUNDS - 1, buffers=buffers)
@@ -147,11 +155,16 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
     n_kept = (inp.mask & (weight >= 0.5)).sum(axis=1)
     test_stat, dof = passes.test_stat, passes.dof
     lost = near(inp.t_s, passes.relocked, LOST_WINDOW_S)
-    below = np.flatnonzero(rho < RHO_CUT)
-    lags = int(below[0]) if below.size else rho.size
+    lags = _lags(rho)
     step_s = float(np.median(np.diff(inp.t_s))) if inp.t_s.size > 1 else 1.0
     return Trajectory(x[:, :3], cov, major, hpl, n_kept, inp.mask.sum(axis=1) - n_kept, test_stat, dof, lost, table, factor,
                       lags * step_s, positioning, odometry)  # fmt: skip
+
+
+def _lags(rho: np.ndarray) -> int:
+    """How many lags an autocorrelation ``rho`` stays at or above :data:`RHO_CUT` (its whole length if it does)."""
+    below = np.flatnonzero(rho < RHO_CUT)
+    return int(below[0]) if below.size else rho.size
 
 
 #: how long before and after an epoch where a pass lost the vehicle (:mod:`tollcli.integrity.trajectory_filter`)

@@ -8,6 +8,12 @@
   seconds; the filter averages over time as if every epoch's error were new. The residuals' autocorrelation ρ (per
   measurement, summed over all, by FFT) gives the factor 1 + 2 Σ ρ(lag) (lags until ρ < :data:`RHO_CUT`) by which the
   variance of an average of correlated errors exceeds the white one; the σ are inflated by its square root.
+* :func:`position_inflation`: the same factor for the errors as the position sees them. Satellites' errors in a
+  city lean together (a street's reflections come from the same side), which no satellite's own series shows: each
+  epoch's normalised residuals are solved for a position offset (least squares, one clock per constellation), and the
+  offset's east and north series, each normalised by its white σ, give mean square × (1 + 2 Σ ρ). On the Berlin drive
+  the offsets' mean square is 1.5–1.8 (1 if the satellites' errors were independent) and the factor 59 against the
+  satellites' 40; on its part 60–190 s, 77 against 36.
 """
 
 from __future__ import annotations
@@ -125,6 +131,91 @@ def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tu
     return float(1.0 + 2.0 * rho[1:cut].sum()), rho
 
 
+def position_inflation(z: np.ndarray, inp: TrajectoryInputs, x: np.ndarray, mask: np.ndarray) -> tuple[float, np.ndarray]:
+    """The variance factor of normalised residuals ``z`` (E, N) as the position sees them, and ρ of the axis that gives
+    it (lags in epochs): each epoch's offset δ = (HᵀH)⁻¹Hᵀz (H: the line-of-sight rows at the trajectory ``x`` (E, S),
+    ENU, and a column per clock group) where ``mask`` keeps at least two measurements more than the unknowns; per axis
+    (east, north) the series δ / √((HᵀH)⁻¹) (its median removed; zero where there is no offset) gives
+    mean square × (1 + 2 Σ ρ(lag)) (lags until ρ < :data:`RHO_CUT`); the larger of the two. 1 where no epoch has an
+    offset."""
+    n_epochs = z.shape[0]
+    offsets = np.full((n_epochs, 2), np.nan)
+    n_clocks = inp.n_clocks
+    for first in range(0, n_epochs, OFFSET_BLOCK):
+        rows = slice(first, min(first + OFFSET_BLOCK, n_epochs))
+        offsets[rows] = _offsets(z[rows], mask[rows], inp.sat_ecef_m[rows], inp.clock_index[rows], x[rows, :3], inp, n_clocks)
+    best, best_rho = 1.0, np.ones(1)
+    for axis in range(2):
+        series = offsets[:, axis]
+        have = np.isfinite(series)
+        if have.sum() < 3:
+            continue
+        series = np.where(have, series - median(series[have]), 0.0)
+        size = 1 << int(np.ceil(np.log2(n_epochs + MAX_LAG + 1)))
+        spec = np.fft.rfft(series, size)
+        acf = np.fft.irfft(np.square(spec.real) + np.square(spec.imag), size)[: min(MAX_LAG + 1, n_epochs)]
+        if not acf[0] > 0:
+            continue
+        rho = acf / acf[0]
+        below = np.flatnonzero(rho < RHO_CUT)
+        cut = int(below[0]) if below.size else rho.size
+        factor = float(acf[0] / have.sum() * (1.0 + 2.0 * rho[1:cut].sum()))
+        if factor > best:
+            best, best_rho = factor, rho
+    return best, best_rho
+
+
+def _offsets(z, mask, sat_ecef_m, clock_index, enu_m, inp: TrajectoryInputs, n_clocks: int) -> np.ndarray:
+    """(B, 2) each epoch's east and north offset solved from its normalised residuals, each over its white σ (NaN
+    where the epoch has too few measurements). The clocks are taken out first: the least squares with a clock per
+    group is the one without clocks on the rows less their group's mean (the clocks' block of HᵀH is diagonal), so
+    HᵀH's position block is Σ u uᵀ − Σ_groups (Σ u)(Σ u)ᵀ / n and Hᵀz's is Σ u z − Σ_groups (Σ u)(Σ z) / n: a 3 × 3
+    system per epoch, solved in closed form. Each component is its own (B, N) array: row sums, no small matrices."""
+    keep = mask & np.isfinite(z)
+    receiver = inp.origin_ecef_m + enu_m @ inp.ecef2enu
+    los = [sat_ecef_m[..., k] - receiver[:, k, None] for k in range(3)]  # ECEF: the frame turned at the end
+    with np.errstate(invalid="ignore", divide="ignore"):
+        length = -np.sqrt(los[0] * los[0] + los[1] * los[1] + los[2] * los[2])
+    rows = [np.where(keep, component / length, 0.0) for component in los]  # −u (H's rows)
+    value = np.where(keep, z, 0.0)
+    pairs = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
+    normal = [_dot(rows[j], rows[k]) for j, k in pairs]
+    rhs = [_dot(row, value) for row in rows]
+    unknowns = np.full(keep.shape[0], 3)
+    for group in range(n_clocks):  # a handful of constellations
+        member = (keep & (clock_index == group)).astype(float)
+        count = _dot(member, member)  # (a sum of ones: exact)
+        unknowns += count > 0
+        inverse = np.divide(1.0, count, out=np.zeros(count.shape), where=count > 0)
+        sums = [_dot(row, member) for row in rows]
+        total = _dot(value, member)
+        for m, (j, k) in enumerate(pairs):
+            normal[m] -= sums[j] * sums[k] * inverse
+        for j in range(3):
+            rhs[j] -= sums[j] * total * inverse
+    a, b, c, e, f, i = normal
+    # the inverse of the symmetric [[a, b, c], [b, e, f], [c, f, i]] by cofactors, times det
+    adj = np.stack([e * i - f * f, c * f - b * i, b * f - c * e, a * i - c * c, c * b - a * f, a * e - b * b], axis=1)
+    det = a * adj[:, 0] + b * adj[:, 1] + c * adj[:, 2]
+    full = adj[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
+    scale = np.maximum(np.maximum(a, e), i)
+    enough = (keep.sum(axis=1) >= unknowns + 2) & (det > 1e-12 * scale**3)
+    turn = inp.ecef2enu[:2]  # east and north
+    with np.errstate(invalid="ignore", divide="ignore"):
+        delta = np.einsum("kj,bji,bi->bk", turn, full, np.stack(rhs, axis=1)) / det[:, None]
+        variance = np.einsum("kj,bji,ki->bk", turn, full, turn) / det[:, None]
+        out = delta / np.sqrt(variance)
+    out[~enough] = np.nan
+    return out
+
+
+def _dot(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of two (B, N) arrays."""
+    return np.einsum("ij,ij->i", x, y)
+
+
+#: epochs whose offsets are solved at once (:func:`position_inflation`)
+OFFSET_BLOCK = 4096
 #: the residual series transformed at once (:func:`correlation_inflation`)
 SERIES_AT_ONCE = 16
 
