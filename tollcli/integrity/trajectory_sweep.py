@@ -48,8 +48,8 @@ UNKNOWN_M2 = 1e12
 class Sweep:
     """A sweep's per-epoch columns: the combined state (E, S) and horizontal covariance (E, 2, 2); the forward pass's
     posterior state and horizontal covariance; the weights (E, N) of both passes (the smaller) and of the forward
-    pass; the fault test (:func:`fault_test`); the epochs where either pass lost the vehicle. A sweep that was not
-    ``full`` (:func:`sweep`) has only ``x`` and ``weight``."""
+    pass; the fault test (:func:`fault_test`); the epochs where either pass lost the vehicle; the backward pass's prior
+    state and horizontal covariance. A sweep that was not ``full`` (:func:`sweep`) has only ``x`` and ``weight``."""
 
     x: np.ndarray
     cov_en_m2: np.ndarray | None
@@ -60,6 +60,8 @@ class Sweep:
     test_stat: np.ndarray | None
     dof: np.ndarray | None
     relocked: np.ndarray | None
+    backward_x: np.ndarray | None = None
+    backward_cov_en_m2: np.ndarray | None = None
 
 
 def sweep(inp: TrajectoryInputs, sigma2_m2: np.ndarray, start_f, start_b, odometry: bool, noise: MotionNoise = MotionNoise(),
@@ -79,7 +81,7 @@ def sweep(inp: TrajectoryInputs, sigma2_m2: np.ndarray, start_f, start_b, odomet
 
     out = Sweep(np.empty((n_epochs, n_states)), empty((n_epochs, 2, 2)), empty((n_epochs, n_states)), empty((n_epochs, 2, 2)),
                 np.empty((n_epochs, n_slots)), empty((n_epochs, n_slots)), empty(n_epochs), empty(n_epochs, np.int64),
-                empty(n_epochs, bool))  # fmt: skip
+                empty(n_epochs, bool), empty((n_epochs, n_states)), empty((n_epochs, 2, 2)))  # fmt: skip
     chunk = chunk_epochs or (n_epochs if swept_whole(n_epochs) else CHUNK_EPOCHS)
     bounds = [(a, min(a + chunk, n_epochs)) for a in range(0, n_epochs, max(chunk, 1))]
     if len(bounds) <= 1:
@@ -140,6 +142,7 @@ def _fill(out: Sweep, first: int, forward: FilterPass, backward: FilterPass, ful
     out.forward_weight[rows] = forward.weight
     out.test_stat[rows], out.dof[rows] = fault_test(forward, backward)
     out.relocked[rows] = forward.relocked | backward.relocked
+    out.backward_x[rows], out.backward_cov_en_m2[rows] = backward.prior_x, backward.prior_p[:, :2, :2]
 
 
 def fault_test(forward: FilterPass, backward: FilterPass | None) -> tuple[np.ndarray, np.ndarray]:
