@@ -33,8 +33,8 @@ import pandas as pd
 from tollcli.integrity.trajectory_filter import MOTION_STATES, MotionNoise, PassBuffers, run_pass
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 from tollcli.integrity.trajectory_noise import (
-    RHO_CUT,
     correlation_inflation,
+    correlation_lags,
     noise_bins,
     position_inflation,
     postfit_residuals,
@@ -100,7 +100,7 @@ class Trajectory:
     lost: np.ndarray  # epochs within LOST_WINDOW_S of where a pass lost the vehicle: a fault, whatever the test says
     sigma_by_cn0_m: np.ndarray  # the noise table of the last round (per C/N0 bin, or per elevation bin: noise_bins)
     inflation: float  # the correlation factor of the last round
-    correlation_s: float  # how long the residuals stay correlated (ρ above RHO_CUT): the evidence's independence time
+    correlation_s: float  # how long the residuals stay correlated (ρ above trajectory_noise.RHO_CUT): the evidence's independence time
     positioning: str
     odometry: bool
 
@@ -152,14 +152,14 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
             leaning, leaning_rho = position_inflation(z, inp, smoothed_x, kept)
         if leaning > factor:
             factor = leaning
-        if _lags(leaning_rho) > _lags(rho):
+        if correlation_lags(leaning_rho) > correlation_lags(rho):
             rho = leaning_rho
         z = kept = smoothed_x = None
         white2 = np.where(inp.mask, table[bins] ** 2, FALLBACK_SIGMA_M**2)
         sigma2 = white2 * max(factor, 1.0)
         passes = sweep(inp, sigma2, start_f, start_b, odometry, noise, white2, full=round_ == NOISE_ROUNDS - 1, buffers=buffers)
     step_s = float(np.median(np.diff(inp.t_s))) if inp.t_s.size > 1 else 1.0
-    correlation_s = _lags(rho) * step_s
+    correlation_s = correlation_lags(rho) * step_s
     x, cov = at_the_ends(inp.t_s, passes, END_CORRELATIONS * correlation_s) if odometry else (passes.x, passes.cov_en_m2)
     major = sigma_major_m(cov)
     hpl = K_FUSED * major
@@ -188,12 +188,6 @@ def at_the_ends(t_s: np.ndarray, passes, end_s: float) -> tuple[np.ndarray, np.n
     x[backward_only], cov[backward_only] = passes.backward_x[backward_only], passes.backward_cov_en_m2[backward_only]
     x[forward_only], cov[forward_only] = passes.forward_x[forward_only], passes.forward_cov_en_m2[forward_only]
     return x, cov
-
-
-def _lags(rho: np.ndarray) -> int:
-    """How many lags an autocorrelation ``rho`` stays at or above :data:`RHO_CUT` (its whole length if it does)."""
-    below = np.flatnonzero(rho < RHO_CUT)
-    return int(below[0]) if below.size else rho.size
 
 
 #: how long before and after an epoch where a pass lost the vehicle (:mod:`tollcli.integrity.trajectory_filter`)

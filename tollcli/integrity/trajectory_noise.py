@@ -126,9 +126,18 @@ def correlation_inflation(z: np.ndarray, sv: np.ndarray, mask: np.ndarray) -> tu
     if not acf[0] > 0:
         return 1.0, np.ones(1)
     rho = acf / acf[0]
+    return _variance_factor(rho), rho
+
+
+def correlation_lags(rho: np.ndarray) -> int:
+    """How many lags an autocorrelation ``rho`` stays at or above :data:`RHO_CUT` (its whole length if it does)."""
     below = np.flatnonzero(rho < RHO_CUT)
-    cut = int(below[0]) if below.size else rho.size
-    return float(1.0 + 2.0 * rho[1:cut].sum()), rho
+    return int(below[0]) if below.size else rho.size
+
+
+def _variance_factor(rho: np.ndarray) -> float:
+    """1 + 2 Σ ρ(lag) over the lags before ρ first falls below :data:`RHO_CUT`."""
+    return float(1.0 + 2.0 * rho[1 : correlation_lags(rho)].sum())
 
 
 def position_inflation(z: np.ndarray, inp: TrajectoryInputs, x: np.ndarray, mask: np.ndarray) -> tuple[float, np.ndarray]:
@@ -157,9 +166,7 @@ def position_inflation(z: np.ndarray, inp: TrajectoryInputs, x: np.ndarray, mask
         if not acf[0] > 0:
             continue
         rho = acf / acf[0]
-        below = np.flatnonzero(rho < RHO_CUT)
-        cut = int(below[0]) if below.size else rho.size
-        factor = float(acf[0] / have.sum() * (1.0 + 2.0 * rho[1:cut].sum()))
+        factor = float(acf[0] / have.sum()) * _variance_factor(rho)
         if factor > best:
             best, best_rho = factor, rho
     return best, best_rho
