@@ -415,19 +415,15 @@ def test_rinex_observations_with_a_navigation_file_of_another_day_are_a_clear_er
     assert "pixel6.23o" in err and "brdc1190.21n" in err and "2021-04-29" in err and "2023-11-07" in err
 
 
-def test_rawx_rows_made_a_table_block_by_block_are_the_same_table(tmp_path, monkeypatch):
-    """The first 200 kB of the real u-blox walk (its last frame cut short: a damaged frame, counted): RAWX rows made a
-    table 97 at a time, then joined, are the table made of all at once — every value and dtype — and the other tables
-    and counts are the same."""
-    import tollcli.readers.ubx as ubx
-
+def test_rawx_read_in_small_blocks_is_the_same_table(tmp_path):
+    """The first 200 kB of the real u-blox walk (its last frame cut short: a damaged frame, counted): read in blocks of
+    997 bytes (frames cut by every block's end, a block of no whole frame) its tables are those read at once — every
+    value and dtype — and so are the counts."""
     part = tmp_path / "part.ubx"
     part.write_bytes(shared("rtklibexplorer", "gnss_1730.ubx").read_bytes()[:200_000])
-    monkeypatch.setattr(ubx, "RAWX_BLOCK_ROWS", 10**9)
     whole = read_ubx(str(part))
-    monkeypatch.setattr(ubx, "RAWX_BLOCK_ROWS", 97)
-    blocks = read_ubx(str(part))
-    assert len(whole.rawx) > 20 * 97
+    blocks = read_ubx(str(part), block_bytes=997)
+    assert len(whole.rawx) > 2000 and len(whole.sfrbx) > 100 and len(whole.pvt) > 50
     for table in ("rawx", "sfrbx", "pvt"):
         pd.testing.assert_frame_equal(getattr(blocks, table), getattr(whole, table))
-    assert (blocks.n_messages, blocks.n_bad) == (whole.n_messages, whole.n_bad)
+    assert (blocks.n_messages, blocks.n_bad) == (whole.n_messages, whole.n_bad) and whole.n_bad == 1

@@ -1,5 +1,6 @@
-"""u-blox navigation messages read as the receiver's own solution: against pyubx2 on every real UBX log, against the
-receiver's NAV-PVT on the OSNMA recording, and on constructed frames of every message read."""
+"""u-blox navigation messages read as the receiver's own solution: against pyubx2 on every real UBX log (the long
+OSNMA recording against the raw-measurement reader, which is checked against pyubx2), against the receiver's NAV-PVT
+on the OSNMA recording, and on constructed frames of every message read."""
 
 from __future__ import annotations
 
@@ -42,6 +43,18 @@ def _pyubx2_pvt(path) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["lat", "lon", "n_sv", "h_acc_m"]).astype(float)
 
 
+def _reference_pvt(path) -> pd.DataFrame:
+    """The NAV-PVT fixes of a log as pyubx2 decodes them; of the long OSNMA recording (16 s in pyubx2) as the
+    raw-measurement reader decodes them — itself checked against pyubx2 field by field (``test_ubx_reader.py``)."""
+    if path != OSNMA_UBX:
+        return _pyubx2_pvt(path)
+    from tollcli.readers.ubx import read_ubx
+
+    pvt = read_ubx(str(path)).pvt
+    pvt = pvt[~pvt["fix_type"].isin([0, 5])]
+    return pd.DataFrame({"lat": pvt["lat_deg"], "lon": pvt["lon_deg"], "n_sv": pvt["n_sv"], "h_acc_m": pvt["h_acc_m"]}).astype(float)
+
+
 def _ubx_logs_with_pvt():
     if not GPSD.exists():
         return []
@@ -57,7 +70,7 @@ def test_every_real_nav_pvt_is_read_as_pyubx2_decodes_it():
     for log in logs:
         epochs, _, stats = _read(log)
         ours = epochs[epochs["lat_deg"].notna()]
-        theirs = _pyubx2_pvt(log)
+        theirs = _reference_pvt(log)
         assert len(ours) == len(theirs), log.name
         assert np.allclose(ours["lat_deg"], theirs["lat"], atol=1e-9) and np.allclose(ours["lon_deg"], theirs["lon"], atol=1e-9), log.name
         assert (ours["n_used"].to_numpy() == theirs["n_sv"].to_numpy()).all(), log.name
@@ -72,7 +85,7 @@ def test_the_osnma_recording_positions_are_nav_pvt_and_its_residuals_decide():
         pytest.skip("real data not available: ../shared/data/osnma/ublox/current_config.ubx")
     assert sniff_format(str(OSNMA_UBX)) == "ubx-nav"
     table = pd.concat([c.table for c in iter_integrity(str(OSNMA_UBX), "ubx-nav", RaimParams())], ignore_index=True)
-    theirs = _pyubx2_pvt(OSNMA_UBX)
+    theirs = _reference_pvt(OSNMA_UBX)
     assert len(table) == 4753 == len(theirs)
     assert np.allclose(table["lat_deg"], theirs["lat"], atol=1e-9) and np.allclose(table["lon_deg"], theirs["lon"], atol=1e-9)
     assert (table["test_stat_source"] == "grs").all() and (table["integrity_source"] == "grs").all()

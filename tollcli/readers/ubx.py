@@ -1,14 +1,18 @@
-"""u-blox UBX binary logs (pyubx2 frames and fields them) → raw-measurement, navigation-data and PVT tables.
+"""u-blox UBX binary logs → raw-measurement, navigation-data and PVT tables, decoded a block of frames at a time.
 
-* ``RXM-RAWX``: one row per measurement — receiver time of week and week (GPS time of the receiver's
+* ``RXM-RAWX`` (0x02 0x15): one row per measurement — receiver time of week and week (GPS time of the receiver's
   clock), pseudorange (m), carrier phase (cycles), Doppler (Hz), C/N0, standard deviations
   (0.01·2ⁿ m, 0.004 cycles, 0.002·2ⁿ Hz as the message codes them), tracking flags;
-* ``RXM-SFRBX``: one row per navigation-data subframe (satellite and its ten 32-bit words), decoded
+* ``RXM-SFRBX`` (0x02 0x13): one row per navigation-data subframe (satellite and its 32-bit words), decoded
   into ephemerides in :mod:`tollcli.gnss.lnav_subframes`;
-* ``NAV-PVT``: the receiver's own solution (time, position, ground speed, accuracies), for comparison.
+* ``NAV-PVT`` (0x01 0x07): the receiver's own solution (time, position, ground speed, accuracies), for comparison.
 
-Messages that fail their checksum or cannot be parsed are skipped and counted (NMEA and RTCM
-between the UBX frames are not errors: they are another protocol on the same port).
+The frames come from :func:`~tollcli.readers.ubx_frames.iter_frame_blocks` (found by their lengths, checksums checked
+for a block at once) and each message's fields are read for all its frames of a block at once, as numpy records at
+the offsets of the u-blox interface description (``tests/test_ubx_reader.py`` checks every real log against pyubx2's
+decoding, field by field). Frames that fail their checksum, and messages whose length is not what their counts say,
+are skipped and counted (NMEA and RTCM between the UBX frames are not errors: they are another protocol on the same
+port); ``strict`` makes the first an error naming the message.
 """
 
 from __future__ import annotations
@@ -19,30 +23,41 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError, UsageError
+from tollcli.readers.nmea.line_reader import ReadStats
+from tollcli.readers.ubx_frames import iter_frame_blocks
 from tollcli.times import plausible_date
 
 UBX_SYNC = b"\xb5\x62"
 #: UBX gnssId → constellation name
 GNSS_ID = {0: "GPS", 1: "SBAS", 2: "Galileo", 3: "BeiDou", 5: "QZSS", 6: "GLONASS", 7: "NavIC"}
-_NAME_TO_ID = {"GPS": 0, "SBAS": 1, "GALILEO": 2, "Galileo": 2, "BEIDOU": 3, "BeiDou": 3, "QZSS": 5, "GLONASS": 6,
-               "NAVIC": 7, "NavIC": 7, "IMES": 4}  # fmt: skip
 RAWX_COLUMNS = ("rcvTow", "week", "leapS", "prMes", "cpMes", "doMes", "gnssId", "svId", "sigId", "freqId", "locktime",
                 "cno", "prStd", "cpStd", "doStd", "prValid", "cpValid")  # fmt: skip
+RXM_RAWX, RXM_SFRBX, NAV_PVT = (0x02, 0x15), (0x02, 0x13), (0x01, 0x07)
 
-
-#: RAWX rows gathered as tuples before they are made a table (then the next block): the memory of a long log's
-#: measurements is its table's, not its Python tuples' (28.7 MB at the peak on a 536-epoch walk of 37 850 measurements,
-#: a 5.5 MB table)
-RAWX_BLOCK_ROWS = 5_000
+#: RXM-RAWX: its 16-byte head, then 32 bytes a measurement (numMeas at byte 11)
+_RAWX_HEAD = np.dtype({"names": ["rcvTow", "week", "leapS", "numMeas"], "formats": ["<f8", "<u2", "i1", "u1"],
+                       "offsets": [0, 8, 10, 11], "itemsize": 16})  # fmt: skip
+_RAWX_MEAS = np.dtype({"names": ["prMes", "cpMes", "doMes", "gnssId", "svId", "sigId", "freqId", "locktime", "cno", "prStdev",
+                                 "cpStdev", "doStdev", "trkStat"],
+                       "formats": ["<f8", "<f8", "<f4", "u1", "u1", "u1", "u1", "<u2", "u1", "u1", "u1", "u1", "u1"],
+                       "offsets": [0, 8, 16, 20, 21, 22, 23, 24, 26, 27, 28, 29, 30], "itemsize": 32})  # fmt: skip
+#: NAV-PVT: the fields read (92 bytes since protocol 14; the 84 of earlier versions hold them all)
+_PVT = np.dtype({"names": ["year", "month", "day", "hour", "minute", "second", "nano", "fix_type", "n_sv", "lon", "lat", "height",
+                           "h_acc", "g_speed", "s_acc"],
+                 "formats": ["<u2", "u1", "u1", "u1", "u1", "u1", "<i4", "u1", "u1", "<i4", "<i4", "<i4", "<u4", "<i4", "<u4"],
+                 "offsets": [4, 6, 7, 8, 9, 10, 16, 20, 23, 24, 28, 32, 40, 60, 68], "itemsize": 84})  # fmt: skip
+PVT_MIN_LENGTH = 84
+PVT_COLUMNS = ("year", "month", "day", "hour", "minute", "second", "nano", "fix_type", "lat_deg", "lon_deg", "height_m",
+               "speed_mps", "h_acc_m", "speed_acc_mps", "n_sv", "message")  # fmt: skip
 
 
 @dataclass
 class UbxRead:
     rawx: pd.DataFrame  # one row per RXM-RAWX measurement (RAWX_COLUMNS + ``message``)
-    sfrbx: pd.DataFrame  # one row per RXM-SFRBX: gnssId, svId, sigId, words (10 × uint32), message
+    sfrbx: pd.DataFrame  # one row per RXM-SFRBX: gnssId, svId, sigId, words (tuple of uint32), message
     pvt: pd.DataFrame  # one row per NAV-PVT
-    n_messages: int
-    n_bad: int  # UBX frames that failed their checksum or could not be parsed
+    n_messages: int  # good UBX frames
+    n_bad: int  # UBX frames that failed their checksum, or whose message's length is not what its counts say
 
 
 def is_ubx(head: bytes) -> bool:
@@ -51,24 +66,77 @@ def is_ubx(head: bytes) -> bool:
     return at >= 0 and at + 2 < len(head) and head[at + 2] in (0x01, 0x02, 0x05, 0x06, 0x0A, 0x0D, 0x10, 0x13, 0x21, 0x27, 0x28)
 
 
-def _int_id(value) -> int:
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    return _NAME_TO_ID.get(str(value), -1)
+def _records(data: np.ndarray, offsets: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """The ``dtype`` records at byte ``offsets`` of ``data`` (uint8), gathered at once."""
+    if not offsets.size:
+        return np.zeros(0, dtype)
+    return data[offsets[:, None] + np.arange(dtype.itemsize)].view(dtype).ravel()
 
 
-def read_ubx(path: str, strict: bool = False) -> UbxRead:
-    """The RAWX, SFRBX and PVT messages of a UBX (or mixed UBX/NMEA/RTCM) log."""
-    try:
-        from pyubx2 import UBX_PROTOCOL, UBXReader
-    except ImportError:  # pragma: no cover - a dependency of the package
-        raise UsageError("reading UBX needs pyubx2 (pip install pyubx2)") from None
-    errors: list[str] = []
-    rawx: list[tuple] = []
-    rawx_blocks: list[pd.DataFrame] = []
-    sfrbx: list[tuple] = []
-    pvt: list[tuple] = []
-    n = 0
+class _Tables:
+    """The columns of the messages read so far, a block's arrays at a time."""
+
+    def __init__(self) -> None:
+        self.rawx: list[dict] = []
+        self.sfrbx: list[tuple] = []
+        self.pvt: list[dict] = []
+
+    def add_rawx(self, data: np.ndarray, payload: np.ndarray, numbers: np.ndarray) -> None:
+        head = _records(data, payload, _RAWX_HEAD)
+        count = head["numMeas"].astype(np.int64)
+        first = np.repeat(payload + 16 - 32 * np.concatenate([[0], np.cumsum(count)[:-1]]), count)
+        meas = _records(data, first + 32 * np.arange(int(count.sum())), _RAWX_MEAS)
+        each = np.repeat(np.arange(head.size), count)
+        i64 = lambda a: a.astype(np.int64)  # noqa: E731
+        self.rawx.append({
+            "rcvTow": head["rcvTow"][each].astype(np.float64), "week": i64(head["week"][each]),
+            "leapS": i64(head["leapS"][each]), "prMes": meas["prMes"].astype(np.float64),
+            "cpMes": meas["cpMes"].astype(np.float64), "doMes": meas["doMes"].astype(np.float64),
+            "gnssId": i64(meas["gnssId"]), "svId": i64(meas["svId"]), "sigId": i64(meas["sigId"]),
+            "freqId": i64(meas["freqId"]), "locktime": i64(meas["locktime"]), "cno": i64(meas["cno"]),
+            "prStd": i64(meas["prStdev"] & 0x0F), "cpStd": i64(meas["cpStdev"] & 0x0F), "doStd": i64(meas["doStdev"] & 0x0F),
+            "prValid": i64(meas["trkStat"] & 1), "cpValid": i64(meas["trkStat"] >> 1 & 1), "message": numbers[each],
+        })  # fmt: skip
+
+    def add_sfrbx(self, data: np.ndarray, payload: np.ndarray, numbers: np.ndarray) -> None:
+        head = data[payload[:, None] + np.arange(5)].astype(np.int64)
+        count = head[:, 4]
+        first = np.repeat(payload + 8 - 4 * np.concatenate([[0], np.cumsum(count)[:-1]]), count)
+        at = first + 4 * np.arange(int(count.sum()))
+        words = data[at[:, None] + np.arange(4)].view("<u4").ravel().tolist()
+        edges = np.cumsum(count).tolist()
+        self.sfrbx.append((head[:, 0], head[:, 1], head[:, 2], [tuple(words[a:b]) for a, b in zip([0, *edges[:-1]], edges)], numbers))
+
+    def add_pvt(self, data: np.ndarray, payload: np.ndarray, numbers: np.ndarray) -> None:
+        r = _records(data, payload, _PVT)
+        i64 = lambda a: a.astype(np.int64)  # noqa: E731
+        self.pvt.append({
+            "year": i64(r["year"]), "month": i64(r["month"]), "day": i64(r["day"]), "hour": i64(r["hour"]),
+            "minute": i64(r["minute"]), "second": i64(r["second"]), "nano": i64(r["nano"]), "fix_type": i64(r["fix_type"]),
+            "lat_deg": r["lat"] / 1e7, "lon_deg": r["lon"] / 1e7, "height_m": r["height"] / 1000.0, "speed_mps": r["g_speed"] / 1000.0,
+            "h_acc_m": r["h_acc"] / 1000.0, "speed_acc_mps": r["s_acc"] / 1000.0, "n_sv": i64(r["n_sv"]), "message": numbers,
+        })  # fmt: skip
+
+    def frames(self) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+        rawx = pd.DataFrame({c: np.concatenate([b[c] for b in self.rawx]) for c in (*RAWX_COLUMNS, "message")}) if self.rawx \
+            else pd.DataFrame(columns=[*RAWX_COLUMNS, "message"])  # fmt: skip
+        if self.sfrbx:
+            columns = list(zip(*self.sfrbx))
+            sfrbx = pd.DataFrame({"gnssId": np.concatenate(columns[0]), "svId": np.concatenate(columns[1]),
+                                  "sigId": np.concatenate(columns[2]), "words": [w for block in columns[3] for w in block],
+                                  "message": np.concatenate(columns[4])})  # fmt: skip
+        else:
+            sfrbx = pd.DataFrame(columns=["gnssId", "svId", "sigId", "words", "message"])
+        pvt = pd.DataFrame({c: np.concatenate([b[c] for b in self.pvt]) for c in PVT_COLUMNS}) if self.pvt \
+            else pd.DataFrame(columns=list(PVT_COLUMNS))  # fmt: skip
+        return rawx, sfrbx, pvt
+
+
+def read_ubx(path: str, strict: bool = False, block_bytes: int = 1 << 20) -> UbxRead:
+    """The RAWX, SFRBX and PVT messages of a UBX (or mixed UBX/NMEA/RTCM) log, read ``block_bytes`` at a time."""
+    stats = ReadStats(source=str(path), protocol="UBX messages")
+    tables = _Tables()
+    malformed: list[str] = []
     try:
         stream = open(path, "rb")  # noqa: SIM115 - closed below
     except FileNotFoundError:
@@ -76,52 +144,37 @@ def read_ubx(path: str, strict: bool = False) -> UbxRead:
     except OSError as exc:
         raise UsageError(f"{path}: cannot open ({exc.strerror})") from None
     with stream:
-        reader = UBXReader(stream, protfilter=UBX_PROTOCOL, quitonerror=1, errorhandler=lambda e: errors.append(str(e)))
-        while True:
-            try:
-                raw, msg = reader.read()
-            except Exception as exc:  # pyubx2 raises its own kinds on a damaged frame; skip it, counted
-                errors.append(f"{type(exc).__name__}: {exc}")
-                if strict:
-                    break
-                continue
-            if raw is None:
-                break
-            if msg is None:
-                continue
-            n += 1
-            ident = msg.identity
-            if ident == "RXM-RAWX":
-                base = (msg.rcvTow, msg.week, msg.leapS)
-                for k in range(1, int(msg.numMeas) + 1):
-                    s = f"_{k:02d}"
-                    rawx.append((*base, *(getattr(msg, c + s, np.nan) for c in RAWX_COLUMNS[3:]), n))
-                if len(rawx) >= RAWX_BLOCK_ROWS:  # a block of rows as columns: a tuple of Python numbers is 4× their size
-                    rawx_blocks.append(pd.DataFrame(rawx, columns=[*RAWX_COLUMNS, "message"]))
-                    rawx = []
-            elif ident == "RXM-SFRBX":
-                words = tuple(int(getattr(msg, f"dwrd_{k:02d}", 0)) for k in range(1, int(msg.numWords) + 1))
-                sfrbx.append((_int_id(msg.gnssId), int(msg.svId), _int_id(getattr(msg, "sigId", 0)), words, n))
-            elif ident == "NAV-PVT":
-                pvt.append((msg.year, msg.month, msg.day, msg.hour, msg.min, msg.second, msg.nano, msg.fixType,
-                            msg.lat, msg.lon, msg.height / 1000.0, msg.gSpeed / 1000.0, msg.hAcc / 1000.0,
-                            msg.sAcc / 1000.0, msg.numSV, n))  # fmt: skip
-    if strict and errors:
-        raise DataError(f"{path}: UBX message {n + 1}: {errors[0]}")
-    if n == 0 and not rawx:
+        for block in iter_frame_blocks(stream, str(path), stats, strict, block_bytes):
+            data = np.frombuffer(block.buf, np.uint8)
+            kind = block.classes.astype(np.int64) * 256 + block.ids
+            length = block.ends - block.starts - 8
+            payload = block.starts + 6
+            numbers = block.first_number + np.arange(block.starts.size, dtype=np.int64)
+            for (cls, ident), name, fits, add in (
+                (RXM_RAWX, "RXM-RAWX", lambda p, n: (n >= 16) & (n == 16 + 32 * data[np.minimum(p + 11, data.size - 1)].astype(np.int64)), tables.add_rawx),
+                (RXM_SFRBX, "RXM-SFRBX", lambda p, n: (n >= 8) & (n == 8 + 4 * data[np.minimum(p + 4, data.size - 1)].astype(np.int64)), tables.add_sfrbx),
+                (NAV_PVT, "NAV-PVT", lambda p, n: n >= PVT_MIN_LENGTH, tables.add_pvt),
+            ):  # fmt: skip
+                these = np.flatnonzero(kind == cls * 256 + ident)
+                if not these.size:
+                    continue
+                good = fits(payload[these], length[these])
+                for k in these[~good].tolist():
+                    why = f"UBX message {int(numbers[k])}: {name} of {int(length[k])} bytes, not what its counts say"
+                    if strict:
+                        raise DataError(f"{path}: {why}")
+                    malformed.append(why)
+                these = these[good]
+                if these.size:
+                    add(data, payload[these], numbers[these])
+    if stats.sentences == 0:
         raise DataError(f"{path}: no UBX messages")
-    raw_table = pd.DataFrame(rawx, columns=[*RAWX_COLUMNS, "message"])
-    if rawx_blocks:
-        raw_table = pd.concat([*rawx_blocks, raw_table], ignore_index=True)
-    for name in ("gnssId", "sigId"):
-        raw_table[name] = [_int_id(v) for v in raw_table[name]]
-    sf = pd.DataFrame(sfrbx, columns=["gnssId", "svId", "sigId", "words", "message"])
-    pvt_table = pd.DataFrame(pvt, columns=["year", "month", "day", "hour", "minute", "second", "nano", "fix_type", "lat_deg",
-                                           "lon_deg", "height_m", "speed_mps", "h_acc_m", "speed_acc_mps", "n_sv", "message"])  # fmt: skip
-    dated = plausible_date(*(pvt_table[c].to_numpy(np.int64) for c in ("year", "month", "day", "hour", "minute", "second")))
+    rawx, sfrbx, pvt = tables.frames()
+    n_bad = stats.bad_checksum + stats.malformed + len(malformed)
+    dated = plausible_date(*(pvt[c].to_numpy(np.int64) for c in ("year", "month", "day", "hour", "minute", "second")))
     if not dated.all():  # a damaged date (year 60000) is no date: the row is dropped, and counted
         if strict:
-            raise DataError(f"{path}: UBX message {int(pvt_table['message'][~dated].iloc[0]) + 1}: NAV-PVT with an impossible date")
-        errors += ["NAV-PVT with an impossible date"] * int((~dated).sum())
-        pvt_table = pvt_table[dated].reset_index(drop=True)
-    return UbxRead(raw_table, sf, pvt_table, n, len(errors))
+            raise DataError(f"{path}: UBX message {int(pvt['message'][~dated].iloc[0])}: NAV-PVT with an impossible date")
+        n_bad += int((~dated).sum())
+        pvt = pvt[dated].reset_index(drop=True)
+    return UbxRead(rawx, sfrbx, pvt, stats.sentences, n_bad)

@@ -5,7 +5,8 @@ A frame is ``B5 62``, class, id, a little-endian 16-bit payload length, the payl
 payload. The frames of each block read are found by following their lengths, and the checksums of the whole block
 are computed at once from two running sums (:func:`block_checksums`); a bad checksum makes the search start again
 two bytes after its sync pair (a false sync pair inside other data, or a damaged frame), as does a length no
-message has (more than 8 KiB). Bytes between frames (NMEA, RTCM, text) are another protocol on the same port.
+message has (more than 8 KiB). A frame cut short by the end of the file is a damaged frame too (``malformed``). Bytes
+between frames (NMEA, RTCM, text) are another protocol on the same port.
 """
 
 from __future__ import annotations
@@ -73,7 +74,8 @@ def iter_frame_blocks(stream: BinaryIO, name: str, stats: ReadStats, strict: boo
     """The good UBX frames of a stream as :class:`FrameBlock` blocks, in file order: the frames of each block read are
     found by following their lengths and their checksums computed for the block at once (:func:`block_checksums`);
     a bad one is counted (``stats.bad_checksum``, ``first_problem``; an error with ``strict``) and the search starts
-    again two bytes after its sync pair. ``stats.lines`` counts frames, ``sentences`` good ones."""
+    again two bytes after its sync pair; a frame the file ends inside is counted ``stats.malformed`` (the same).
+    ``stats.lines`` counts frames, ``sentences`` good ones."""
     buf = b""
     number = 0
     eof = False
@@ -108,6 +110,15 @@ def iter_frame_blocks(stream: BinaryIO, name: str, stats: ReadStats, strict: boo
                 raise DataError(f"{name}: UBX message {number} (class 0x{buf[start + 2]:02X} id 0x{buf[start + 3]:02X}): bad checksum")
             at, keep = start + 2, None  # a false sync pair, or a damaged frame: look again from the next byte
         buf = buf[keep:]
+    if buf:  # the file ends inside a frame
+        number += 1
+        stats.lines += 1
+        stats.malformed += 1
+        if not stats.first_problem:
+            stats.first_problem = f"{name}: UBX message {number}: cut short by the end of the file"
+        if strict:
+            raise DataError(f"{name}: UBX message {number} (class 0x{buf[2]:02X}): cut short by the end of the file ({len(buf)} bytes)"
+                            if len(buf) > 2 else f"{name}: UBX message {number}: cut short by the end of the file ({len(buf)} bytes)")  # fmt: skip
 
 
 #: frames checked at once (a damaged frame makes the ones after it be walked again: at most this many)
@@ -118,7 +129,7 @@ def _walk(buf: bytes, at: int, eof: bool) -> tuple[list[tuple[int, int]], int, i
     """Up to ``_WALK_FRAMES`` frames of ``buf`` from ``at`` on, found by their sync pairs and lengths (checksums not
     checked): their (start, end) offsets, where the walk stopped, and — when it stopped at the buffer's end —
     where the bytes kept for the next block begin (a frame cut by the block's end, or a last sync byte; at the
-    end of the file nothing is kept), else None."""
+    end of the file, a frame the file ends inside, else nothing), else None."""
     spans = []
     n = len(buf)
     while len(spans) < _WALK_FRAMES:
@@ -126,14 +137,14 @@ def _walk(buf: bytes, at: int, eof: bool) -> tuple[list[tuple[int, int]], int, i
         if start < 0:
             return spans, n, (n - 1 if buf.endswith(SYNC[:1]) and not eof else n)
         if n < start + 6:
-            return spans, n, (n if eof else start)
+            return spans, n, start
         length = buf[start + 4] | (buf[start + 5] << 8)
         if length > MAX_PAYLOAD:  # no frame: a sync pair inside other data
             at = start + 2
             continue
         end = start + 8 + length
         if n < end:
-            return spans, n, (n if eof else start)
+            return spans, n, start
         spans.append((start, end))
         at = end
     return spans, at, None
