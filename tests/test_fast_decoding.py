@@ -17,33 +17,37 @@ from tollcli.readers.ubx_frames import SYNC, block_checksums, checksum, frame, i
 
 def _reference_frames(data: bytes) -> tuple[list, tuple]:
     """Frame by frame, byte by byte: the reader's rules written plainly (sync pair, length ≤ 8192, checksum; a bad
-    checksum or an impossible length makes the search start two bytes on)."""
-    out, at, number, bad = [], 0, 0, 0
+    checksum, an impossible length or a frame the data ends inside makes the search start two bytes on)."""
+    out, at, number, bad, cut = [], 0, 0, 0, 0
     while True:
         at = data.find(SYNC, at)
-        if at < 0 or len(data) < at + 6:
+        if at < 0:
             break
+        if len(data) < at + 6:
+            number, cut, at = number + 1, cut + 1, at + 2
+            continue
         length = data[at + 4] | (data[at + 5] << 8)
         end = at + 8 + length
         if length > 8192:
             at += 2
             continue
-        if len(data) < end:
-            break
         number += 1
+        if len(data) < end:
+            cut, at = cut + 1, at + 2
+            continue
         if checksum(data[at + 2 : end - 2]) != data[end - 2 : end]:
             bad += 1
             at += 2
             continue
         out.append((data[at + 2], data[at + 3], data[at + 6 : end - 2], number))
         at = end
-    return out, (number, number - bad, bad)
+    return out, (number, number - bad - cut, bad, cut)
 
 
 def _frames(data: bytes, block_bytes: int) -> tuple[list, tuple]:
     stats = ReadStats()
     got = list(iter_frames(io.BytesIO(data), "log", stats, False, block_bytes=block_bytes))
-    return got, (stats.lines, stats.sentences, stats.bad_checksum)
+    return got, (stats.lines, stats.sentences, stats.bad_checksum, stats.malformed)
 
 
 def _log(rng: random.Random, n: int) -> bytes:
@@ -75,6 +79,16 @@ def test_framing_matches_the_frame_by_frame_reference_on_damaged_logs(seed):
     assert want[1][2] > 0 and len(want[0]) > 200  # damaged, and mostly readable
     for block_bytes in (1, 7, 64, 1000, 1 << 20):
         assert _frames(data, block_bytes) == want
+
+
+def test_a_false_sync_pair_whose_length_runs_past_the_end_hides_no_frame():
+    """Text before the last frames holds a sync pair whose "length" runs past the end of the file: it is counted as a
+    frame the file ends inside, and the real frames after it are read (they were lost behind it)."""
+    good = [frame(0x01, 0x07, bytes([k]) * 92) for k in range(3)]
+    data = good[0] + b"$GPTXT,noise \xb5\x62\x01\x02\xff\x1f*00\r\n" + good[1] + good[2]
+    got, counts = _frames(data, 1 << 20)
+    assert [g[3] for g in got] == [1, 3, 4] and [g[2][0] for g in got] == [0, 1, 2] and counts == (4, 3, 0, 1)
+    assert _frames(data, 5) == (got, counts) == _reference_frames(data)
 
 
 def test_strict_names_the_first_bad_frame():

@@ -74,16 +74,18 @@ def iter_frame_blocks(stream: BinaryIO, name: str, stats: ReadStats, strict: boo
     """The good UBX frames of a stream as :class:`FrameBlock` blocks, in file order: the frames of each block read are
     found by following their lengths and their checksums computed for the block at once (:func:`block_checksums`);
     a bad one is counted (``stats.bad_checksum``, ``first_problem``; an error with ``strict``) and the search starts
-    again two bytes after its sync pair; a frame the file ends inside is counted ``stats.malformed`` (the same).
+    again two bytes after its sync pair; a frame the file ends inside is counted ``stats.malformed`` (and the search
+    goes on the same way: the sync pair may be a false one, its length running past the end over real frames).
     ``stats.lines`` counts frames, ``sentences`` good ones."""
     buf = b""
     number = 0
     eof = False
-    while not eof:
-        block = stream.read(block_bytes)
-        eof = not block
-        stats.bytes_read += len(block)
-        buf += block
+    while not eof or buf:
+        if not eof:
+            block = stream.read(block_bytes)
+            eof = not block
+            stats.bytes_read += len(block)
+            buf += block
         at, keep = 0, None
         while keep is None or at < keep:
             spans, at, keep = _walk(buf, at, eof)
@@ -110,15 +112,16 @@ def iter_frame_blocks(stream: BinaryIO, name: str, stats: ReadStats, strict: boo
                 raise DataError(f"{name}: UBX message {number} (class 0x{buf[start + 2]:02X} id 0x{buf[start + 3]:02X}): bad checksum")
             at, keep = start + 2, None  # a false sync pair, or a damaged frame: look again from the next byte
         buf = buf[keep:]
-    if buf:  # the file ends inside a frame
-        number += 1
-        stats.lines += 1
-        stats.malformed += 1
-        if not stats.first_problem:
-            stats.first_problem = f"{name}: UBX message {number}: cut short by the end of the file"
-        if strict:
-            raise DataError(f"{name}: UBX message {number} (class 0x{buf[2]:02X}): cut short by the end of the file ({len(buf)} bytes)"
-                            if len(buf) > 2 else f"{name}: UBX message {number}: cut short by the end of the file ({len(buf)} bytes)")  # fmt: skip
+        if eof and buf:  # the file ends inside a frame (or a false sync pair's length runs past it): counted, and the
+            # search goes on two bytes after its sync pair, as after a bad checksum
+            number += 1
+            stats.lines += 1
+            stats.malformed += 1
+            if not stats.first_problem:
+                stats.first_problem = f"{name}: UBX message {number}: cut short by the end of the file"
+            if strict:
+                raise DataError(f"{name}: UBX message {number}: cut short by the end of the file ({len(buf)} bytes from its sync pair)")
+            buf = buf[2:]
 
 
 #: frames checked at once (a damaged frame makes the ones after it be walked again: at most this many)
