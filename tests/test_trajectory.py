@@ -15,7 +15,7 @@ import pytest
 from conftest import run_cli, shared
 
 from tollcli.gnss.odometry import implausible_odometry, interval_odometry
-from tollcli.integrity.trajectory import at_the_ends, sigma_major_m
+from tollcli.integrity.trajectory import at_the_ends, inherited_at_the_ends, sigma_major_m
 from tollcli.integrity.trajectory_noise import correlation_inflation, position_inflation, sigma_by_cn0
 
 BERLIN = ("smartloc", "Berlin_Potsdamer_Platz_Input.txt")
@@ -99,6 +99,27 @@ def test_near_the_ends_the_older_pass_alone():
     assert (passes.x == 1.0).all()  # the sweep's own arrays are left as they were
     got_x, _ = at_the_ends(t_s, passes, 60.0)
     np.testing.assert_array_equal(got_x[:, 0], np.where(t_s < 40, 3.0, np.where(t_s > 59, 2.0, 1.0)))
+
+
+def test_the_ends_inherit_the_fault_test_from_beyond_their_windows():
+    """Each end's window (within ``end_s`` of the first or last epoch) takes the largest statistic of the ``beyond_s``
+    seconds beyond it, and lost if an epoch there is; epochs farther in, and NaN statistics, give nothing."""
+    t_s = np.arange(100, dtype=float)
+    stat = np.ones(100)
+    stat[[12, 25, 40, 80]] = [7.0, 50.0, 90.0, 30.0]  # 12: beyond the first window; 25: farther; 80: beyond the last
+    stat[15] = np.nan
+    lost = np.zeros(100, bool)
+    lost[[5, 85]] = True  # inside the first window (its own), beyond the last
+    got, got_lost = inherited_at_the_ends(t_s, stat, lost, 10.0, 10.0)
+    want = stat.copy()
+    want[:10], want[90:] = 7.0, 30.0
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(got_lost, lost | (t_s >= 90))
+    assert stat[0] == 1.0 and not lost[95]  # the inputs are left as they were
+    got, _ = inherited_at_the_ends(t_s, np.full(100, np.nan), lost, 10.0, 10.0)
+    assert np.isnan(got).all()
+    got, got_lost = inherited_at_the_ends(t_s, stat, lost, 10.0, 1000.0)  # beyond: the whole of the log past the window
+    assert (got[:10] == 90.0).all() and (got[90:] == 90.0).all() and got_lost[:10].all() and got_lost[90:].all()
 
 
 def test_berlin_snapshot_is_todays(tmp_path):

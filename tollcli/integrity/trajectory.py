@@ -4,7 +4,8 @@
   backward over the log; at each epoch the forward posterior and the backward prior (two estimates from disjoint
   measurements, but with correlated errors: reflections last) are combined by **covariance intersection**, which is
   consistent whatever their correlation: P⁻¹ = ω P_f⁻¹ + (1 − ω) P_b⁻¹, ω minimising the horizontal variance;
-  near the log's ends, with odometry, the older pass alone (:func:`at_the_ends`, :data:`END_CORRELATIONS`);
+  near the log's ends, with odometry, the older pass alone (:func:`at_the_ends`, :data:`END_CORRELATIONS`), and the
+  fault test's verdict from beyond those ends' windows (:func:`inherited_at_the_ends`);
 * ``filtered`` (what an on-board unit could do): the forward pass alone — each position from the measurements up to
   its epoch. Its bound is checked against the whole trip, as only a log processor can: HPL = max(K σ_forward,
   |x_forward − x_smoothed| + HPL_smoothed) (wherever the smoothed bound holds, the forward position is within this),
@@ -60,6 +61,15 @@ K_FUSED = 5.0
 #: passes forget at the motion model's pace and the rule only takes away (Berlin without its odometry: 45.5 → 19.9 %
 #: valid at HAL 50 m, the parts' misleading epochs 47 → 21)
 END_CORRELATIONS = 3.0
+#: and the older pass's position there is what it brought from beyond: where the fault test failed (or a pass lost the
+#: vehicle) within this many correlation times beyond an end's window, the window fails too (:func:`inherited_at_the_ends`).
+#: A pass carries a fault's error long after it: on the simulated drive with a 10 % odometer step, the backward pass was
+#: still 13 m off 40 s (6 correlation times) after it had crossed the fault, 26 m off as it left it. On the simulated
+#: drives with an odometer or a gyro fault, cut into parts of 130 and 200 s every 23 s (``benchmarks/berlin_cuts.py``;
+#: 132 461 epochs each), hazardous epochs at HAL 50 m: 738 and 28 without, 0 and 0 with 3 or 10; misleading 1 967 and
+#: 757 without, 326 and 150 with 3, 326 and 0 with 10. The Berlin drive: whole, no change; its parts lose 0.8 % of their
+#: valid epochs (with 3: none)
+INHERIT_CORRELATIONS = 10.0
 #: rounds of noise estimation from the residuals. One round would save a sweep (0.21 instead of 0.30 s on a simulated
 #: 10 000-epoch city drive) but the second is what Berlin needs: with one, its error p50 / p95 7.2 / 15.9 m against
 #: 5.8 / 11.9 m, its largest HPE/HPL 0.96 against 0.84, without odometry p95 38.8 against 32.7 m (2026-11-27; the
@@ -172,6 +182,9 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
     n_kept = (inp.mask & (weight >= 0.5)).sum(axis=1)
     test_stat, dof = passes.test_stat, passes.dof
     lost = near(inp.t_s, passes.relocked, LOST_WINDOW_S)
+    if odometry:
+        test_stat, lost = inherited_at_the_ends(inp.t_s, test_stat, lost, END_CORRELATIONS * correlation_s,
+                                                INHERIT_CORRELATIONS * correlation_s)  # fmt: skip
     return Trajectory(x[:, :3], cov, major, hpl, n_kept, inp.mask.sum(axis=1) - n_kept, test_stat, dof, lost, table, factor,
                       correlation_s, positioning, odometry)  # fmt: skip
 
@@ -188,6 +201,26 @@ def at_the_ends(t_s: np.ndarray, passes, end_s: float) -> tuple[np.ndarray, np.n
     x[backward_only], cov[backward_only] = passes.backward_x[backward_only], passes.backward_cov_en_m2[backward_only]
     x[forward_only], cov[forward_only] = passes.forward_x[forward_only], passes.forward_cov_en_m2[forward_only]
     return x, cov
+
+
+def inherited_at_the_ends(t_s: np.ndarray, test_stat: np.ndarray, lost: np.ndarray, end_s: float,
+                          beyond_s: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The fault test's statistic (E,) and the lost flags (E,) with each end's window (the epochs within ``end_s`` of the
+    log's first or last, where one pass is young and the test has no power: :func:`at_the_ends`) given the largest
+    statistic of the ``beyond_s`` seconds beyond it, and lost if any epoch there is: the older pass brings its position
+    from there. With odometry every epoch's test has the same degrees of freedom (3), so the largest statistic is the
+    most significant. NaN statistics (no test) are passed over."""
+    test_stat, lost = test_stat.copy(), lost.copy()
+    for since in (t_s - t_s[0], t_s[-1] - t_s):
+        window = since < end_s
+        beyond = (since >= end_s) & (since < end_s + beyond_s)
+        if not window.any() or not beyond.any():
+            continue
+        worst = np.fmax.reduce(test_stat[beyond])
+        if np.isfinite(worst):
+            test_stat[window] = np.fmax(test_stat[window], worst)
+        lost[window] |= bool(lost[beyond].any())
+    return test_stat, lost
 
 
 #: how long before and after an epoch where a pass lost the vehicle (:mod:`tollcli.integrity.trajectory_filter`)
