@@ -287,3 +287,46 @@ main(["integrity", {str(shared(*BERLIN))!r}, "-q", "-o", {str(tmp_path / "table.
     assert len(lines) == 1 and "No space left on device" in lines[0] and "TMPDIR" in lines[0] and str(store) in lines[0]
     assert "Traceback" not in done.stderr
     assert not list(store.iterdir()) and not (tmp_path / "table.csv").exists()
+
+
+def test_a_long_ubx_log_is_read_in_two_passes_and_placed_in_segments(tmp_path, monkeypatch):
+    """A u-blox receiver simulated on the day's real orbits, driving 300 s at 20 m/s, cut into cores of 100 epochs:
+    its navigation data read in a first pass, its RXM-RAWX a block of frames at a time in a second. Snapshot: every
+    epoch the whole log's (to 1e-6 m). Smoothed: every epoch once, in order, within its bound of the known track."""
+    from test_raw_measurements import T0_GPS_S, _nav
+    from ubx_synth import simulate_ubx
+
+    from tollcli.gnss.satellite_states import rinex_ephemeris_table
+    from tollcli.readers import ubx as ubx_reader
+
+    lat, lon = 37.3958, -122.1029
+    path = tmp_path / "drive.ubx"
+    path.write_bytes(simulate_ubx(rinex_ephemeris_table(_nav()), T0_GPS_S, 300, lat, lon, -4.5, vel_enu_mps=(-12.0, 16.0, 0.0), seed=3))
+    monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 100)
+    monkeypatch.setattr(segments, "SEGMENT_MIN_S", 100.0)
+    monkeypatch.setattr(segments, "MARGIN_EPOCHS", 40)
+    blocks = []
+    real_iter = ubx_reader.iter_rawx
+    monkeypatch.setattr(ubx_reader, "iter_rawx", lambda p, strict=False: (blocks.append(len(b)) or b for b in real_iter(p, strict, 4_000)))
+    whole_epochs, whole_meas = pseudorange_epochs(str(path), "ubx", None, "nominal", 5.0, NominalModel())
+
+    def placed(positioning):
+        with segments.placed_log(str(path), "ubx", None, "nominal", 5.0, NominalModel(), False, positioning) as log:
+            parts = list(log.chunks(70))
+        return log, pd.concat([p for p, _ in parts], ignore_index=True), parts
+
+    log, epochs, parts = placed("snapshot")
+    assert log.segments == 3 and len(blocks) > 10  # read a block of frames at a time
+    # (the WLS of a batch of epochs is the same to 1e-14° and 1e-8 m whichever epochs are in the batch)
+    pd.testing.assert_frame_equal(epochs.drop(columns=["epoch"]), whole_epochs.drop(columns=["epoch"]), check_exact=False, rtol=1e-12, atol=1e-6)
+    assert (epochs["epoch"].to_numpy() == np.arange(300)).all()
+    log, epochs, parts = placed("auto")
+    assert log.segments == 3 and (epochs["positioning"] == "smoothed").all()
+    assert (epochs["time_utc"].to_numpy() == whole_epochs["time_utc"].to_numpy()).all()
+    t = np.arange(300.0)
+    east, north = -12.0 * t, 16.0 * t
+    e, n, _ = geodetic2enu(epochs["lat_deg"].to_numpy(), epochs["lon_deg"].to_numpy(), np.zeros(300), np.full(300, lat), np.full(300, lon),
+                           np.zeros(300))  # fmt: skip
+    hpe = np.hypot(e - east, n - north)
+    hpl = np.concatenate([m.trajectory_hpl_m for _, m in parts])
+    assert (hpe < hpl).all() and np.percentile(hpe, 95) < 5.0, (hpe.max(), hpl.min())

@@ -427,3 +427,13 @@ def test_rawx_read_in_small_blocks_is_the_same_table(tmp_path):
     for table in ("rawx", "sfrbx", "pvt"):
         pd.testing.assert_frame_equal(getattr(blocks, table), getattr(whole, table))
     assert (blocks.n_messages, blocks.n_bad) == (whole.n_messages, whole.n_bad) and whole.n_bad == 1
+    # a long log's two passes: the navigation data and times without the measurements, then the measurements by block
+    from tollcli.readers.ubx import iter_rawx
+
+    pd.testing.assert_frame_equal(pd.concat(list(iter_rawx(str(part), block_bytes=997)), ignore_index=True), whole.rawx)
+    first = read_ubx(str(part), measurements=False)
+    assert first.rawx.empty and (first.n_messages, first.n_bad) == (whole.n_messages, whole.n_bad)
+    for table in ("sfrbx", "pvt", "rawx_heads"):
+        pd.testing.assert_frame_equal(getattr(first, table), getattr(whole, table))
+    counts = whole.rawx.groupby("message").size()
+    assert (first.rawx_heads.set_index("message")["numMeas"].loc[counts.index] == counts).all()

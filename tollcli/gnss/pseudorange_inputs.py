@@ -56,6 +56,30 @@ def pseudorange_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_m
     raise UsageError(f"{log}: {kind} is not a pseudorange format")
 
 
+def ubx_orbits(log: str, ubx, ephemerides: pd.DataFrame | None) -> pd.DataFrame:
+    """The orbits a u-blox log's pseudoranges are solved with: ``ephemerides`` (``--nav``), else those of its own
+    RXM-SFRBX. Raises DataError for a log without RXM-RAWX measurements, NoOrbitsError for one without either orbits."""
+    from tollcli.gnss.ubx_measurements import sfrbx_ephemerides
+
+    heads = ubx.rawx_heads
+    if ubx.rawx.empty and (heads is None or not (heads["numMeas"].to_numpy() > 0).any()):
+        raise DataError(f"{log}: no RXM-RAWX measurements in the UBX log (the receiver was not set to output raw data)")
+    if ephemerides is None:
+        ephemerides = sfrbx_ephemerides(ubx)
+        if ephemerides.empty:
+            raise NoOrbitsError(f"{log}: no complete GPS, Galileo, BeiDou or GLONASS ephemeris in the log's RXM-SFRBX navigation data: give --nav NAVFILE")
+    return ephemerides
+
+
+def navigation_of(nav: str | list[str] | None):
+    """The ephemerides and ionosphere coefficients of ``--nav`` (one file or several), or (None, None)."""
+    if nav is None:
+        return None, None
+    from tollcli.gnss.satellite_states import load_navigation
+
+    return load_navigation(nav)
+
+
 def _rinex_navigation(path: str) -> bool:
     """Whether a RINEX file's first line says it holds navigation data (type N, G, C, … in column 21), not observations."""
     try:
@@ -74,11 +98,7 @@ def _raw_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: s
         with_device_gnss_satellites,
     )
 
-    ephemerides, iono = None, None
-    if nav is not None:
-        from tollcli.gnss.satellite_states import load_navigation
-
-        ephemerides, iono = load_navigation(nav)  # one file or several
+    ephemerides, iono = navigation_of(nav)  # one file or several
     if kind == "gnsslogger":
         from tollcli.gnss.android_raw import raw_pseudoranges
         from tollcli.readers.gnsslogger import read_gnsslogger
@@ -97,16 +117,11 @@ def _raw_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: s
         m = raw_pseudoranges(device)
         m = with_device_gnss_satellites(m, device) if ephemerides is None else with_broadcast_satellites(m, ephemerides)
     else:
-        from tollcli.gnss.ubx_measurements import rawx_measurements, sfrbx_ephemerides
+        from tollcli.gnss.ubx_measurements import rawx_measurements
         from tollcli.readers.ubx import read_ubx
 
         ubx = read_ubx(log, strict)
-        if ubx.rawx.empty:
-            raise DataError(f"{log}: no RXM-RAWX measurements in the UBX log (the receiver was not set to output raw data)")
-        if ephemerides is None:
-            ephemerides = sfrbx_ephemerides(ubx)
-            if ephemerides.empty:
-                raise NoOrbitsError(f"{log}: no complete GPS, Galileo, BeiDou or GLONASS ephemeris in the log's RXM-SFRBX navigation data: give --nav NAVFILE")
+        ephemerides = ubx_orbits(log, ubx, ephemerides)
         m = with_broadcast_satellites(rawx_measurements(ubx), ephemerides)
     try:
         epochs, meas = raw_epochs(m, sigma_model, sigma_m, nominal, iono_coeffs=iono)

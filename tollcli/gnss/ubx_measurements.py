@@ -95,7 +95,7 @@ def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.Da
     glo = sf[(sf["gnssId"] == 6) & (sf["words"].map(len) >= 4)].reset_index(drop=True)
     glonass = glonass_strings.ephemerides(glo, receive_times_gps_s(ubx, glo["message"].to_numpy()), leap_seconds_at_gps)
     if gps_week_hint is None:
-        weeks = ubx.rawx["week"].to_numpy(float) if len(ubx.rawx) else np.array([])
+        weeks = ubx.rawx["week"].to_numpy(float) if len(ubx.rawx) else _measured_heads(ubx)["week"].to_numpy(float)
         if weeks.size:
             gps_week_hint = float(np.median(weeks))
         elif len(galileo):
@@ -109,6 +109,14 @@ def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.Da
     return pd.concat(tables, ignore_index=True)
 
 
+def _measured_heads(ubx: UbxRead) -> pd.DataFrame:
+    """The RXM-RAWX messages with a measurement (week, rcvTow, message): the log's read without its measurements."""
+    heads = ubx.rawx_heads
+    if heads is None:
+        return pd.DataFrame({"week": np.zeros(0), "rcvTow": np.zeros(0), "message": np.zeros(0, np.int64)})
+    return heads[heads["numMeas"].to_numpy() > 0]
+
+
 def receive_times_gps_s(ubx: UbxRead, message: np.ndarray) -> np.ndarray:
     """The receive time (GPS seconds) of messages at positions ``message`` in the log: that of the latest RAWX
     (its week and receive time of week), else NAV-PVT (its UTC date and time) at or before it, else the first one
@@ -116,8 +124,8 @@ def receive_times_gps_s(ubx: UbxRead, message: np.ndarray) -> np.ndarray:
     from tollcli.readers.gps_time import gps_seconds, leap_seconds_at_gps
 
     at, when = [], []
-    if len(ubx.rawx):
-        first = ubx.rawx.drop_duplicates("message")
+    first = ubx.rawx.drop_duplicates("message") if len(ubx.rawx) else _measured_heads(ubx)
+    if len(first):
         at.append(first["message"].to_numpy(np.int64))
         when.append(first["week"].to_numpy(float) * WEEK_S + first["rcvTow"].to_numpy(float))
     if len(ubx.pvt):

@@ -1,11 +1,12 @@
 """A pseudorange log solved and placed segment by segment: memory flat in the log's length.
 
-libRSF logs and GSDC derived CSVs (:data:`SEGMENTED_KINDS`) are read this way; the other pseudorange formats (RINEX,
-GnssLogger, GSDC ``device_gnss.csv``, u-blox RAWX) are read and solved whole
+libRSF logs, GSDC derived CSVs and u-blox RAWX logs (:data:`SEGMENTED_KINDS`) are read this way; the other
+pseudorange formats (RINEX, GnssLogger, GSDC ``device_gnss.csv``) are read and solved whole
 (:func:`~tollcli.gnss.pseudorange_inputs.pseudorange_epochs`).
 
 The log is read in blocks of rows (:func:`~tollcli.readers.librsf.iter_librsf`,
-:func:`~tollcli.readers.gsdc.iter_gsdc_derived`). Its epochs are cut into segments of
+:func:`~tollcli.readers.gsdc.iter_gsdc_derived`, :func:`~tollcli.readers.ubx.iter_rawx` after a first pass over the
+u-blox log for its navigation data, :func:`_ubx`). Its epochs are cut into segments of
 :data:`SEGMENT_EPOCHS` (the segment's *core*); each segment is solved (snapshot WLS) and placed by the trajectory
 estimator (:func:`~tollcli.integrity.trajectory.with_trajectory`) together with :data:`MARGIN_EPOCHS` epochs before
 and after its core — the passes converge there, the backward one from the future — and only its core is kept. The
@@ -38,7 +39,7 @@ from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.sigma_models import NominalModel
 
 #: pseudorange formats read and placed segment by segment
-SEGMENTED_KINDS = ("librsf", "gsdc-derived")
+SEGMENTED_KINDS = ("librsf", "gsdc-derived", "ubx")
 #: the epochs of a segment's core, at least …
 SEGMENT_EPOCHS = 8_192
 #: … and at least this long (s): the estimator measures the noise from a segment's own residuals, and on the Berlin
@@ -110,7 +111,7 @@ def placed_log(log: str, kind: str, nav, sigma_model: str, sigma_m: float, nomin
     :func:`~tollcli.integrity.trajectory.with_trajectory` takes it): segment by segment where the format allows
     (see the module), else whole. Raises what :func:`~tollcli.gnss.pseudorange_inputs.pseudorange_epochs` raises."""
     if kind in SEGMENTED_KINDS:
-        segmented = _segments(_FORMATS[kind](), log, sigma_model, sigma_m, nominal, strict, positioning)
+        segmented = _segments(_FORMATS[kind](nav), log, sigma_model, sigma_m, nominal, strict, positioning)
         if segmented is not None:
             return segmented
     from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
@@ -181,7 +182,33 @@ def _gsdc_derived() -> _Format:
                    lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no usable rows")  # fmt: skip
 
 
-_FORMATS = {"librsf": _librsf, "gsdc-derived": _gsdc_derived}
+def _ubx(nav) -> _Format:
+    """A u-blox log in two passes: the first reads its navigation data and message times (not its measurements) for
+    the orbits, the second its RXM-RAWX a block of frames at a time."""
+    from tollcli.gnss.pseudorange_inputs import navigation_of, ubx_orbits
+    from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites
+    from tollcli.gnss.ubx_measurements import rawx_measurements, with_receiver_solution
+    from tollcli.readers.ubx import UbxRead, iter_rawx, read_ubx
+
+    known: dict = {}
+
+    def blocks(path, strict):
+        ephemerides, known["iono"] = navigation_of(nav)
+        first = read_ubx(path, strict, measurements=False)
+        known["orbits"], known["pvt"] = ubx_orbits(path, first, ephemerides), first.pvt
+        for rawx in iter_rawx(path, strict):
+            part = UbxRead(rawx, first.sfrbx.iloc[:0], first.pvt.iloc[:0], 0, 0)
+            yield with_broadcast_satellites(rawx_measurements(part), known["orbits"]), None, 0
+
+    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
+        epochs, meas = raw_epochs(rows, sigma_model, sigma_m, nominal, iono_coeffs=known["iono"])
+        return with_receiver_solution(epochs, known["pvt"]), meas
+
+    return _Format(blocks, lambda rows: rows["epoch_key"].to_numpy(np.int64), solve,
+                   lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no RXM-RAWX measurements in the UBX log")  # fmt: skip
+
+
+_FORMATS = {"librsf": lambda _nav: _librsf(), "gsdc-derived": lambda _nav: _gsdc_derived(), "ubx": _ubx}
 
 
 def _segments(fmt: _Format, log: str, sigma_model: str, sigma_m: float, nominal: NominalModel, strict: bool,
@@ -208,9 +235,9 @@ def _segments(fmt: _Format, log: str, sigma_model: str, sigma_m: float, nominal:
         placer.close()
         if isinstance(exc, _Unordered):
             return None
-        if isinstance(exc, DataError):
-            raise DataError(exc.args[0] if exc.args[0].startswith(log) else f"{log}: {exc}") from None
-        raise
+        if isinstance(exc, DataError) and not exc.args[0].startswith(log):
+            raise DataError(f"{log}: {exc}") from None
+        raise  # (a DataError naming the log as it is: its kind, NoOrbitsError, is what the caller acts on)
     return placer.finish(skipped)
 
 

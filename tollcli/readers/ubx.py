@@ -47,6 +47,7 @@ _PVT = np.dtype({"names": ["year", "month", "day", "hour", "minute", "second", "
                  "formats": ["<u2", "u1", "u1", "u1", "u1", "u1", "<i4", "u1", "u1", "<i4", "<i4", "<i4", "<u4", "<i4", "<u4"],
                  "offsets": [4, 6, 7, 8, 9, 10, 16, 20, 23, 24, 28, 32, 40, 60, 68], "itemsize": 84})  # fmt: skip
 PVT_MIN_LENGTH = 84
+HEAD_COLUMNS = ("rcvTow", "week", "leapS", "numMeas", "message")
 PVT_COLUMNS = ("year", "month", "day", "hour", "minute", "second", "nano", "fix_type", "lat_deg", "lon_deg", "height_m",
                "speed_mps", "h_acc_m", "speed_acc_mps", "n_sv", "message")  # fmt: skip
 
@@ -58,6 +59,7 @@ class UbxRead:
     pvt: pd.DataFrame  # one row per NAV-PVT
     n_messages: int  # good UBX frames
     n_bad: int  # UBX frames that failed their checksum, or whose message's length is not what its counts say
+    rawx_heads: pd.DataFrame | None = None  # one row per RXM-RAWX: rcvTow, week, leapS, numMeas, message
 
 
 def is_ubx(head: bytes) -> bool:
@@ -76,14 +78,20 @@ def _records(data: np.ndarray, offsets: np.ndarray, dtype: np.dtype) -> np.ndarr
 class _Tables:
     """The columns of the messages read so far, a block's arrays at a time."""
 
-    def __init__(self) -> None:
+    def __init__(self, measurements: bool = True) -> None:
+        self.measurements = measurements
         self.rawx: list[dict] = []
+        self.heads: list[dict] = []
         self.sfrbx: list[tuple] = []
         self.pvt: list[dict] = []
 
     def add_rawx(self, data: np.ndarray, payload: np.ndarray, numbers: np.ndarray) -> None:
         head = _records(data, payload, _RAWX_HEAD)
         count = head["numMeas"].astype(np.int64)
+        self.heads.append({"rcvTow": head["rcvTow"].astype(np.float64), "week": head["week"].astype(np.int64),
+                           "leapS": head["leapS"].astype(np.int64), "numMeas": count, "message": numbers})  # fmt: skip
+        if not self.measurements:
+            return
         first = np.repeat(payload + 16 - 32 * np.concatenate([[0], np.cumsum(count)[:-1]]), count)
         meas = _records(data, first + 32 * np.arange(int(count.sum())), _RAWX_MEAS)
         each = np.repeat(np.arange(head.size), count)
@@ -117,9 +125,11 @@ class _Tables:
             "h_acc_m": r["h_acc"] / 1000.0, "speed_acc_mps": r["s_acc"] / 1000.0, "n_sv": i64(r["n_sv"]), "message": numbers,
         })  # fmt: skip
 
-    def frames(self) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    def frames(self) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, pd.DataFrame]:
         rawx = pd.DataFrame({c: np.concatenate([b[c] for b in self.rawx]) for c in (*RAWX_COLUMNS, "message")}) if self.rawx \
             else pd.DataFrame(columns=[*RAWX_COLUMNS, "message"])  # fmt: skip
+        heads = pd.DataFrame({c: np.concatenate([b[c] for b in self.heads]) for c in HEAD_COLUMNS}) if self.heads \
+            else pd.DataFrame({c: np.zeros(0, np.float64 if c == "rcvTow" else np.int64) for c in HEAD_COLUMNS})  # fmt: skip
         if self.sfrbx:
             columns = list(zip(*self.sfrbx))
             sfrbx = pd.DataFrame({"gnssId": np.concatenate(columns[0]), "svId": np.concatenate(columns[1]),
@@ -129,52 +139,109 @@ class _Tables:
             sfrbx = pd.DataFrame(columns=["gnssId", "svId", "sigId", "words", "message"])
         pvt = pd.DataFrame({c: np.concatenate([b[c] for b in self.pvt]) for c in PVT_COLUMNS}) if self.pvt \
             else pd.DataFrame(columns=list(PVT_COLUMNS))  # fmt: skip
-        return rawx, sfrbx, pvt
+        return rawx, sfrbx, pvt, heads
 
 
-def read_ubx(path: str, strict: bool = False, block_bytes: int = 1 << 20) -> UbxRead:
-    """The RAWX, SFRBX and PVT messages of a UBX (or mixed UBX/NMEA/RTCM) log, read ``block_bytes`` at a time."""
-    stats = ReadStats(source=str(path), protocol="UBX messages")
-    tables = _Tables()
-    malformed: list[str] = []
-    try:
-        stream = open(path, "rb")  # noqa: SIM115 - closed below
-    except FileNotFoundError:
-        raise UsageError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot open ({exc.strerror})") from None
-    with stream:
-        for block in iter_frame_blocks(stream, str(path), stats, strict, block_bytes):
-            data = np.frombuffer(block.buf, np.uint8)
-            kind = block.classes.astype(np.int64) * 256 + block.ids
-            length = block.ends - block.starts - 8
-            payload = block.starts + 6
-            numbers = block.first_number + np.arange(block.starts.size, dtype=np.int64)
-            for (cls, ident), name, fits, add in (
-                (RXM_RAWX, "RXM-RAWX", lambda p, n: (n >= 16) & (n == 16 + 32 * data[np.minimum(p + 11, data.size - 1)].astype(np.int64)), tables.add_rawx),
-                (RXM_SFRBX, "RXM-SFRBX", lambda p, n: (n >= 8) & (n == 8 + 4 * data[np.minimum(p + 4, data.size - 1)].astype(np.int64)), tables.add_sfrbx),
-                (NAV_PVT, "NAV-PVT", lambda p, n: n >= PVT_MIN_LENGTH, tables.add_pvt),
-            ):  # fmt: skip
-                these = np.flatnonzero(kind == cls * 256 + ident)
-                if not these.size:
-                    continue
-                good = fits(payload[these], length[these])
-                for k in these[~good].tolist():
-                    why = f"UBX message {int(numbers[k])}: {name} of {int(length[k])} bytes, not what its counts say"
-                    if strict:
-                        raise DataError(f"{path}: {why}")
-                    malformed.append(why)
-                these = these[good]
-                if these.size:
-                    add(data, payload[these], numbers[these])
-    if stats.sentences == 0:
-        raise DataError(f"{path}: no UBX messages")
-    rawx, sfrbx, pvt = tables.frames()
-    n_bad = stats.bad_checksum + stats.malformed + len(malformed)
+def read_ubx(path: str, strict: bool = False, block_bytes: int = 1 << 20, measurements: bool = True) -> UbxRead:
+    """The RAWX, SFRBX and PVT messages of a UBX (or mixed UBX/NMEA/RTCM) log, read ``block_bytes`` at a time.
+    ``measurements`` False: the RAWX measurements are not kept (``rawx`` empty; ``rawx_heads`` still one row per
+    message): what a long log's first pass needs (its navigation data and times), the measurements read by
+    :func:`iter_rawx` after."""
+    tables = _Tables(measurements)
+    stats, malformed = _read_frames(path, strict, block_bytes, tables)
+    rawx, sfrbx, pvt, heads = tables.frames()
+    n_bad = stats.bad_checksum + stats.malformed + malformed
     dated = plausible_date(*(pvt[c].to_numpy(np.int64) for c in ("year", "month", "day", "hour", "minute", "second")))
     if not dated.all():  # a damaged date (year 60000) is no date: the row is dropped, and counted
         if strict:
             raise DataError(f"{path}: UBX message {int(pvt['message'][~dated].iloc[0])}: NAV-PVT with an impossible date")
         n_bad += int((~dated).sum())
         pvt = pvt[dated].reset_index(drop=True)
-    return UbxRead(rawx, sfrbx, pvt, stats.sentences, n_bad)
+    return UbxRead(rawx, sfrbx, pvt, stats.sentences, n_bad, heads)
+
+
+def iter_rawx(path: str, strict: bool = False, block_bytes: int = 1 << 20):
+    """The RXM-RAWX measurements of a UBX log (the table :func:`read_ubx` makes), a block of frames at a time: the
+    rows of each block as a table (blocks without one are passed over), in file order; joined, ``read_ubx``'s."""
+    tables = _Tables()
+    for _ in _FramesInto(path, strict, block_bytes, tables, (RXM_RAWX,)):
+        if tables.rawx:
+            yield pd.DataFrame({c: np.concatenate([b[c] for b in tables.rawx]) for c in (*RAWX_COLUMNS, "message")})
+        tables.rawx, tables.heads = [], []  # (a block's rows once: the memory of one block)
+
+
+def _read_frames(path: str, strict: bool, block_bytes: int, tables: _Tables) -> tuple[ReadStats, int]:
+    """Every frame of ``path`` of the messages read added to ``tables``: the framing statistics and the count of
+    malformed messages."""
+    frames = _FramesInto(path, strict, block_bytes, tables, None)
+    for _ in frames:
+        pass
+    return frames.result
+
+
+class _FramesInto:
+    """The frames of a log added to tables block by block (an iterator yielding after each block); ``result``: the
+    framing statistics and the count of malformed messages, once it is exhausted."""
+
+    def __init__(self, path: str, strict: bool, block_bytes: int, tables: _Tables, only: tuple | None) -> None:
+        self.args = (path, strict, block_bytes, tables, only)
+        self.result: tuple[ReadStats, int] | None = None
+        self._it = self._run()
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        return next(self._it)
+
+    def _run(self):
+        path, strict, block_bytes, tables, only = self.args
+        stats = ReadStats(source=str(path), protocol="UBX messages")
+        malformed = 0
+        try:
+            stream = open(path, "rb")  # noqa: SIM115 - closed below
+        except FileNotFoundError:
+            raise UsageError(f"{path}: no such file") from None
+        except OSError as exc:
+            raise UsageError(f"{path}: cannot open ({exc.strerror})") from None
+        messages = [m for m in _MESSAGES if only is None or m[0] in only]
+        with stream:
+            for block in iter_frame_blocks(stream, str(path), stats, strict, block_bytes):
+                data = np.frombuffer(block.buf, np.uint8)
+                kind = block.classes.astype(np.int64) * 256 + block.ids
+                length = block.ends - block.starts - 8
+                payload = block.starts + 6
+                numbers = block.first_number + np.arange(block.starts.size, dtype=np.int64)
+                for (cls, ident), name, fits, add in messages:
+                    these = np.flatnonzero(kind == cls * 256 + ident)
+                    if not these.size:
+                        continue
+                    good = fits(data, payload[these], length[these])
+                    for k in these[~good].tolist():
+                        if strict:
+                            raise DataError(f"{path}: UBX message {int(numbers[k])}: {name} of {int(length[k])} bytes, not what its counts say")
+                        malformed += 1
+                    these = these[good]
+                    if these.size:
+                        add(tables, data, payload[these], numbers[these])
+                yield
+        if stats.sentences == 0:
+            raise DataError(f"{path}: no UBX messages")
+        self.result = (stats, malformed)
+
+
+def _count_fits(at: int, head: int, each: int):
+    """A message whose length must be ``head`` + ``each`` × the count at payload byte ``at``."""
+    def fits(data: np.ndarray, payload: np.ndarray, length: np.ndarray) -> np.ndarray:
+        count = data[np.minimum(payload + at, data.size - 1)].astype(np.int64)
+        return (length >= head) & (length == head + each * count)
+
+    return fits
+
+
+#: the messages read: (class, id), name, whether a frame's length fits, and how its frames are added to the tables
+_MESSAGES = (
+    (RXM_RAWX, "RXM-RAWX", _count_fits(11, 16, 32), _Tables.add_rawx),
+    (RXM_SFRBX, "RXM-SFRBX", _count_fits(4, 8, 4), _Tables.add_sfrbx),
+    (NAV_PVT, "NAV-PVT", lambda data, payload, length: length >= PVT_MIN_LENGTH, _Tables.add_pvt),
+)
