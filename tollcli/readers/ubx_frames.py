@@ -104,24 +104,27 @@ def iter_frame_blocks(stream: BinaryIO, name: str, stats: ReadStats, strict: boo
                 continue
             start = spans[first_bad][0]
             number += 1
-            stats.lines += 1
-            stats.bad_checksum += 1
-            if not stats.first_problem:
-                stats.first_problem = f"{name}: UBX message {number}: bad checksum"
-            if strict:
-                raise DataError(f"{name}: UBX message {number} (class 0x{buf[start + 2]:02X} id 0x{buf[start + 3]:02X}): bad checksum")
+            _damaged(stats, "bad_checksum", f"{name}: UBX message {number}", "bad checksum",
+                     f"(class 0x{buf[start + 2]:02X} id 0x{buf[start + 3]:02X}): bad checksum", strict)  # fmt: skip
             at, keep = start + 2, None  # a false sync pair, or a damaged frame: look again from the next byte
         buf = buf[keep:]
         if eof and buf:  # the file ends inside a frame (or a false sync pair's length runs past it): counted, and the
             # search goes on two bytes after its sync pair, as after a bad checksum
             number += 1
-            stats.lines += 1
-            stats.malformed += 1
-            if not stats.first_problem:
-                stats.first_problem = f"{name}: UBX message {number}: cut short by the end of the file"
-            if strict:
-                raise DataError(f"{name}: UBX message {number}: cut short by the end of the file ({len(buf)} bytes from its sync pair)")
+            _damaged(stats, "malformed", f"{name}: UBX message {number}", "cut short by the end of the file",
+                     f": cut short by the end of the file ({len(buf)} bytes from its sync pair)", strict)  # fmt: skip
             buf = buf[2:]
+
+
+def _damaged(stats: ReadStats, counter: str, where: str, what: str, strict_detail: str, strict: bool) -> None:
+    """A damaged frame at ``where`` (file and message): counted in ``stats`` (``counter``; the first problem, ``what``),
+    or with ``strict`` an error (``where`` + ``strict_detail``)."""
+    stats.lines += 1
+    setattr(stats, counter, getattr(stats, counter) + 1)
+    if not stats.first_problem:
+        stats.first_problem = f"{where}: {what}"
+    if strict:
+        raise DataError(where + (" " if strict_detail.startswith("(") else "") + strict_detail)
 
 
 #: frames checked at once (a damaged frame makes the ones after it be walked again: at most this many)
