@@ -122,3 +122,21 @@ def test_a_rawx_whose_length_is_not_its_count_is_skipped_counted_or_an_error_in_
     log.write_bytes(_rawx(2) + _rawx(2)[:-10])
     with pytest.raises(DataError, match=r"raw\.ubx: UBX message 2: cut short by the end of the file"):
         read_ubx(str(log), strict=True)
+
+
+def test_a_damaged_rawx_log_says_how_many_frames_it_skipped(tmp_path):
+    """The first 600 kB of the real u-blox walk (its last frame cut short; its orbits complete) through ``integrity``: the
+    damaged frame is skipped and counted in the summary; ``--strict`` makes it a one-line error naming the file and the
+    message."""
+    import json
+
+    from conftest import run_cli
+
+    part = tmp_path / "part.ubx"
+    part.write_bytes(shared("rtklibexplorer", "gnss_1730.ubx").read_bytes()[:600_000])
+    done = run_cli("integrity", str(part), "-o", str(tmp_path / "i.csv"), "--json", "-q")
+    assert done.returncode == 0, done.stderr.decode()
+    assert json.loads(done.stdout)["skipped_lines"] == 1
+    strict = run_cli("integrity", str(part), "-o", str(tmp_path / "s.csv"), "--strict", "-q")
+    err = strict.stderr.decode()
+    assert strict.returncode == 1 and err.count("\n") == 1 and f"{part}: UBX message" in err and "cut short" in err, err

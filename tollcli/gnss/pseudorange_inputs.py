@@ -121,14 +121,14 @@ def _raw_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_model: s
         from tollcli.readers.ubx import read_ubx
 
         ubx = read_ubx(log, strict)
+        skipped = ubx.n_bad  # damaged frames: a bad checksum, cut short, a length its counts do not give, a date that is none
         ephemerides = ubx_orbits(log, ubx, ephemerides)
         m = with_broadcast_satellites(rawx_measurements(ubx), ephemerides)
     try:
         epochs, meas = raw_epochs(m, sigma_model, sigma_m, nominal, iono_coeffs=iono)
     except DataError as exc:
         raise DataError(f"{log}: {exc}") from None
-    if kind != "ubx":
-        epochs.attrs["skipped_lines"] = int(skipped)
+    epochs.attrs["skipped_lines"] = int(skipped)
     if kind == "ubx":
         from tollcli.gnss.ubx_measurements import with_receiver_solution
 

@@ -6,7 +6,7 @@ pseudorange formats (RINEX, GnssLogger, GSDC ``device_gnss.csv``) are read and s
 
 The log is read in blocks of rows (:func:`~tollcli.readers.librsf.iter_librsf`,
 :func:`~tollcli.readers.gsdc.iter_gsdc_derived`, :func:`~tollcli.readers.ubx.iter_rawx` after a first pass over the
-u-blox log for its navigation data, :func:`_ubx`). Its epochs are cut into segments of
+u-blox log for its navigation data: :mod:`tollcli.job.segment_formats`). Its epochs are cut into segments of
 :data:`SEGMENT_EPOCHS` (the segment's *core*); each segment is solved (snapshot WLS) and placed by the trajectory
 estimator (:func:`~tollcli.integrity.trajectory.with_trajectory`) together with :data:`MARGIN_EPOCHS` epochs before
 and after its core — the passes converge there, the backward one from the future — and only its core is kept. The
@@ -37,6 +37,7 @@ import pandas as pd
 
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.sigma_models import NominalModel
+from tollcli.job.segment_formats import FORMATS, SegmentFormat
 
 #: pseudorange formats read and placed segment by segment
 SEGMENTED_KINDS = ("librsf", "gsdc-derived", "ubx")
@@ -111,7 +112,7 @@ def placed_log(log: str, kind: str, nav, sigma_model: str, sigma_m: float, nomin
     :func:`~tollcli.integrity.trajectory.with_trajectory` takes it): segment by segment where the format allows
     (see the module), else whole. Raises what :func:`~tollcli.gnss.pseudorange_inputs.pseudorange_epochs` raises."""
     if kind in SEGMENTED_KINDS:
-        segmented = _segments(_FORMATS[kind](nav), log, sigma_model, sigma_m, nominal, strict, positioning)
+        segmented = _segments(FORMATS[kind](nav), log, sigma_model, sigma_m, nominal, strict, positioning)
         if segmented is not None:
             return segmented
     from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
@@ -133,85 +134,9 @@ class _Unordered(Exception):
     """The log's lines are not in time order: it cannot be cut into segments."""
 
 
-@dataclass(frozen=True)
-class _Format:
-    """How a segmented format is read and solved: ``blocks(path, strict)`` its rows in file order, a block at a time
-    (measurement rows, odometry rows or None, malformed lines); ``keys(rows)`` each row's epoch key (ms, int64);
-    ``solve(rows, odometry, sigma_model, sigma_m, nominal)`` a segment's (epochs, measurements), and ``epoch_keys``
-    those epochs' keys; ``no_rows``: the error of a log without a measurement."""
-
-    blocks: Callable[[str, bool], Iterator[tuple[pd.DataFrame, pd.DataFrame | None, int]]]
-    keys: Callable[[pd.DataFrame], np.ndarray]
-    solve: Callable[..., tuple[pd.DataFrame, Measurements]]
-    epoch_keys: Callable[[pd.DataFrame], np.ndarray]
-    no_rows: str
 
 
-def _librsf() -> _Format:
-    from tollcli.gnss.librsf_positions import librsf_epochs
-    from tollcli.readers.librsf import LIBRSF_T0, ODOMETRY_COLUMNS, LibrsfLog, iter_librsf
-
-    def blocks(path, strict):
-        for part in iter_librsf(path, strict):
-            yield part.pseudoranges, part.odometry, part.malformed
-
-    def solve(rows, odometry, sigma_model, sigma_m, nominal):
-        if odometry is None:
-            odometry = pd.DataFrame(np.zeros((0, len(ODOMETRY_COLUMNS))), columns=list(ODOMETRY_COLUMNS))
-        return librsf_epochs(LibrsfLog(rows, odometry, pd.DataFrame(), 0), sigma_model, sigma_m, nominal)
-
-    def epoch_keys(epochs):  # (librsf_epochs places epoch k ms after LIBRSF_T0 at time_utc: the key back, exactly)
-        return ((epochs["time_utc"] - LIBRSF_T0) // pd.Timedelta(milliseconds=1)).to_numpy(np.int64)
-
-    return _Format(blocks, lambda rows: np.round(rows["t_s"].to_numpy(float) * 1e3).astype(np.int64), solve, epoch_keys,
-                   "no pseudorange3 line: a libRSF ground-truth file is a --truth, not a log")  # fmt: skip
-
-
-def _gsdc_derived() -> _Format:
-    from tollcli.gnss.gsdc_positions import gsdc_epochs
-    from tollcli.readers.gsdc import iter_gsdc_derived
-
-    def blocks(path, strict):
-        for table in iter_gsdc_derived(path, strict):
-            yield table, None, int(table.attrs["skipped_lines"])
-
-    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
-        return gsdc_epochs(rows, sigma_model, sigma_m, nominal)
-
-    return _Format(blocks, lambda rows: rows["millisSinceGpsEpoch"].to_numpy(np.int64), solve,
-                   lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no usable rows")  # fmt: skip
-
-
-def _ubx(nav) -> _Format:
-    """A u-blox log in two passes: the first reads its navigation data and message times (not its measurements) for
-    the orbits, the second its RXM-RAWX a block of frames at a time."""
-    from tollcli.gnss.pseudorange_inputs import navigation_of, ubx_orbits
-    from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites
-    from tollcli.gnss.ubx_measurements import rawx_measurements, with_receiver_solution
-    from tollcli.readers.ubx import UbxRead, iter_rawx, read_ubx
-
-    known: dict = {}
-
-    def blocks(path, strict):
-        ephemerides, known["iono"] = navigation_of(nav)
-        first = read_ubx(path, strict, measurements=False)
-        known["orbits"], known["pvt"] = ubx_orbits(path, first, ephemerides), first.pvt
-        for rawx in iter_rawx(path, strict):
-            part = UbxRead(rawx, first.sfrbx.iloc[:0], first.pvt.iloc[:0], 0, 0)
-            yield with_broadcast_satellites(rawx_measurements(part), known["orbits"]), None, 0
-
-    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
-        epochs, meas = raw_epochs(rows, sigma_model, sigma_m, nominal, iono_coeffs=known["iono"])
-        return with_receiver_solution(epochs, known["pvt"]), meas
-
-    return _Format(blocks, lambda rows: rows["epoch_key"].to_numpy(np.int64), solve,
-                   lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no RXM-RAWX measurements in the UBX log")  # fmt: skip
-
-
-_FORMATS = {"librsf": lambda _nav: _librsf(), "gsdc-derived": lambda _nav: _gsdc_derived(), "ubx": _ubx}
-
-
-def _segments(fmt: _Format, log: str, sigma_model: str, sigma_m: float, nominal: NominalModel, strict: bool,
+def _segments(fmt: SegmentFormat, log: str, sigma_model: str, sigma_m: float, nominal: NominalModel, strict: bool,
               positioning: str) -> PlacedLog | None:  # fmt: skip
     """A log placed segment by segment; None where its lines are not in time order (read it whole)."""
     from tollcli.errors import DataError
@@ -309,7 +234,7 @@ class _Cutter:
 class _Placer:
     """Each segment solved, placed and its core stored; what the segments said, gathered."""
 
-    def __init__(self, fmt: _Format, positioning: str, sigma_model: str, sigma_m: float, nominal: NominalModel):
+    def __init__(self, fmt: SegmentFormat, positioning: str, sigma_model: str, sigma_m: float, nominal: NominalModel):
         self.fmt, self.positioning, self.sigma_model, self.sigma_m, self.nominal = fmt, positioning, sigma_model, sigma_m, nominal
         self.folder: str | None = None
         self.stored: list[str] = []

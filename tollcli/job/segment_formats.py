@@ -1,0 +1,93 @@
+"""How each pseudorange format that is placed segment by segment is read and solved
+(:mod:`tollcli.job.pseudorange_segments`): its rows a block at a time, each row's epoch key, a segment's rows solved
+into epochs and measurements, and those epochs' keys."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from tollcli.gnss.measurements import Measurements
+
+
+@dataclass(frozen=True)
+class SegmentFormat:
+    """How a segmented format is read and solved: ``blocks(path, strict)`` its rows in file order, a block at a time
+    (measurement rows, odometry rows or None, malformed lines); ``keys(rows)`` each row's epoch key (ms, int64);
+    ``solve(rows, odometry, sigma_model, sigma_m, nominal)`` a segment's (epochs, measurements), and ``epoch_keys``
+    those epochs' keys; ``no_rows``: the error of a log without a measurement."""
+
+    blocks: Callable[[str, bool], Iterator[tuple[pd.DataFrame, pd.DataFrame | None, int]]]
+    keys: Callable[[pd.DataFrame], np.ndarray]
+    solve: Callable[..., tuple[pd.DataFrame, Measurements]]
+    epoch_keys: Callable[[pd.DataFrame], np.ndarray]
+    no_rows: str
+
+
+def _librsf() -> SegmentFormat:
+    from tollcli.gnss.librsf_positions import librsf_epochs
+    from tollcli.readers.librsf import LIBRSF_T0, ODOMETRY_COLUMNS, LibrsfLog, iter_librsf
+
+    def blocks(path, strict):
+        for part in iter_librsf(path, strict):
+            yield part.pseudoranges, part.odometry, part.malformed
+
+    def solve(rows, odometry, sigma_model, sigma_m, nominal):
+        if odometry is None:
+            odometry = pd.DataFrame(np.zeros((0, len(ODOMETRY_COLUMNS))), columns=list(ODOMETRY_COLUMNS))
+        return librsf_epochs(LibrsfLog(rows, odometry, pd.DataFrame(), 0), sigma_model, sigma_m, nominal)
+
+    def epoch_keys(epochs):  # (librsf_epochs places epoch k ms after LIBRSF_T0 at time_utc: the key back, exactly)
+        return ((epochs["time_utc"] - LIBRSF_T0) // pd.Timedelta(milliseconds=1)).to_numpy(np.int64)
+
+    return SegmentFormat(blocks, lambda rows: np.round(rows["t_s"].to_numpy(float) * 1e3).astype(np.int64), solve, epoch_keys,
+                   "no pseudorange3 line: a libRSF ground-truth file is a --truth, not a log")  # fmt: skip
+
+
+def _gsdc_derived() -> SegmentFormat:
+    from tollcli.gnss.gsdc_positions import gsdc_epochs
+    from tollcli.readers.gsdc import iter_gsdc_derived
+
+    def blocks(path, strict):
+        for table in iter_gsdc_derived(path, strict):
+            yield table, None, int(table.attrs["skipped_lines"])
+
+    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
+        return gsdc_epochs(rows, sigma_model, sigma_m, nominal)
+
+    return SegmentFormat(blocks, lambda rows: rows["millisSinceGpsEpoch"].to_numpy(np.int64), solve,
+                   lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no usable rows")  # fmt: skip
+
+
+def _ubx(nav) -> SegmentFormat:
+    """A u-blox log in two passes: the first reads its navigation data and message times (not its measurements) for
+    the orbits, the second its RXM-RAWX a block of frames at a time."""
+    from tollcli.gnss.pseudorange_inputs import navigation_of, ubx_orbits
+    from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites
+    from tollcli.gnss.ubx_measurements import rawx_measurements, with_receiver_solution
+    from tollcli.readers.ubx import UbxRead, iter_rawx, read_ubx
+
+    known: dict = {}
+
+    def blocks(path, strict):
+        ephemerides, known["iono"] = navigation_of(nav)
+        first = read_ubx(path, strict, measurements=False)
+        known["orbits"], known["pvt"] = ubx_orbits(path, first, ephemerides), first.pvt
+        damaged = first.n_bad  # (counted once: the first pass saw every frame)
+        for rawx in iter_rawx(path, strict):
+            part = UbxRead(rawx, first.sfrbx.iloc[:0], first.pvt.iloc[:0], 0, 0)
+            yield with_broadcast_satellites(rawx_measurements(part), known["orbits"]), None, damaged
+            damaged = 0
+
+    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
+        epochs, meas = raw_epochs(rows, sigma_model, sigma_m, nominal, iono_coeffs=known["iono"])
+        return with_receiver_solution(epochs, known["pvt"]), meas
+
+    return SegmentFormat(blocks, lambda rows: rows["epoch_key"].to_numpy(np.int64), solve,
+                   lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no RXM-RAWX measurements in the UBX log")  # fmt: skip
+
+
+FORMATS = {"librsf": lambda _nav: _librsf(), "gsdc-derived": lambda _nav: _gsdc_derived(), "ubx": _ubx}
