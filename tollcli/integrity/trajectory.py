@@ -65,8 +65,8 @@ END_CORRELATIONS = 3.0
 #: vehicle) within this many correlation times beyond an end's window, the window fails too (:func:`inherited_at_the_ends`).
 #: A pass carries a fault's error long after it: on the simulated drive with a 10 % odometer step, the backward pass was
 #: still 13 m off 40 s (6 correlation times) after it had crossed the fault, 26 m off as it left it. On the simulated
-#: drives with an odometer or a gyro fault, cut into parts of 130 and 200 s every 23 s (``benchmarks/berlin_cuts.py``;
-#: 132 461 epochs each), hazardous epochs at HAL 50 m: 738 and 28 without, 0 and 0 with 3 or 10; misleading 1 967 and
+#: drives with an odometer or a gyro fault, cut into parts of 130 and 200 s every 23 s (in-process, statuses applied;
+#: 132 461 epochs each: docs/integrity.md), hazardous epochs at HAL 50 m: 738 and 28 without, 0 and 0 with 3 or 10; misleading 1 967 and
 #: 757 without, 326 and 150 with 3, 326 and 0 with 10. The Berlin drive: whole, no change; its parts lose 0.8 % of their
 #: valid epochs (with 3: none)
 INHERIT_CORRELATIONS = 10.0
