@@ -125,9 +125,14 @@ class _Tables:
             "h_acc_m": r["h_acc"] / 1000.0, "speed_acc_mps": r["s_acc"] / 1000.0, "n_sv": i64(r["n_sv"]), "message": numbers,
         })  # fmt: skip
 
+    def rawx_table(self) -> pd.DataFrame:
+        """The RAWX measurements added so far, one table."""
+        if not self.rawx:
+            return pd.DataFrame(columns=[*RAWX_COLUMNS, "message"])
+        return pd.DataFrame({c: np.concatenate([b[c] for b in self.rawx]) for c in (*RAWX_COLUMNS, "message")})
+
     def frames(self) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, pd.DataFrame]:
-        rawx = pd.DataFrame({c: np.concatenate([b[c] for b in self.rawx]) for c in (*RAWX_COLUMNS, "message")}) if self.rawx \
-            else pd.DataFrame(columns=[*RAWX_COLUMNS, "message"])  # fmt: skip
+        rawx = self.rawx_table()
         heads = pd.DataFrame({c: np.concatenate([b[c] for b in self.heads]) for c in HEAD_COLUMNS}) if self.heads \
             else pd.DataFrame({c: np.zeros(0, np.float64 if c == "rcvTow" else np.int64) for c in HEAD_COLUMNS})  # fmt: skip
         if self.sfrbx:
@@ -148,9 +153,11 @@ def read_ubx(path: str, strict: bool = False, block_bytes: int = 1 << 20, measur
     message): what a long log's first pass needs (its navigation data and times), the measurements read by
     :func:`iter_rawx` after."""
     tables = _Tables(measurements)
-    stats, malformed = _read_frames(path, strict, block_bytes, tables)
+    stats = ReadStats(source=str(path), protocol="UBX messages")
+    for _ in _frames_into(path, strict, block_bytes, tables, stats):
+        pass
     rawx, sfrbx, pvt, heads = tables.frames()
-    n_bad = stats.bad_checksum + stats.malformed + malformed
+    n_bad = stats.bad_checksum + stats.malformed
     dated = plausible_date(*(pvt[c].to_numpy(np.int64) for c in ("year", "month", "day", "hour", "minute", "second")))
     if not dated.all():  # a damaged date (year 60000) is no date: the row is dropped, and counted
         if strict:
@@ -164,70 +171,44 @@ def iter_rawx(path: str, strict: bool = False, block_bytes: int = 1 << 20):
     """The RXM-RAWX measurements of a UBX log (the table :func:`read_ubx` makes), a block of frames at a time: the
     rows of each block as a table (blocks without one are passed over), in file order; joined, ``read_ubx``'s."""
     tables = _Tables()
-    for _ in _FramesInto(path, strict, block_bytes, tables, (RXM_RAWX,)):
+    for _ in _frames_into(path, strict, block_bytes, tables, ReadStats(), only=(RXM_RAWX,)):
         if tables.rawx:
-            yield pd.DataFrame({c: np.concatenate([b[c] for b in tables.rawx]) for c in (*RAWX_COLUMNS, "message")})
+            yield tables.rawx_table()
         tables.rawx, tables.heads = [], []  # (a block's rows once: the memory of one block)
 
 
-def _read_frames(path: str, strict: bool, block_bytes: int, tables: _Tables) -> tuple[ReadStats, int]:
-    """Every frame of ``path`` of the messages read added to ``tables``: the framing statistics and the count of
-    malformed messages."""
-    frames = _FramesInto(path, strict, block_bytes, tables, None)
-    for _ in frames:
-        pass
-    return frames.result
-
-
-class _FramesInto:
-    """The frames of a log added to tables block by block (an iterator yielding after each block); ``result``: the
-    framing statistics and the count of malformed messages, once it is exhausted."""
-
-    def __init__(self, path: str, strict: bool, block_bytes: int, tables: _Tables, only: tuple | None) -> None:
-        self.args = (path, strict, block_bytes, tables, only)
-        self.result: tuple[ReadStats, int] | None = None
-        self._it = self._run()
-
-    def __iter__(self):
-        return self
-
-    def __next__(self):
-        return next(self._it)
-
-    def _run(self):
-        path, strict, block_bytes, tables, only = self.args
-        stats = ReadStats(source=str(path), protocol="UBX messages")
-        malformed = 0
-        try:
-            stream = open(path, "rb")  # noqa: SIM115 - closed below
-        except FileNotFoundError:
-            raise UsageError(f"{path}: no such file") from None
-        except OSError as exc:
-            raise UsageError(f"{path}: cannot open ({exc.strerror})") from None
-        messages = [m for m in _MESSAGES if only is None or m[0] in only]
-        with stream:
-            for block in iter_frame_blocks(stream, str(path), stats, strict, block_bytes):
-                data = np.frombuffer(block.buf, np.uint8)
-                kind = block.classes.astype(np.int64) * 256 + block.ids
-                length = block.ends - block.starts - 8
-                payload = block.starts + 6
-                numbers = block.first_number + np.arange(block.starts.size, dtype=np.int64)
-                for (cls, ident), name, fits, add in messages:
-                    these = np.flatnonzero(kind == cls * 256 + ident)
-                    if not these.size:
-                        continue
-                    good = fits(data, payload[these], length[these])
-                    for k in these[~good].tolist():
-                        if strict:
-                            raise DataError(f"{path}: UBX message {int(numbers[k])}: {name} of {int(length[k])} bytes, not what its counts say")
-                        malformed += 1
-                    these = these[good]
-                    if these.size:
-                        add(tables, data, payload[these], numbers[these])
-                yield
-        if stats.sentences == 0:
-            raise DataError(f"{path}: no UBX messages")
-        self.result = (stats, malformed)
+def _frames_into(path: str, strict: bool, block_bytes: int, tables: _Tables, stats: ReadStats, only: tuple | None = None):
+    """The frames of ``path`` of the messages read (``only`` those) added to ``tables``, yielding after each block;
+    ``stats`` counts the frames, and as ``malformed`` also the messages whose length is not what their counts say."""
+    try:
+        stream = open(path, "rb")  # noqa: SIM115 - closed below
+    except FileNotFoundError:
+        raise UsageError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot open ({exc.strerror})") from None
+    messages = [m for m in _MESSAGES if only is None or m[0] in only]
+    with stream:
+        for block in iter_frame_blocks(stream, str(path), stats, strict, block_bytes):
+            data = np.frombuffer(block.buf, np.uint8)
+            kind = block.classes.astype(np.int64) * 256 + block.ids
+            length = block.ends - block.starts - 8
+            payload = block.starts + 6
+            numbers = block.first_number + np.arange(block.starts.size, dtype=np.int64)
+            for (cls, ident), name, fits, add in messages:
+                these = np.flatnonzero(kind == cls * 256 + ident)
+                if not these.size:
+                    continue
+                good = fits(data, payload[these], length[these])
+                for k in these[~good].tolist():
+                    if strict:
+                        raise DataError(f"{path}: UBX message {int(numbers[k])}: {name} of {int(length[k])} bytes, not what its counts say")
+                    stats.malformed += 1
+                these = these[good]
+                if these.size:
+                    add(tables, data, payload[these], numbers[these])
+            yield
+    if stats.sentences == 0:
+        raise DataError(f"{path}: no UBX messages")
 
 
 def _count_fits(at: int, head: int, each: int):
