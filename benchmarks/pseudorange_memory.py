@@ -5,9 +5,9 @@ simulated city drive, on the whole of it, and on a drive twice as long, in the s
 
 The drive is ``tollcli simulate --nlos --odometry --duration 8000 --rate 5 --seed 11`` (40 000 epochs at 5 Hz, written
 once into ``benchmarks/integrity_truth/sim/city-long``, ≈ 80 s), as libRSF text (pseudoranges and odometry) and as a
-GSDC derived CSV; the longer one the same with ``--duration 16000`` (``sim/city-80000``, ≈ 3 min once). Each is cut
-to its first quarter (whole lines, the same epochs) and run with the whole and the longer drive. The ratios of the
-peak RSS say how memory grows with the log (4.0 whole / quarter: in proportion; 1.0: flat). Both formats are read in
+GSDC derived CSV, and the derived CSV's measurements as a GSDC ``device_gnss.csv`` (:func:`device_gnss`); the longer
+one the same with ``--duration 16000`` (``sim/city-80000``, ≈ 3 min once). Each is cut to its first quarter (whole lines, the same epochs) and run with the whole and the longer drive. The ratios of the
+peak RSS say how memory grows with the log (4.0 whole / quarter: in proportion; 1.0: flat). Every format is read in
 blocks and placed segment by segment (``tollcli/job/pseudorange_segments.py``: cores of 8 192 epochs and at least
 30 min, each with 1 024 epochs of margin), so beyond a segment and a half the memory stays a segment's.
 """
@@ -46,6 +46,41 @@ def quarter(path: Path, out: Path, header: bool, epochs: int) -> None:
             dst.write(line)
 
 
+#: Android's constellation types, carriers and tracking states of a decoded time of week (code lock, TOW decoded;
+#: Galileo also E1BC code lock), for the simulator's GPS L1 and Galileo E1
+ANDROID = {1: (1_575_420_000.0, 1 | 8), 6: (1_575_420_000.0, 1 | 8 | 1024)}
+
+
+def device_gnss(derived: Path, out: Path, chunk_rows: int = 200_000) -> None:
+    """The derived CSV's measurements as a GSDC ``device_gnss.csv``: the pseudorange as Android states it (receiver time
+    TimeNanos − FullBiasNanos, transmit time ReceivedSvTimeNanos, the sub-nanosecond rest in TimeOffsetNanos) and the
+    satellites, clocks and delays in Google's columns (so no ``--nav``)."""
+    import numpy as np
+    import pandas as pd
+
+    c, week_ns = 299_792_458.0, 604_800 * 10**9
+    header = True
+    with open(out, "w") as dst:
+        for d in pd.read_csv(derived, chunksize=chunk_rows):
+            millis = d["millisSinceGpsEpoch"].to_numpy(np.int64)
+            time_nanos = (millis - 1_400_000_000_000) * 10**6  # the phone's hardware clock: its own zero
+            flight = d["rawPrM"].to_numpy(float) / c * 1e9
+            whole = np.floor(flight).astype(np.int64)
+            carrier, state = (np.array([ANDROID[k][i] for k in d["constellationType"].tolist()]) for i in (0, 1))
+            table = pd.DataFrame({
+                "TimeNanos": time_nanos, "FullBiasNanos": time_nanos - millis * 10**6, "BiasNanos": 0.0, "TimeOffsetNanos": flight - whole,
+                "ReceivedSvTimeNanos": (millis * 10**6) % week_ns - whole, "ReceivedSvTimeUncertaintyNanos": d["rawPrUncM"] / c * 1e9,
+                "State": state, "Svid": d["svid"], "ConstellationType": d["constellationType"], "Cn0DbHz": 40.0,
+                "PseudorangeRateMetersPerSecond": np.nan, "CarrierFrequencyHz": carrier,
+                "SvPositionXEcefMeters": d["xSatPosM"], "SvPositionYEcefMeters": d["ySatPosM"], "SvPositionZEcefMeters": d["zSatPosM"],
+                "SvVelocityXEcefMetersPerSecond": d["xSatVelMps"], "SvVelocityYEcefMetersPerSecond": d["ySatVelMps"],
+                "SvVelocityZEcefMetersPerSecond": d["zSatVelMps"], "SvClockBiasMeters": d["satClkBiasM"],
+                "SvClockDriftMetersPerSecond": d["satClkDriftMps"], "IsrbMeters": d["isrbM"], "IonosphericDelayMeters": d["ionoDelayM"],
+                "TroposphericDelayMeters": d["tropoDelayM"]})  # fmt: skip
+            table.to_csv(dst, index=False, header=header)
+            header = False
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--epochs", type=int, default=40_000, help="the whole drive's epochs (5 Hz)")
@@ -57,9 +92,14 @@ def main() -> int:
     tollcli = [sys.executable, "-m", "tollcli", "integrity"]
     print(f"a simulated city drive of {args.epochs} epochs (5 Hz); tollcli integrity, wall time and peak RSS")
     with tempfile.TemporaryDirectory() as tmp:
-        for name, path, header in (("libRSF", librsf, False), ("GSDC derived CSV", derived, True)):
+        for name, path, header in (("libRSF", librsf, False), ("GSDC derived CSV", derived, True), ("device_gnss.csv", derived, True)):
             part = Path(tmp) / f"quarter{path.suffix}"
             quarter(path, part, header, args.epochs // 4)
+            if name == "device_gnss.csv":  # (the derived CSV's measurements, whole and the quarter, as Android gives them)
+                for src, dst in ((part, part), (path, Path(tmp) / "device_gnss.csv")):
+                    device_gnss(src, Path(tmp) / "converting.csv")
+                    os.replace(Path(tmp) / "converting.csv", dst)
+                path = Path(tmp) / "device_gnss.csv"
             runs = {}
             for label, log in (("quarter", part), ("whole", path)):
                 runs[label] = timed([*tollcli, str(log), "-q", "-o", str(Path(tmp) / "table.csv")])
@@ -68,7 +108,10 @@ def main() -> int:
                   f"{runs['whole'][1] / runs['quarter'][1]:.2f}")  # fmt: skip
             if args.longer:
                 longer = Path(simulated_drive(os.path.join(os.path.dirname(LONG), f"city-{args.longer}"), args.longer // 5))
-                longer = longer.with_name(path.name)  # (the same format: the simulator writes both)
+                longer = longer.with_name(path.name if name != "device_gnss.csv" else derived.name)  # (the simulator writes both)
+                if name == "device_gnss.csv":
+                    device_gnss(longer, Path(tmp) / "longer.csv")
+                    longer = Path(tmp) / "longer.csv"
                 runs["longer"] = timed([*tollcli, str(longer), "-q", "-o", str(Path(tmp) / "table.csv")])
                 print(f"  {name:16s} {args.longer // 1000}k epochs {longer.stat().st_size / 1e6:5.0f} MB: {runs['longer'][0]:6.2f} s, "
                       f"peak RSS {runs['longer'][1]:6.0f} MB; {args.longer // 1000}k / {args.epochs // 1000}k: time "

@@ -330,3 +330,94 @@ def test_a_long_ubx_log_is_read_in_two_passes_and_placed_in_segments(tmp_path, m
     hpe = np.hypot(e - east, n - north)
     hpl = np.concatenate([m.trajectory_hpl_m for _, m in parts])
     assert (hpe < hpl).all() and np.percentile(hpe, 95) < 5.0, (hpe.max(), hpl.min())
+
+
+@pytest.fixture(scope="module")
+def phone_drive(tmp_path_factory):
+    """A phone simulated on the day's real orbits, driving 300 s at 20 m/s: its records as a GnssLogger file and as a
+    ``device_gnss.csv`` (orbits from ``--nav``), the navigation file, and the start's latitude and longitude."""
+    from android_synth import device_gnss_csv, gnsslogger_text, raw_records
+    from test_raw_measurements import T0_GPS_S, _nav
+
+    from tollcli.gnss.satellite_states import rinex_ephemeris_table
+
+    lat, lon = 37.3958, -122.1029
+    records = raw_records(rinex_ephemeris_table(_nav()), T0_GPS_S, 300, lat, lon, -4.5, vel_enu_mps=(-12.0, 16.0, 0.0), seed=3)
+    folder = tmp_path_factory.mktemp("phone")
+    (folder / "drive.txt").write_text(gnsslogger_text(records, lat, lon))
+    (folder / "device_gnss.csv").write_text(device_gnss_csv(records))
+    return folder, str(shared("rinex", "brdc1190.21n")), lat, lon
+
+
+def test_android_logs_read_in_blocks_are_the_whole_files_records(phone_drive, tmp_path):
+    """GnssLogger files and device_gnss.csv read a block at a time are the whole file's records, line numbers and
+    skipped lines: the real ones, and the simulated phone's with a Raw line cut short and a number that is none. With
+    --strict the error names the damaged line itself (it named the record's place among the Raw records before)."""
+    from tollcli.readers.gnsslogger import iter_device_gnss, iter_gnsslogger, read_device_gnss, read_gnsslogger
+
+    folder = phone_drive[0]
+    lines = (folder / "drive.txt").read_text().splitlines(keepends=True)
+    cut, wrong = 1_200, 2_000
+    lines[cut] = lines[cut].rsplit(",", 2)[0] + "\n"
+    lines[wrong] = lines[wrong].replace(",42.0,", ",4x.0,", 1)
+    bad = tmp_path / "bad.txt"
+    bad.write_text("".join(lines).replace("\n", "\r\n"))  # CR LF line ends as well
+    for path in (shared("android", "pixel6_gnsslogger.txt"), shared("gsdc2021", "Pixel4_GnssLog.txt"), folder / "drive.txt", bad):
+        whole = read_gnsslogger(str(path))
+        parts = list(iter_gnsslogger(str(path), block_bytes=4_001))
+        assert len(parts) > 2
+        pd.testing.assert_frame_equal(pd.concat([p.raw for p in parts if p.raw is not None], ignore_index=True), whole.raw)
+        assert sum(p.n_malformed for p in parts) == whole.n_malformed == 2 * (path == bad)
+    assert read_gnsslogger(str(bad)).first_malformed_line == cut + 1
+    assert read_gnsslogger(str(bad)).raw["line"].iloc[-1] == len(lines)
+    with pytest.raises(DataError, match=rf"{bad.name}:{cut + 1}: a Raw record with"):
+        read_gnsslogger(str(bad), strict=True)
+    lines[cut] = lines[cut - 1]
+    bad.write_text("".join(lines))
+    with pytest.raises(DataError, match=rf"{bad.name}:{wrong + 1}: Cn0DbHz is not a number"):
+        list(iter_gnsslogger(str(bad), strict=True, block_bytes=4_001))
+    for path in (shared("gsdc2022", "device_gnss.csv"), folder / "device_gnss.csv"):
+        whole = read_device_gnss(str(path))
+        parts = list(iter_device_gnss(str(path), block_rows=97))
+        pd.testing.assert_frame_equal(pd.concat(parts, ignore_index=True), whole)
+
+
+@pytest.mark.parametrize("kind", ["gnsslogger", "device-gnss"])
+def test_a_long_android_log_is_placed_in_segments(phone_drive, monkeypatch, kind):
+    """The simulated phone's log (with --nav) cut into cores of 100 epochs. Snapshot: every epoch the whole log's (to
+    1e-6 m). Smoothed: every epoch once, in order, within its bound of the known track. With the default segment (the
+    log is one): placed exactly as when read whole; the real device_gnss.csv too."""
+    folder, nav, lat, lon = phone_drive
+    path = str(folder / ("drive.txt" if kind == "gnsslogger" else "device_gnss.csv"))
+    whole_epochs, whole_meas = pseudorange_epochs(path, kind, nav, "nominal", 5.0, NominalModel())
+    for log, log_nav in ((path, nav), (str(shared("gsdc2022", "device_gnss.csv")), None)):
+        if log_nav is None and kind == "gnsslogger":
+            continue
+        epochs, meas, _ = with_trajectory(*pseudorange_epochs(log, kind, log_nav, "nominal", 5.0, NominalModel()), "auto")
+        with segments.placed_log(log, kind, log_nav, "nominal", 5.0, NominalModel(), False, "auto") as placed:
+            (one, one_meas), = placed.chunks(10_000)
+        assert placed.segments == 1
+        pd.testing.assert_frame_equal(one, epochs)
+        _same_measurements(one_meas, meas)
+    monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 100)
+    monkeypatch.setattr(segments, "SEGMENT_MIN_S", 100.0)
+    monkeypatch.setattr(segments, "MARGIN_EPOCHS", 40)
+
+    def placed(positioning):
+        with segments.placed_log(path, kind, nav, "nominal", 5.0, NominalModel(), False, positioning) as log:
+            parts = list(log.chunks(70))
+        return log, pd.concat([p for p, _ in parts], ignore_index=True), parts
+
+    log, epochs, parts = placed("snapshot")
+    assert log.segments == 3
+    pd.testing.assert_frame_equal(epochs.drop(columns=["epoch"]), whole_epochs.drop(columns=["epoch"]), check_exact=False, rtol=1e-12, atol=1e-6)
+    assert (epochs["epoch"].to_numpy() == np.arange(300)).all()
+    log, epochs, parts = placed("auto")
+    assert log.segments == 3 and (epochs["positioning"] == "smoothed").all()
+    assert (epochs["time_utc"].to_numpy() == whole_epochs["time_utc"].to_numpy()).all()
+    t = np.arange(300.0)
+    e, n, _ = geodetic2enu(epochs["lat_deg"].to_numpy(), epochs["lon_deg"].to_numpy(), np.zeros(300), np.full(300, lat), np.full(300, lon),
+                           np.zeros(300))  # fmt: skip
+    hpe = np.hypot(e + 12.0 * t, n - 16.0 * t)
+    hpl = np.concatenate([m.trajectory_hpl_m for _, m in parts])
+    assert (hpe < hpl).all() and np.percentile(hpe, 95) < 10.0, (hpe.max(), hpl.min(), np.percentile(hpe, 95))

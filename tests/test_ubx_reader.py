@@ -3,6 +3,8 @@ time) against pyubx2's decoding of every real UBX log, field by field, and on da
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -140,3 +142,32 @@ def test_a_damaged_rawx_log_says_how_many_frames_it_skipped(tmp_path):
     strict = run_cli("integrity", str(part), "-o", str(tmp_path / "s.csv"), "--strict", "-q")
     err = strict.stderr.decode()
     assert strict.returncode == 1 and err.count("\n") == 1 and f"{part}: UBX message" in err and "cut short" in err, err
+
+
+@pytest.mark.parametrize("cut", [600_000, 200_000])
+def test_every_command_counts_a_damaged_rawx_logs_skipped_frame(tmp_path, cut):
+    """The real u-blox walk cut inside a frame, solved from its pseudoranges (600 kB: its orbits complete) or, without
+    complete orbits (200 kB), from the receiver's own NAV-PVT instead: ``info``, ``integrity`` (with and without
+    ``--checks``) and ``process`` each say the one skipped frame, ``--max-bad 0`` makes it exit 3 after writing, and no
+    message names the temporary copy of the log instead of the log. (Before: ``process`` said 0 and ignored
+    ``--max-bad`` for every pseudorange log; ``integrity`` said 0 where it fell back to the receiver's solutions or
+    ran ``--checks``; ``info`` named the copy.)"""
+    import json
+
+    from conftest import REPO, run_cli
+
+    part = tmp_path / "part.ubx"
+    part.write_bytes(shared("rtklibexplorer", "gnss_1730.ubx").read_bytes()[:cut])
+    geo, tariff = str(REPO / "geoobjects" / "example-geoobjects.geojson"), str(REPO / "geoobjects" / "example-tariff.toml")
+    info = run_cli("info", str(part), "--json")
+    assert info.returncode == 0 and json.loads(info.stdout)["skipped_lines"] == 1, info.stderr.decode()
+    assert "tollcli-log-" not in info.stdout.decode()
+    commands = [("integrity", str(part), "-o", str(tmp_path / "i.csv")), ("integrity", str(part), "--checks", "-o", str(tmp_path / "c.csv")),
+                ("process", str(part), "--geo", geo, "--tariff", tariff, "-o", str(tmp_path / "inv.json"))]  # fmt: skip
+    for args in commands:
+        done = run_cli(*args, "--json", "-q")
+        assert done.returncode == 0 and json.loads(done.stdout)["skipped_lines"] == 1, (args, done.stderr.decode())
+        over = run_cli(*args, "--max-bad", "0", "-q")
+        err = over.stderr.decode()
+        assert over.returncode == 3 and err.count("\n") == 1 and f"{part}: 1 lines skipped, more than --max-bad 0" in err, (args, err)
+        assert "tollcli-log-" not in err and os.path.exists(args[-1])

@@ -30,20 +30,17 @@ def _sagnac(xyz, flight):
     return np.stack([c * xyz[:, 0] + s * xyz[:, 1], -s * xyz[:, 0] + c * xyz[:, 1], xyz[:, 2]], -1)
 
 
-def simulate_ubx(eph_table, t0_gps_s: float, n_epochs: int, lat_deg: float, lon_deg: float, h_m: float,
-                 vel_enu_mps=(0.0, 0.0, 0.0), clock_m: float = 30_000.0, drift_mps: float = 120.0,
-                 doppler_fault_mps: float = 0.0, with_sfrbx: bool = True, seed: int = 0,
-                 pr_noise_m: float = 0.5, dop_noise_hz: float = 0.064) -> bytes:  # fmt: skip
-    """A UBX byte stream: SFRBX navigation data of every GPS and Galileo satellite used, then one RAWX per second."""
+def receiver_epochs(eph_table, t0_gps_s: float, n_epochs: int, lat_deg: float, lon_deg: float, h_m: float,
+                    vel_enu_mps=(0.0, 0.0, 0.0), clock_m: float = 30_000.0, drift_mps: float = 120.0,
+                    doppler_fault_mps: float = 0.0, seed: int = 0, pr_noise_m: float = 0.5, dop_noise_hz: float = 0.064):  # fmt: skip
+    """Per second from ``t0_gps_s``: (t, satellites above 10°, their pseudoranges (m), Dopplers (Hz, L1)) of a
+    receiver at the given position moving at ``vel_enu_mps``, its clock ``clock_m`` + ``drift_mps`` per second."""
     rng = np.random.default_rng(seed)
     gps = eph_table[eph_table["sv"].str[0].isin(["G", "E"])]
     svs = np.array(sorted(gps["sv"].unique()))
     R = enu_rotation(np.array([lat_deg]), np.array([lon_deg]))[0]  # rows: e, n, u in ECEF
     v_ecef = R.T @ np.asarray(vel_enu_mps, float)
     x0 = np.array(geodetic2ecef(lat_deg, lon_deg, h_m), float).reshape(3)
-    out = bytearray()
-    used = set()
-    rawx = []
     for k in range(n_epochs):
         t = t0_gps_s + k
         rx = x0 + v_ecef * k
@@ -63,12 +60,26 @@ def simulate_ubx(eph_table, t0_gps_s: float, n_epochs: int, lat_deg: float, lon_
         if doppler_fault_mps:
             dop = dop - doppler_fault_mps * L1 / C * np.dot(u, v_ecef / max(np.linalg.norm(v_ecef), 1e-9))
         idx = np.flatnonzero(keep)
-        used.update(svs[idx].tolist())
-        fields = {"rcvTow": round(t % WEEK_S, 3), "week": int(t // WEEK_S), "leapS": 18, "numMeas": idx.size}
-        for j, i in enumerate(idx, start=1):
+        yield t, svs[idx], pr[idx], dop[idx]
+
+
+def simulate_ubx(eph_table, t0_gps_s: float, n_epochs: int, lat_deg: float, lon_deg: float, h_m: float,
+                 vel_enu_mps=(0.0, 0.0, 0.0), clock_m: float = 30_000.0, drift_mps: float = 120.0,
+                 doppler_fault_mps: float = 0.0, with_sfrbx: bool = True, seed: int = 0,
+                 pr_noise_m: float = 0.5, dop_noise_hz: float = 0.064) -> bytes:  # fmt: skip
+    """A UBX byte stream: SFRBX navigation data of every GPS and Galileo satellite used, then one RAWX per second."""
+    gps = eph_table[eph_table["sv"].str[0].isin(["G", "E"])]
+    out = bytearray()
+    used = set()
+    rawx = []
+    for t, svs, pr, dop in receiver_epochs(eph_table, t0_gps_s, n_epochs, lat_deg, lon_deg, h_m, vel_enu_mps, clock_m, drift_mps,
+                                           doppler_fault_mps, seed, pr_noise_m, dop_noise_hz):  # fmt: skip
+        used.update(svs.tolist())
+        fields = {"rcvTow": round(t % WEEK_S, 3), "week": int(t // WEEK_S), "leapS": 18, "numMeas": svs.size}
+        for j, (sv, p, d) in enumerate(zip(svs, pr, dop), start=1):
             s = f"_{j:02d}"
-            fields.update({f"prMes{s}": float(pr[i]), f"cpMes{s}": 0.0, f"doMes{s}": float(dop[i]), f"gnssId{s}": GNSS_ID[svs[i][0]],
-                           f"svId{s}": int(svs[i][1:]), f"sigId{s}": 0, f"freqId{s}": 0, f"locktime{s}": 10_000,
+            fields.update({f"prMes{s}": float(p), f"cpMes{s}": 0.0, f"doMes{s}": float(d), f"gnssId{s}": GNSS_ID[sv[0]],
+                           f"svId{s}": int(sv[1:]), f"sigId{s}": 0, f"freqId{s}": 0, f"locktime{s}": 10_000,
                            f"cno{s}": 42, f"prStd{s}": 5, f"cpStd{s}": 1, f"doStd{s}": 5, f"prValid{s}": 1})  # fmt: skip
         rawx.append(UBXMessage("RXM", "RXM-RAWX", GET, **fields).serialize())
     if with_sfrbx:

@@ -70,7 +70,8 @@ def text_lines(s: dict) -> list[str]:
         lines.append("integrity evidence (epochs): " + ", ".join(f"{k} {v}" for k, v in ev.items())
                      + f"; level under --integrity-sources auto: {s['integrity_level']}")
     if s.get("skipped_lines"):
-        lines.append(f"skipped lines: {s['skipped_lines']} (first: {s['first_problem']})")
+        first = f" (first: {s['first_problem']})" if s.get("first_problem") else " (--strict names the first)"
+        lines.append(f"skipped lines: {s['skipped_lines']}{first}")
     return lines
 
 

@@ -12,7 +12,7 @@ import typer
 from tollcli.cli import options as opt
 from tollcli.cli.console import note, progress
 from tollcli.cli.settings_file import Config
-from tollcli.errors import UsageError
+from tollcli.errors import PartialError, UsageError
 from tollcli.gnss.sigma_models import SIGMA_MODELS, NominalModel
 from tollcli.integrity.environment import ENVIRONMENTS
 from tollcli.integrity.raim import RaimParams
@@ -109,6 +109,8 @@ def integrity(
                                                           date=day, environment=environment, positioning=positioning)]
                 if kind in NAVIGATION_KINDS:
                     check_usable(stats)  # a log without one epoch: the data error, before any check runs
+                if kind not in NAVIGATION_KINDS and tables:  # a pseudorange log's malformed lines (each chunk says them)
+                    counts["skipped", "lines"] += int(tables[0].attrs.get("skipped_lines", 0))
                 table = with_epoch_checks(pd.concat(tables, ignore_index=True), roads)
                 used = table["positioning"].iat[0] if "positioning" in table and len(table) else "snapshot"
                 note_why = tables[0].attrs.get("positioning_note") if tables else None
@@ -118,7 +120,7 @@ def integrity(
                 _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
             else:  # chunk by chunk: a long libRSF or GSDC log is placed segment by segment, its table written as it comes
                 used, note_why = "snapshot", None
-                for i, chunk in enumerate(iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, nav=nav,
+                for i, chunk in enumerate(iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, stats, nav=nav,
                                                          environment=environment, positioning=positioning)):  # fmt: skip
                     table = chunk.table
                     if i == 0:
@@ -130,8 +132,10 @@ def integrity(
                 if note_why:
                     note_why = note_why.replace(run.replay_path(), run.name)
             writer.commit()
-    if kind in NAVIGATION_KINDS:
-        counts["skipped", "lines"] += stats.skipped  # the malformed lines the reader passed over
+        stats.source, stats.first_problem = run.named(stats.source), run.named(stats.first_problem)  # (not the log's copy)
+    # the malformed lines the reader passed over: a navigation log's reader's, or a pseudorange log's (its table says),
+    # or the receiver's own solutions' read instead of a u-blox log's pseudoranges (no orbits)
+    counts["skipped", "lines"] += stats.skipped
     statuses = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "status"}
     sources = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "source"}
     ignored = {k[1]: n for k, n in sorted(counts.items()) if k[0] == "note" and k[1]}
@@ -176,8 +180,10 @@ def integrity(
         if "receiver_notes" in summary:
             text += "; " + summary["receiver_notes"]["gpsd_json"].split(": the positions")[0]
         note(text, quiet)
-    if kind in NAVIGATION_KINDS:
+    if stats.lines or kind in NAVIGATION_KINDS:  # (read as a navigation log)
         check_partial(stats, max_bad)
+    elif max_bad is not None and counts["skipped", "lines"] > max_bad:
+        raise PartialError(f"{run.name}: {counts['skipped', 'lines']} lines skipped, more than --max-bad {max_bad}; outputs were written")
 
 
 def _tally(table: pd.DataFrame, counts: Counter) -> None:

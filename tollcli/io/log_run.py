@@ -137,6 +137,10 @@ class LogRun:
         except (OSError, EOFError, zlib.error):
             return b""
 
+    def named(self, text: str) -> str:
+        """``text`` naming the log where it names the temporary copy (:meth:`replay_path`)."""
+        return text.replace(self._replay, self.name) if self._replay is not None and text else text
+
     def source(self) -> str | BinaryIO:
         """What a reader of the whole log takes: the replay when there is one, else the one streaming pass."""
         return self._replay if self._replay is not None else self.stream()
@@ -149,7 +153,7 @@ class LogRun:
             yield
         except TollError as exc:
             said = str(exc.args[0]) if exc.args else ""
-            named = said.replace(self._replay, self.name) if self._replay is not None else said
+            named = self.named(said)
             if self.decoded_by:  # a line of a decoded log is one of the decoder's reports, not of the binary file
                 named = re.sub(rf"^{re.escape(self.name)}:(\d+):", lambda m: f"{self.name}: {self.decoded_by}'s report {m[1]}:", named)
             if named == said:

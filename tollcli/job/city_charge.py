@@ -67,7 +67,7 @@ def check_city_settings(settings, tariff: CityTariff) -> None:
 
 def charge_city_log(log: str, geo: str, tariff_path: str, settings, nav=None, epoch_table: list | None = None,
                     as_recorded: dict | None = None, *, reading: dict) -> tuple[dict, ReadStats | None]:  # fmt: skip
-    """The city invoice for one log (sealed) and the NMEA reader's statistics.
+    """The city invoice for one log (sealed) and the reader's statistics.
 
     ``reading``: the section job's own steps (``pipeline.py`` passes them, so that a log is read one way whatever it
     is charged for): ``check_settings``, and the chunk sources ``navigation`` and ``pseudorange``."""
@@ -94,10 +94,10 @@ def charge_city_log(log: str, geo: str, tariff_path: str, settings, nav=None, ep
     period = [None, None]
     with LogRun(log, settings.input_format) as run:
         kind = run.kind
-        stats = ReadStats() if kind in NAVIGATION_KINDS else None
+        stats = ReadStats()  # what the reader passed over (a pseudorange log: its malformed lines)
         with run.named_errors():
             chunks = (_navigation_chunks(run, kind, settings, nominal, stats) if kind in NAVIGATION_KINDS
-                      else _pseudorange_chunks(run, kind, nav, settings, nominal, placed, correlation))  # fmt: skip
+                      else _pseudorange_chunks(run, kind, nav, settings, nominal, placed, correlation, stats))  # fmt: skip
             env_carry = EnvironmentCarry()
             for epochs, meas, _sats in chunks:
                 params = settle_sources(params, meas)
@@ -117,8 +117,9 @@ def charge_city_log(log: str, geo: str, tariff_path: str, settings, nav=None, ep
                 rows.extend(_chunk_rows(net, near_areas, params, meas, t, x, y, lat, lon, to_metric))
                 if epoch_table is not None:
                     kept.append(epochs[[c for c in ("epoch", "time_utc", "line", "lat_deg", "lon_deg", "fix_valid") if c in epochs]])
-            if stats is not None:
+            if kind in NAVIGATION_KINDS:
                 check_usable(stats)
+        stats.source, stats.first_problem = run.named(stats.source), run.named(stats.first_problem)  # (not the log's copy)
         log_sha256 = run.sha256
         decoded_by = run.decoded_by
     if epoch_table is not None:

@@ -82,14 +82,14 @@ def file_info(path: str, min_hal_m: float = 25.0, nav: str | list[str] | None = 
                     out.update(_solution_info(replay, kind))
             except DataError as exc:  # nothing to read: what info says, not an error of info's
                 out.update(epochs=0, problem=str(exc))
-            if out.get("first_problem"):
-                out["first_problem"] = out["first_problem"].replace(replay, run.name)
         elif kind != "unknown":
             out["solved_by"] = "tollcli (pseudoranges: WLS, then the RAIM on their residuals)"
             out["needs"] = NEEDS.get(kind, "")
             out["integrity_level"] = "residual"
             with run.named_errors():
                 out.update(_pseudorange_info(replay, kind, nav, out["messages"], run.name))
+        if out.get("first_problem"):
+            out["first_problem"] = run.named(out["first_problem"])
     return out
 
 
@@ -129,7 +129,8 @@ def _pseudorange_info(path: str, kind: str, nav, messages: dict, name: str) -> d
             "span_s": round((last - first).total_seconds(), 3) if first is not None else None,
             "interval_s": round(interval, 3) if interval else None, "rate_hz": round(1.0 / interval, 3) if interval else None,
             **track_extent(lat, lon), "distance_m": round(distance.distance_m, 1), "distance_from": source,
-            "clock": "seconds from the start (no date)" if kind == "librsf" else "GPS time"}  # fmt: skip
+            "clock": "seconds from the start (no date)" if kind == "librsf" else "GPS time",
+            "skipped_lines": int(epochs.attrs.get("skipped_lines", 0))}  # fmt: skip
 
 
 #: the u-blox messages that carry the receiver's own position solution

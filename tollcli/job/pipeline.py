@@ -239,17 +239,18 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         ignored: dict[str, list[int]] = {}  # receiver outputs that were no evidence: note → [epochs, first line]
         track = TrackExtent()  # where the log was, said when it came near no geo-object
         with run.named_errors():  # one charge for every input kind: its chunks of epochs and measurements, streamed
-            stats = ReadStats() if kind in NAVIGATION_KINDS else None
+            stats = ReadStats()  # what the reader passed over (a pseudorange log: its malformed lines)
             placed: dict[str, str] = {}  # how a pseudorange log's epochs were placed: positioning, and a note why not
             chunks = (_navigation_chunks(run, kind, settings, nominal, stats) if kind in NAVIGATION_KINDS
-                      else _pseudorange_chunks(run, kind, nav, settings, nominal, placed, charger))  # fmt: skip
+                      else _pseudorange_chunks(run, kind, nav, settings, nominal, placed, charger, stats))  # fmt: skip
             prepared = _prepared_chunks(chunks, settings, params)
             # a navigation log's next chunk read and prepared on a second thread while this one is charged
             with (read_ahead(prepared) if kind in NAVIGATION_KINDS else contextlib.nullcontext(prepared)) as read:
                 params = _charge_chunks(read, settings, geo_objects, params, epoch_raim, charger, epoch_table, osnma, auth_counts,
                                         failure_fixes, ignored, track)  # fmt: skip
-            if stats is not None:
+            if kind in NAVIGATION_KINDS:
                 check_usable(stats)
+        stats.source, stats.first_problem = run.named(stats.source), run.named(stats.first_problem)  # (not the log's copy)
         policy, table, details, found, period = charger.finish()
         step_s = charger.step_s
         log_sha256 = run.sha256
@@ -362,13 +363,15 @@ def _navigation_chunks(run: LogRun, kind: str, settings: ChargeSettings, nominal
 
 
 def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | None, settings: ChargeSettings,
-                        nominal: NominalModel, placed: dict[str, str], charger: TailCharger) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
+                        nominal: NominalModel, placed: dict[str, str], charger: TailCharger,
+                        stats: ReadStats) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
     """A pseudorange log's (RINEX, GnssLogger, GSDC, u-blox RAWX, libRSF) epochs and measurements, in chunks of
     :data:`CHUNK_EPOCHS` epochs. The positions are solved from the run's replay, a libRSF log's segment by segment and
     any other's whole (:mod:`tollcli.job.pseudorange_segments`) — each epoch alone (snapshot WLS), then placed by the
     trajectory estimator (``settings.positioning``, :func:`~tollcli.integrity.trajectory.with_trajectory`; ``placed`` receives the positioning
     it used and the note why a trajectory was refused, and ``charger`` counts positions as independent evidence only the trajectory's correlation time apart);
-    from there on the chunks take the same path as a navigation log's."""
+    from there on the chunks take the same path as a navigation log's. ``stats`` counts the lines (records, frames) the
+    reader passed over as malformed."""
     try:
         placed_log = placed_pseudorange_log(run.replay_path(), kind, nav, settings.sigma_model, settings.sigma_m, nominal, settings.strict,
                                             settings.positioning)  # fmt: skip
@@ -380,8 +383,9 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
         placed["positioning"] = "receiver"
         placed["note"] = (f"{str(exc).replace(run.replay_path(), run.name)}: the receiver's own solutions ({', '.join(solutions)}, "
                           f"with its NAV-SAT residuals where it wrote them) were charged instead; --nav gives the orbits")  # fmt: skip
-        yield from _navigation_chunks(run, "ubx-nav", settings, nominal, ReadStats())
+        yield from _navigation_chunks(run, "ubx-nav", settings, nominal, stats)
         return
+    stats.source, stats.malformed = run.name, stats.malformed + placed_log.skipped_lines
     with placed_log:
         placed["positioning"] = placed_log.positioning
         if placed_log.note:

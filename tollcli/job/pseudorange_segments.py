@@ -1,12 +1,13 @@
 """A pseudorange log solved and placed segment by segment: memory flat in the log's length.
 
-libRSF logs, GSDC derived CSVs and u-blox RAWX logs (:data:`SEGMENTED_KINDS`) are read this way; the other
-pseudorange formats (RINEX, GnssLogger, GSDC ``device_gnss.csv``) are read and solved whole
+libRSF logs, GSDC derived CSVs, u-blox RAWX logs and Android logs (GnssLogger text, GSDC ``device_gnss.csv``)
+(:data:`SEGMENTED_KINDS`) are read this way; RINEX observation files are read and solved whole
 (:func:`~tollcli.gnss.pseudorange_inputs.pseudorange_epochs`).
 
 The log is read in blocks of rows (:func:`~tollcli.readers.librsf.iter_librsf`,
 :func:`~tollcli.readers.gsdc.iter_gsdc_derived`, :func:`~tollcli.readers.ubx.iter_rawx` after a first pass over the
-u-blox log for its navigation data: :mod:`tollcli.job.segment_formats`). Its epochs are cut into segments of
+u-blox log for its navigation data, :func:`~tollcli.readers.gnsslogger.iter_gnsslogger`,
+:func:`~tollcli.readers.gnsslogger.iter_device_gnss`: :mod:`tollcli.job.segment_formats`). Its epochs are cut into segments of
 :data:`SEGMENT_EPOCHS` (the segment's *core*); each segment is solved (snapshot WLS) and placed by the trajectory
 estimator (:func:`~tollcli.integrity.trajectory.with_trajectory`) together with :data:`MARGIN_EPOCHS` epochs before
 and after its core — the passes converge there, the backward one from the future — and only its core is kept. The
@@ -40,7 +41,7 @@ from tollcli.gnss.sigma_models import NominalModel
 from tollcli.job.segment_formats import FORMATS, SegmentFormat
 
 #: pseudorange formats read and placed segment by segment
-SEGMENTED_KINDS = ("librsf", "gsdc-derived", "ubx")
+SEGMENTED_KINDS = ("librsf", "gsdc-derived", "ubx", "gnsslogger", "device-gnss")
 #: the epochs of a segment's core, at least …
 SEGMENT_EPOCHS = 8_192
 #: … and at least this long (s): the estimator measures the noise from a segment's own residuals, and on the Berlin

@@ -90,4 +90,38 @@ def _ubx(nav) -> SegmentFormat:
                    lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no RXM-RAWX measurements in the UBX log")  # fmt: skip
 
 
-FORMATS = {"librsf": lambda _nav: _librsf(), "gsdc-derived": lambda _nav: _gsdc_derived(), "ubx": _ubx}
+def _android(kind: str, nav) -> SegmentFormat:
+    """An Android log, GnssLogger text (``Raw`` records; orbits from ``--nav``) or GSDC ``device_gnss.csv`` (orbits
+    from its own satellite columns, or ``--nav``), its records a block at a time; an epoch's key its receiver time
+    (ms), the same for every record of the epoch (one GnssClock)."""
+    from tollcli.errors import UsageError
+    from tollcli.gnss.android_raw import raw_pseudoranges
+    from tollcli.gnss.pseudorange_inputs import navigation_of
+    from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites, with_device_gnss_satellites
+    from tollcli.readers.gnsslogger import iter_device_gnss, iter_gnsslogger
+
+    known: dict = {}
+
+    def blocks(path, strict):
+        ephemerides, known["iono"] = navigation_of(nav)
+        if kind == "gnsslogger":
+            if ephemerides is None:
+                raise UsageError(f"{path}: a GnssLogger file carries no satellite orbits: give --nav NAVFILE (RINEX 2 or 3)")
+            for read in iter_gnsslogger(path, strict):
+                rows = with_broadcast_satellites(raw_pseudoranges(read.raw), ephemerides) if read.raw is not None else pd.DataFrame()
+                yield rows, None, read.n_malformed
+            return
+        for device in iter_device_gnss(path, strict):
+            m = raw_pseudoranges(device)
+            m = with_device_gnss_satellites(m, device) if ephemerides is None else with_broadcast_satellites(m, ephemerides)
+            yield m[np.isfinite(m["t_rx_gps_s"].to_numpy(float))].reset_index(drop=True), None, int(device.attrs["skipped_lines"])
+
+    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
+        return raw_epochs(rows, sigma_model, sigma_m, nominal, iono_coeffs=known["iono"])
+
+    return SegmentFormat(blocks, lambda rows: np.round(rows["t_rx_gps_s"].to_numpy(float) * 1000).astype(np.int64), solve,
+                         lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no measurement epochs")  # fmt: skip
+
+
+FORMATS = {"librsf": lambda _nav: _librsf(), "gsdc-derived": lambda _nav: _gsdc_derived(), "ubx": _ubx,
+           "gnsslogger": lambda nav: _android("gnsslogger", nav), "device-gnss": lambda nav: _android("device-gnss", nav)}  # fmt: skip

@@ -46,12 +46,13 @@ def numbers(text: pd.Series) -> np.ndarray:
 
 
 def checked_numbers(table: pd.DataFrame, path, floats: tuple[str, ...], integers: tuple[str, ...] = (), strict: bool = False,
-                    first_line: int = 2, exact: tuple[str, ...] = ()) -> pd.DataFrame:  # fmt: skip
+                    first_line: int = 2, exact: tuple[str, ...] = (), line_numbers: np.ndarray | None = None) -> pd.DataFrame:  # fmt: skip
     """``table`` (read as text) with ``floats`` as float64 (empty: NaN; infinite or not a number: malformed),
     ``integers`` as int64 (missing, fractional or beyond :data:`INTEGER_LIMIT`: malformed) and ``exact`` as nullable
     ``Int64`` read digit for digit (nanosecond counts a float would round; empty: NA; anything but an integer of at
     most 19 digits that fits 64 bits: malformed), its malformed rows dropped; ``attrs['skipped_lines']`` counts them and ``attrs['first_skipped_line']`` names the first (1-based: the
-    table's first row is line ``first_line``). A column ``line`` holds each kept row's line number."""
+    table's first row is line ``first_line``; or each row's line is given, ``line_numbers``: rows picked from a file
+    of other lines too). A column ``line`` holds each kept row's line number."""
     n = len(table)
     bad = np.zeros(n, bool)
     why = np.full(n, "", dtype=object)
@@ -77,7 +78,7 @@ def checked_numbers(table: pd.DataFrame, path, floats: tuple[str, ...], integers
         fresh = wrong & ~bad
         why[fresh] = name
         bad |= wrong
-    lines = np.arange(n) + first_line
+    lines = np.arange(n) + first_line if line_numbers is None else np.asarray(line_numbers, np.int64)
     first = int(lines[bad][0]) if bad.any() else None
     if strict and first is not None:
         name = why[bad][0]

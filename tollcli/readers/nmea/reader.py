@@ -229,8 +229,8 @@ def _emit(
 def check_partial(stats: ReadStats, max_bad: int | None) -> None:
     """Raise PartialError (exit 3) when more lines were skipped than ``--max-bad`` allows."""
     if max_bad is not None and stats.skipped > max_bad:
-        raise PartialError(f"{stats.source}: {stats.skipped} lines skipped, more than --max-bad {max_bad} "
-                           f"(first: {stats.first_problem}); outputs were written")  # fmt: skip
+        first = f" (first: {stats.first_problem})" if stats.first_problem else ""
+        raise PartialError(f"{stats.source}: {stats.skipped} lines skipped, more than --max-bad {max_bad}{first}; outputs were written")
 
 
 def check_usable(stats: ReadStats) -> None:
