@@ -308,28 +308,35 @@ def test_a_long_ubx_log_is_read_in_two_passes_and_placed_in_segments(tmp_path, m
     blocks = []
     real_iter = ubx_reader.iter_rawx
     monkeypatch.setattr(ubx_reader, "iter_rawx", lambda p, strict=False: (blocks.append(len(b)) or b for b in real_iter(p, strict, 4_000)))
-    whole_epochs, whole_meas = pseudorange_epochs(str(path), "ubx", None, "nominal", 5.0, NominalModel())
+    _placed_in_three_segments(str(path), "ubx", None, lat, lon, p95_m=5.0)
+    assert len(blocks) > 10  # read a block of frames at a time
+
+
+def _placed_in_three_segments(path: str, kind: str, nav, lat: float, lon: float, p95_m: float, velocity_en_mps=(-12.0, 16.0)) -> None:
+    """A simulated receiver's 300 s log (from ``lat``/``lon`` at ``velocity_en_mps``, east and north) placed in three segments
+    (the caller sets their size): snapshot, every epoch the whole log's (the WLS of a batch of epochs is the same to
+    1e-14° and 1e-8 m whichever epochs are in the batch); smoothed, every epoch once, in order, within its bound of
+    the known track, the 95th percentile of the error below ``p95_m``."""
+    whole_epochs, _ = pseudorange_epochs(path, kind, nav, "nominal", 5.0, NominalModel())
 
     def placed(positioning):
-        with segments.placed_log(str(path), "ubx", None, "nominal", 5.0, NominalModel(), False, positioning) as log:
+        with segments.placed_log(path, kind, nav, "nominal", 5.0, NominalModel(), False, positioning) as log:
             parts = list(log.chunks(70))
         return log, pd.concat([p for p, _ in parts], ignore_index=True), parts
 
     log, epochs, parts = placed("snapshot")
-    assert log.segments == 3 and len(blocks) > 10  # read a block of frames at a time
-    # (the WLS of a batch of epochs is the same to 1e-14° and 1e-8 m whichever epochs are in the batch)
+    assert log.segments == 3
     pd.testing.assert_frame_equal(epochs.drop(columns=["epoch"]), whole_epochs.drop(columns=["epoch"]), check_exact=False, rtol=1e-12, atol=1e-6)
     assert (epochs["epoch"].to_numpy() == np.arange(300)).all()
     log, epochs, parts = placed("auto")
     assert log.segments == 3 and (epochs["positioning"] == "smoothed").all()
     assert (epochs["time_utc"].to_numpy() == whole_epochs["time_utc"].to_numpy()).all()
     t = np.arange(300.0)
-    east, north = -12.0 * t, 16.0 * t
     e, n, _ = geodetic2enu(epochs["lat_deg"].to_numpy(), epochs["lon_deg"].to_numpy(), np.zeros(300), np.full(300, lat), np.full(300, lon),
                            np.zeros(300))  # fmt: skip
-    hpe = np.hypot(e - east, n - north)
+    hpe = np.hypot(e - velocity_en_mps[0] * t, n - velocity_en_mps[1] * t)
     hpl = np.concatenate([m.trajectory_hpl_m for _, m in parts])
-    assert (hpe < hpl).all() and np.percentile(hpe, 95) < 5.0, (hpe.max(), hpl.min())
+    assert (hpe < hpl).all() and np.percentile(hpe, 95) < p95_m, (hpe.max(), hpl.min(), np.percentile(hpe, 95))
 
 
 @pytest.fixture(scope="module")
@@ -389,7 +396,6 @@ def test_a_long_android_log_is_placed_in_segments(phone_drive, monkeypatch, kind
     log is one): placed exactly as when read whole; the real device_gnss.csv too."""
     folder, nav, lat, lon = phone_drive
     path = str(folder / ("drive.txt" if kind == "gnsslogger" else "device_gnss.csv"))
-    whole_epochs, whole_meas = pseudorange_epochs(path, kind, nav, "nominal", 5.0, NominalModel())
     for log, log_nav in ((path, nav), (str(shared("gsdc2022", "device_gnss.csv")), None)):
         if log_nav is None and kind == "gnsslogger":
             continue
@@ -402,22 +408,40 @@ def test_a_long_android_log_is_placed_in_segments(phone_drive, monkeypatch, kind
     monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 100)
     monkeypatch.setattr(segments, "SEGMENT_MIN_S", 100.0)
     monkeypatch.setattr(segments, "MARGIN_EPOCHS", 40)
+    _placed_in_three_segments(path, kind, nav, lat, lon, p95_m=10.0)
 
-    def placed(positioning):
-        with segments.placed_log(path, kind, nav, "nominal", 5.0, NominalModel(), False, positioning) as log:
-            parts = list(log.chunks(70))
-        return log, pd.concat([p for p, _ in parts], ignore_index=True), parts
 
-    log, epochs, parts = placed("snapshot")
-    assert log.segments == 3
-    pd.testing.assert_frame_equal(epochs.drop(columns=["epoch"]), whole_epochs.drop(columns=["epoch"]), check_exact=False, rtol=1e-12, atol=1e-6)
-    assert (epochs["epoch"].to_numpy() == np.arange(300)).all()
-    log, epochs, parts = placed("auto")
-    assert log.segments == 3 and (epochs["positioning"] == "smoothed").all()
-    assert (epochs["time_utc"].to_numpy() == whole_epochs["time_utc"].to_numpy()).all()
-    t = np.arange(300.0)
-    e, n, _ = geodetic2enu(epochs["lat_deg"].to_numpy(), epochs["lon_deg"].to_numpy(), np.zeros(300), np.full(300, lat), np.full(300, lon),
-                           np.zeros(300))  # fmt: skip
-    hpe = np.hypot(e + 12.0 * t, n - 16.0 * t)
-    hpl = np.concatenate([m.trajectory_hpl_m for _, m in parts])
-    assert (hpe < hpl).all() and np.percentile(hpe, 95) < 10.0, (hpe.max(), hpl.min(), np.percentile(hpe, 95))
+def test_a_long_rinex_file_is_read_in_two_passes_and_placed_in_segments(tmp_path, monkeypatch):
+    """A receiver simulated for 300 s (RINEX 3.04 observations and navigation), cut into cores of 100 epochs: the rows
+    read a block of epochs at a time are the whole file's; snapshot positions the whole log's, smoothed each within its
+    bound; the same file of one segment placed to the bit as before. The same observations in RINEX 2.11 (left to
+    georinex) are read and placed whole, as before; without --nav the error is the same."""
+    from rinex_synth import make_rinex
+
+    from tollcli.errors import UsageError
+    from tollcli.readers.rinex3_obs import iter_rinex3_observation_rows, rinex3_observation_rows, rinex3_plan
+
+    obs, nav, _rows = make_rinex(tmp_path, n_epochs=300, noise_m=1.0, seed=4)
+    obs, nav = str(obs), str(nav)
+    parts = list(iter_rinex3_observation_rows(obs, rinex3_plan(obs), 37))
+    assert len(parts) == 9
+    pd.testing.assert_frame_equal(pd.concat(parts, ignore_index=True), rinex3_observation_rows(obs))
+    epochs, meas, _ = with_trajectory(*pseudorange_epochs(obs, "rinex", nav, "nominal", 5.0, NominalModel()), "auto")
+    with segments.placed_log(obs, "rinex", nav, "nominal", 5.0, NominalModel(), False, "auto") as placed:
+        (one, one_meas), = placed.chunks(10_000)
+    assert placed.segments == 1 and (one["positioning"] == "smoothed").all()
+    pd.testing.assert_frame_equal(one, epochs)
+    _same_measurements(one_meas, meas)
+    with pytest.raises(UsageError, match="give --nav"):
+        segments.placed_log(obs, "rinex", None, "nominal", 5.0, NominalModel(), False, "auto")
+    monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 100)
+    monkeypatch.setattr(segments, "SEGMENT_MIN_S", 100.0)
+    monkeypatch.setattr(segments, "MARGIN_EPOCHS", 40)
+    _placed_in_three_segments(obs, "rinex", nav, 42.6987, 2.8956, p95_m=5.0, velocity_en_mps=(0.0, 0.0))
+    (tmp_path / "v2").mkdir()
+    version2 = str(make_rinex(tmp_path / "v2", n_epochs=300, noise_m=1.0, seed=4, version=2)[0])
+    assert rinex3_plan(version2) is None
+    epochs, _, _ = with_trajectory(*pseudorange_epochs(version2, "rinex", nav, "nominal", 5.0, NominalModel()), "auto")
+    with segments.placed_log(version2, "rinex", nav, "nominal", 5.0, NominalModel(), False, "auto") as placed:
+        assert placed.segments == 1
+        pd.testing.assert_frame_equal(pd.concat([p for p, _ in placed.chunks(70)], ignore_index=True), epochs)

@@ -37,7 +37,7 @@ def pseudorange_epochs(log: str, kind: str, nav: str | list[str] | None, sigma_m
     if kind == "rinex":
         from tollcli.gnss.rinex_positions import rinex_epochs
 
-        if _rinex_navigation(log):
+        if is_rinex_navigation(log):
             raise UsageError(f"{log}: a RINEX navigation file (satellite orbits), not observations: give it as --nav beside the "
                              "observation file")  # fmt: skip
         if nav is None:
@@ -80,7 +80,7 @@ def navigation_of(nav: str | list[str] | None):
     return load_navigation(nav)
 
 
-def _rinex_navigation(path: str) -> bool:
+def is_rinex_navigation(path: str) -> bool:
     """Whether a RINEX file's first line says it holds navigation data (type N, G, C, … in column 21), not observations."""
     try:
         with open(path, "rb") as f:

@@ -60,6 +60,16 @@ def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m:
     ephemerides, coeffs = load_navigation(nav_path)
     if rows is None:
         rows = observations(obs)
+    return rinex_rows_epochs(rows, ephemerides, coeffs, sigma_model, sigma_m, nominal, obs_path, nav_path)
+
+
+def rinex_rows_epochs(rows: pd.DataFrame, ephemerides: pd.DataFrame, coeffs, sigma_model: str = "nominal", sigma_m: float = 5.0,
+                      nominal: NominalModel | None = None, obs_path: str = "", nav_path="") -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
+    """:func:`rinex_epochs` of observation rows (:func:`tollcli.readers.rinex.observations`' columns) with the
+    navigation files' ``ephemerides`` and ionosphere ``coeffs`` (:func:`~tollcli.gnss.satellite_states.load_navigation`);
+    ``obs_path`` and ``nav_path`` name the files in an error."""
+    if sigma_model == "input":
+        raise UsageError("--sigma-model input: RINEX observations carry no per-measurement σ; use nominal or constant")
     t_rx = gps_seconds(rows["time"].to_numpy())
     sv = rows["sv"].to_numpy(str)
     pr = rows["pr_m"].to_numpy(float)

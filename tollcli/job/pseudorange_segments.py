@@ -1,13 +1,15 @@
 """A pseudorange log solved and placed segment by segment: memory flat in the log's length.
 
-libRSF logs, GSDC derived CSVs, u-blox RAWX logs and Android logs (GnssLogger text, GSDC ``device_gnss.csv``)
-(:data:`SEGMENTED_KINDS`) are read this way; RINEX observation files are read and solved whole
+libRSF logs, GSDC derived CSVs, u-blox RAWX logs, Android logs (GnssLogger text, GSDC ``device_gnss.csv``) and RINEX 3
+observation files (:data:`SEGMENTED_KINDS`) are read this way; a RINEX file the direct reader leaves to georinex
+(RINEX 2, and the cases :mod:`tollcli.readers.rinex3_obs` names) is read and solved whole
 (:func:`~tollcli.gnss.pseudorange_inputs.pseudorange_epochs`).
 
 The log is read in blocks of rows (:func:`~tollcli.readers.librsf.iter_librsf`,
 :func:`~tollcli.readers.gsdc.iter_gsdc_derived`, :func:`~tollcli.readers.ubx.iter_rawx` after a first pass over the
 u-blox log for its navigation data, :func:`~tollcli.readers.gnsslogger.iter_gnsslogger`,
-:func:`~tollcli.readers.gnsslogger.iter_device_gnss`: :mod:`tollcli.job.segment_formats`). Its epochs are cut into segments of
+:func:`~tollcli.readers.gnsslogger.iter_device_gnss`, :func:`~tollcli.readers.rinex3_obs.iter_rinex3_observation_rows`
+after a first pass that chooses each system's code: :mod:`tollcli.job.segment_formats`). Its epochs are cut into segments of
 :data:`SEGMENT_EPOCHS` (the segment's *core*); each segment is solved (snapshot WLS) and placed by the trajectory
 estimator (:func:`~tollcli.integrity.trajectory.with_trajectory`) together with :data:`MARGIN_EPOCHS` epochs before
 and after its core — the passes converge there, the backward one from the future — and only its core is kept. The
@@ -38,10 +40,10 @@ import pandas as pd
 
 from tollcli.gnss.measurements import Measurements
 from tollcli.gnss.sigma_models import NominalModel
-from tollcli.job.segment_formats import FORMATS, SegmentFormat
+from tollcli.job.segment_formats import FORMATS, ReadWhole, SegmentFormat
 
 #: pseudorange formats read and placed segment by segment
-SEGMENTED_KINDS = ("librsf", "gsdc-derived", "ubx", "gnsslogger", "device-gnss")
+SEGMENTED_KINDS = ("librsf", "gsdc-derived", "ubx", "gnsslogger", "device-gnss", "rinex")
 #: the epochs of a segment's core, at least …
 SEGMENT_EPOCHS = 8_192
 #: … and at least this long (s): the estimator measures the noise from a segment's own residuals, and on the Berlin
@@ -131,10 +133,6 @@ def _whole(epochs: pd.DataFrame, meas: Measurements, positioning: str, skipped: 
                      _whole=(epochs, meas))  # fmt: skip
 
 
-class _Unordered(Exception):
-    """The log's lines are not in time order: it cannot be cut into segments."""
-
-
 
 
 def _segments(fmt: SegmentFormat, log: str, sigma_model: str, sigma_m: float, nominal: NominalModel, strict: bool,
@@ -159,7 +157,7 @@ def _segments(fmt: SegmentFormat, log: str, sigma_model: str, sigma_m: float, no
         placer.place(rows, odometry, core)
     except BaseException as exc:  # nothing stored is left behind, whatever stopped the placing
         placer.close()
-        if isinstance(exc, _Unordered):
+        if isinstance(exc, ReadWhole):
             return None
         if isinstance(exc, DataError) and not exc.args[0].startswith(log):
             raise DataError(f"{log}: {exc}") from None
@@ -183,7 +181,7 @@ class _Cutter:
         for table, attr in ((rows, "last_row"), (odo, "last_odo")):
             k = self.row_keys(table) if table is not None and len(table) else np.zeros(0, np.int64)
             if k.size and (k[0] < getattr(self, attr) or (np.diff(k) < 0).any()):
-                raise _Unordered
+                raise ReadWhole("its lines are not in time order")
             if k.size:
                 setattr(self, attr, int(k[-1]))
         if len(rows):

@@ -13,6 +13,11 @@ import pandas as pd
 from tollcli.gnss.measurements import Measurements
 
 
+class ReadWhole(Exception):
+    """The log cannot be cut into segments (its lines are not in time order, or its reader reads it only whole): it is
+    read and solved whole."""
+
+
 @dataclass(frozen=True)
 class SegmentFormat:
     """How a segmented format is read and solved: ``blocks(path, strict)`` its rows in file order, a block at a time
@@ -123,5 +128,36 @@ def _android(kind: str, nav) -> SegmentFormat:
                          lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no measurement epochs")  # fmt: skip
 
 
+def _rinex(nav) -> SegmentFormat:
+    """A RINEX 3 observation file (orbits from ``--nav``), read directly in two passes: the first chooses each system's
+    code, the second gives the rows a block of epochs at a time. A file the direct reader leaves to georinex, or
+    without ``--nav``, is read whole (where those say what is wrong)."""
+    from tollcli.gnss.pseudorange_inputs import is_rinex_navigation
+    from tollcli.gnss.rinex_positions import rinex_rows_epochs
+    from tollcli.gnss.satellite_states import load_navigation
+    from tollcli.readers.gps_time import gps_seconds
+    from tollcli.readers.rinex3_obs import iter_rinex3_observation_rows, rinex3_plan
+
+    known: dict = {}
+
+    def blocks(path, _strict):
+        plan = rinex3_plan(path) if nav is not None and not is_rinex_navigation(path) else None
+        if plan is None:
+            raise ReadWhole("read by georinex, or not to be solved")
+        known["ephemerides"], known["coeffs"], known["path"] = *load_navigation(nav), path
+        for rows in iter_rinex3_observation_rows(path, plan):
+            yield rows, None, 0
+
+    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
+        return rinex_rows_epochs(rows, known["ephemerides"], known["coeffs"], sigma_model, sigma_m, nominal, known["path"], nav)
+
+    def millis(times) -> np.ndarray:
+        return np.round(gps_seconds(np.asarray(times, "datetime64[ns]")) * 1000).astype(np.int64)
+
+    return SegmentFormat(blocks, lambda rows: millis(rows["time"].to_numpy()), solve, lambda epochs: millis(epochs["time_gps"].to_numpy()),
+                         "no pseudorange")  # fmt: skip
+
+
 FORMATS = {"librsf": lambda _nav: _librsf(), "gsdc-derived": lambda _nav: _gsdc_derived(), "ubx": _ubx,
-           "gnsslogger": lambda nav: _android("gnsslogger", nav), "device-gnss": lambda nav: _android("device-gnss", nav)}  # fmt: skip
+           "gnsslogger": lambda nav: _android("gnsslogger", nav), "device-gnss": lambda nav: _android("device-gnss", nav),
+           "rinex": _rinex}  # fmt: skip

@@ -97,3 +97,12 @@ def checked_numbers(table: pd.DataFrame, path, floats: tuple[str, ...], integers
     result.attrs["skipped_lines"] = int(bad.sum())
     result.attrs["first_skipped_line"] = first
     return result
+
+
+def joined_blocks(parts: list[pd.DataFrame]) -> pd.DataFrame:
+    """A CSV log's checked blocks (:func:`checked_numbers` each) as one table: their rows in order, and
+    ``attrs['skipped_lines']`` / ``attrs['first_skipped_line']`` of them all."""
+    table = pd.concat(parts, ignore_index=True)
+    table.attrs = {"skipped_lines": sum(p.attrs["skipped_lines"] for p in parts),
+                   "first_skipped_line": next((p.attrs["first_skipped_line"] for p in parts if p.attrs["first_skipped_line"]), None)}  # fmt: skip
+    return table

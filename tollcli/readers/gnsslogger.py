@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.errors import DataError, UsageError
-from tollcli.readers.csv_numbers import checked_numbers
+from tollcli.readers.csv_numbers import checked_numbers, joined_blocks
 
 #: the ``Raw`` fields a pseudorange needs (Android GnssClock + GnssMeasurement names)
 RAW_REQUIRED = ("TimeNanos", "FullBiasNanos", "BiasNanos", "TimeOffsetNanos", "ReceivedSvTimeNanos", "State",
@@ -155,11 +155,7 @@ def read_device_gnss(path: str, strict: bool = False) -> pd.DataFrame:
     """A GSDC 2022/2023 ``device_gnss.csv`` (``Raw`` fields + Google's satellite columns), checked: a row whose
     number fields are not numbers is skipped and counted (``attrs['skipped_lines']``), or with ``strict`` an error.
     Its blocks (:func:`iter_device_gnss`) joined."""
-    parts = list(iter_device_gnss(path, strict))
-    table = pd.concat(parts, ignore_index=True)
-    table.attrs = {"skipped_lines": sum(p.attrs["skipped_lines"] for p in parts),
-                   "first_skipped_line": next((p.attrs["first_skipped_line"] for p in parts if p.attrs["first_skipped_line"]), None)}  # fmt: skip
-    return table
+    return joined_blocks(list(iter_device_gnss(path, strict)))
 
 
 #: rows of a ``device_gnss.csv`` read at a time by :func:`iter_device_gnss`

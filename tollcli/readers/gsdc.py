@@ -12,7 +12,7 @@ from collections.abc import Iterator
 import pandas as pd
 
 from tollcli.errors import DataError
-from tollcli.readers.csv_numbers import checked_numbers
+from tollcli.readers.csv_numbers import checked_numbers, joined_blocks
 
 ANDROID_CONSTELLATION = {1: "GPS", 2: "SBAS", 3: "GLONASS", 4: "QZSS", 5: "BeiDou", 6: "Galileo", 7: "NavIC"}
 REQUIRED = ("millisSinceGpsEpoch", "constellationType", "svid", "signalType", "xSatPosM", "ySatPosM", "zSatPosM",
@@ -27,11 +27,7 @@ def read_gsdc_derived(path, strict: bool = False) -> pd.DataFrame:
     """The derived CSV with the columns the WLS needs, checked: its blocks (:func:`iter_gsdc_derived`) joined, a row
     whose number fields are not numbers skipped and counted (``attrs['skipped_lines']``, the first at
     ``attrs['first_skipped_line']``), or with ``strict`` an error naming its line."""
-    parts = list(iter_gsdc_derived(path, strict))
-    table = pd.concat(parts, ignore_index=True)
-    table.attrs = {"skipped_lines": sum(p.attrs["skipped_lines"] for p in parts),
-                   "first_skipped_line": next((p.attrs["first_skipped_line"] for p in parts if p.attrs["first_skipped_line"]), None)}  # fmt: skip
-    return table
+    return joined_blocks(list(iter_gsdc_derived(path, strict)))
 
 
 #: rows of a derived CSV checked at a time by :func:`iter_gsdc_derived`

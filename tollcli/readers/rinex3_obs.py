@@ -21,7 +21,8 @@ synthetic and real files, and on 460 randomly damaged copies of a real one (ever
 from __future__ import annotations
 
 import datetime as dt
-import io
+from collections.abc import Iterator
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -34,78 +35,150 @@ SYSTEMS = tuple(CODES)
 
 def rinex3_observation_rows(path: str) -> pd.DataFrame | None:
     """One row per (epoch, satellite) with a pseudorange — time (GPS time, ns), sv, pr_m, cn0_dbhz, code — sorted by
-    time and satellite; None where georinex should read the file (see the module's docstring)."""
-    try:
-        with open(path, "rb") as raw:
-            text = raw.read().decode("ascii")
-    except (OSError, UnicodeDecodeError):
-        return None
-    try:
-        return _rows(io.StringIO(text, newline=None).readlines())  # lines as georinex's text file gives them
-    except (ValueError, IndexError, KeyError):
-        return None
+    time and satellite; None where georinex should read the file (see the module's docstring). Its blocks
+    (:func:`iter_rinex3_observation_rows`) joined."""
+    plan = rinex3_plan(path)
+    return None if plan is None else pd.concat(list(iter_rinex3_observation_rows(path, plan)), ignore_index=True)
 
 
-def _rows(lines: list[str]) -> pd.DataFrame | None:
-    header = _header(lines)
-    if header is None:
+#: epochs of a RINEX 3 observation file turned into rows at a time by :func:`iter_rinex3_observation_rows`
+BLOCK_EPOCHS = 4_096
+
+
+@dataclass(frozen=True)
+class Rinex3Plan:
+    """What a first pass over a RINEX 3 observation file found: each system's observation types and the columns read
+    (the candidate codes and their C/N0), the code each system's pseudorange is read from (None: none has a value)."""
+
+    types: dict[str, list[str]]
+    columns: dict[str, list[int]]
+    codes: dict[str, str | None]
+
+
+def rinex3_plan(path: str) -> Rinex3Plan | None:
+    """A first pass over the file (line by line: memory flat): its plan, or None where georinex should read it."""
+    try:
+        with _lines(path) as lines:
+            header = _header_of(lines)
+            if header is None:
+                return None
+            types, columns, wanted = header
+            seen_value = {s: np.zeros(len(columns[s]), bool) for s in columns}
+            for _time, sats in _records(lines, columns):
+                for sv, values in sats:
+                    if sv[0] in seen_value:
+                        seen_value[sv[0]] |= np.isfinite(values)
+            for _ in lines:  # (what follows the records is not read, but must be ASCII text too)
+                pass
+    except (ValueError, IndexError, KeyError, OSError, UnicodeDecodeError, _Refused):
         return None
-    types, at = header
+    codes = {}
+    for system in columns:
+        index = {types[system][i]: k for k, i in enumerate(columns[system])}
+        codes[system] = next((c for c in wanted[system] if seen_value[system][index[c]]), None)
+    if not any(codes.values()):  # (no satellite of any system with a pseudorange)
+        return None
+    return Rinex3Plan(types, columns, codes)
+
+
+def iter_rinex3_observation_rows(path: str, plan: Rinex3Plan, block_epochs: int | None = None) -> Iterator[pd.DataFrame]:
+    """The file's rows (as :func:`rinex3_observation_rows`), :data:`BLOCK_EPOCHS` epochs at a time, in time order, by
+    the ``plan`` its first pass made (:func:`rinex3_plan`)."""
+    block: list[tuple[dt.datetime, list]] = []
+    with _lines(path) as lines:
+        _header_of(lines)
+        for record in _records(lines, plan.columns):
+            block.append(record)
+            if len(block) == (block_epochs or BLOCK_EPOCHS):
+                yield _block_rows(block, plan)
+                block = []
+    if block:
+        yield _block_rows(block, plan)
+
+
+class _Refused(Exception):
+    """The file is one georinex should read (the module's docstring says when)."""
+
+
+def _lines(path: str):
+    """The file's lines as georinex's text file gives them (universal newlines), ASCII only."""
+    return open(path, encoding="ascii", newline=None)
+
+
+def _header_of(lines) -> tuple[dict[str, list[str]], dict[str, list[int]], dict[str, list[str]]] | None:
+    """The header's observation types, the columns read of each system and its candidate codes (in CODES' order);
+    ``lines`` left at the first record. None where georinex should read the file."""
+    header = []
+    for line in lines:
+        header.append(line)
+        if "END OF HEADER" in line:
+            break
+    found = _header(header)
+    if found is None:
+        return None
+    types, _at = found
     systems = [s for s in SYSTEMS if s in types]
     if not systems:
         return None
-    wanted = {s: [c for c in CODES[s] if c in types[s]] for s in systems}  # the candidates, in CODES' order
+    wanted = {s: [c for c in CODES[s] if c in types[s]] for s in systems}
     columns = {s: sorted({types[s].index(c) for c in wanted[s]} | {types[s].index("S" + c[1:]) for c in wanted[s] if "S" + c[1:] in types[s]})
                for s in systems}  # fmt: skip
-    times: list[dt.datetime] = []
+    return types, columns, wanted
+
+
+def _records(lines, columns: dict[str, list[int]]) -> Iterator[tuple[dt.datetime, list[tuple[str, np.ndarray]]]]:
+    """Each epoch's time and its satellites' values of ``columns`` (the systems read), as georinex reads the records:
+    a time it cannot read passed over (and the lines after it end the records), the records ending at the first line
+    that is not an epoch's. Raises _Refused where georinex should read the file."""
     seen_times: set[dt.datetime] = set()
-    per_system = {s: ([], [], []) for s in systems}  # each system's (epoch numbers, satellites, the columns' values)
-    while at < len(lines):
-        line = lines[at]
-        at += 1
+    for line in lines:
         if not line.startswith(">"):
-            break
+            return
         try:
             time = _epoch_time(line)
         except ValueError:  # georinex passes over a time it cannot read (and the lines after it end the records)
             continue
         n_sats = int(line[33:35])
         if time in seen_times:
-            return None
+            raise _Refused
         seen_times.add(time)
-        times.append(time)
-        seen = set()
-        for sat_line in lines[at : at + n_sats]:
+        seen, sats = set(), []
+        for _ in range(n_sats):
+            sat_line = next(lines, None)
+            if sat_line is None:  # (the file ends inside the epoch)
+                raise _Refused
             sv, data = sat_line[:3], sat_line[3:]
             if not data.strip("\r\n") or "#" in data or sv in seen:
-                return None
+                raise _Refused
             seen.add(sv)
-            if sv[0] in per_system:
-                epochs, svs, values = per_system[sv[0]]
-                epochs.append(len(times) - 1)
-                svs.append(sv.replace(" ", "0"))
-                values.append([_value(data[16 * i : 16 * i + 14]) for i in columns[sv[0]]])
-        if at + n_sats > len(lines):
-            return None
-        at += n_sats
+            if sv[0] in columns:
+                sats.append((sv.replace(" ", "0"), np.array([_value(data[16 * i : 16 * i + 14]) for i in columns[sv[0]]], float)))
+        yield time, sats
+
+
+def _block_rows(block: list[tuple[dt.datetime, list]], plan: Rinex3Plan) -> pd.DataFrame:
+    """The rows of a block of records (time, satellites' values), sorted by time and satellite."""
     frames = []
-    for system, (epochs, svs, values) in per_system.items():
-        table = np.array(values, float).reshape(len(epochs), len(columns[system]))
-        index = {types[system][i]: k for k, i in enumerate(columns[system])}
-        code = next((c for c in wanted[system] if np.isfinite(table[:, index[c]]).any()), None)
-        if code is None:  # (no satellite of the system, or none with a pseudorange)
+    for system, code in plan.codes.items():
+        if code is None:
             continue
+        epochs, svs, values = [], [], []
+        for k, (_time, sats) in enumerate(block):
+            for sv, v in sats:
+                if sv[0] == system:
+                    epochs.append(k)
+                    svs.append(sv)
+                    values.append(v)
+        table = np.array(values, float).reshape(len(epochs), len(plan.columns[system]))
+        index = {plan.types[system][i]: k for k, i in enumerate(plan.columns[system])}
         snr = table[:, index["S" + code[1:]]] if "S" + code[1:] in index else np.full(len(epochs), np.nan)
-        frames.append(pd.DataFrame({"epoch": epochs, "sv": np.asarray(svs, dtype=object), "pr_m": table[:, index[code]],
+        frames.append(pd.DataFrame({"epoch": np.asarray(epochs, np.int64), "sv": np.asarray(svs, dtype=object), "pr_m": table[:, index[code]],
                                     "cn0_dbhz": snr, "code": code}))  # fmt: skip
-    if not frames:
-        return None
     out = pd.concat(frames, ignore_index=True)
     out = out[np.isfinite(out["pr_m"].to_numpy())]
-    stamps = np.array(times, dtype="datetime64[us]").astype("datetime64[ns]")
+    stamps = np.array([time for time, _ in block], dtype="datetime64[us]").astype("datetime64[ns]")
     out.insert(0, "time", stamps[out["epoch"].to_numpy()])
-    out = out.drop(columns="epoch").sort_values(["time", "sv"], kind="stable").reset_index(drop=True)
-    return out if len(out) else None
+    return out.drop(columns="epoch").sort_values(["time", "sv"], kind="stable").reset_index(drop=True)
 
 
 def _header(lines: list[str]) -> tuple[dict[str, list[str]], int] | None:
