@@ -133,6 +133,12 @@ def _run_forked_child(args: list[str], pipes, cwd: Path, env: dict) -> None:
     import importlib
     import traceback
 
+    import gc
+
+    # what the parent left for the collector is not the child's to collect: a finalizer may wait for a thread that was
+    # not forked (libosmium's reader, after a test read an OpenStreetMap file in this worker: the child's first
+    # collection then hung until the timeout, 5 minutes of CI; tests/test_osm_network.py then test_policies.py showed it)
+    gc.freeze()
     code = 1
     try:
         (in_r, in_w), (out_r, out_w), (err_r, err_w) = pipes

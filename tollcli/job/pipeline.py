@@ -366,8 +366,8 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
                         nominal: NominalModel, placed: dict[str, str], charger: TailCharger,
                         stats: ReadStats) -> Iterator[tuple[pd.DataFrame, Measurements, None]]:  # fmt: skip
     """A pseudorange log's (RINEX, GnssLogger, GSDC, u-blox RAWX, libRSF) epochs and measurements, in chunks of
-    :data:`CHUNK_EPOCHS` epochs. The positions are solved from the run's replay, a libRSF log's segment by segment and
-    any other's whole (:mod:`tollcli.job.pseudorange_segments`) — each epoch alone (snapshot WLS), then placed by the
+    :data:`CHUNK_EPOCHS` epochs. The positions are solved from the run's replay, a long log segment by segment
+    (:mod:`tollcli.job.pseudorange_segments`) — each epoch alone (snapshot WLS), then placed by the
     trajectory estimator (``settings.positioning``, :func:`~tollcli.integrity.trajectory.with_trajectory`; ``placed`` receives the positioning
     it used and the note why a trajectory was refused, and ``charger`` counts positions as independent evidence only the trajectory's correlation time apart);
     from there on the chunks take the same path as a navigation log's. ``stats`` counts the lines (records, frames) the

@@ -99,7 +99,6 @@ def _android(kind: str, nav) -> SegmentFormat:
     """An Android log, GnssLogger text (``Raw`` records; orbits from ``--nav``) or GSDC ``device_gnss.csv`` (orbits
     from its own satellite columns, or ``--nav``), its records a block at a time; an epoch's key its receiver time
     (ms), the same for every record of the epoch (one GnssClock)."""
-    from tollcli.errors import UsageError
     from tollcli.gnss.android_raw import raw_pseudoranges
     from tollcli.gnss.pseudorange_inputs import navigation_of
     from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites, with_device_gnss_satellites
@@ -110,8 +109,8 @@ def _android(kind: str, nav) -> SegmentFormat:
     def blocks(path, strict):
         ephemerides, known["iono"] = navigation_of(nav)
         if kind == "gnsslogger":
-            if ephemerides is None:
-                raise UsageError(f"{path}: a GnssLogger file carries no satellite orbits: give --nav NAVFILE (RINEX 2 or 3)")
+            if ephemerides is None:  # (read whole, where the error says so)
+                raise ReadWhole("no orbits")
             for read in iter_gnsslogger(path, strict):
                 rows = with_broadcast_satellites(raw_pseudoranges(read.raw), ephemerides) if read.raw is not None else pd.DataFrame()
                 yield rows, None, read.n_malformed
