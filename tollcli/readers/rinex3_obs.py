@@ -37,8 +37,9 @@ def rinex3_observation_rows(path: str) -> pd.DataFrame | None:
     """One row per (epoch, satellite) with a pseudorange — time (GPS time, ns), sv, pr_m, cn0_dbhz, code — sorted by
     time and satellite; None where georinex should read the file (see the module's docstring). Its blocks
     (:func:`iter_rinex3_observation_rows`) joined."""
-    plan = rinex3_plan(path)
-    return None if plan is None else pd.concat(list(iter_rinex3_observation_rows(path, plan)), ignore_index=True)
+    records: list = []
+    plan = rinex3_plan(path, keep=records)  # (read once: its records kept)
+    return None if plan is None else _block_rows(records, plan)
 
 
 #: epochs of a RINEX 3 observation file turned into rows at a time by :func:`iter_rinex3_observation_rows`
@@ -55,8 +56,9 @@ class Rinex3Plan:
     codes: dict[str, str | None]
 
 
-def rinex3_plan(path: str) -> Rinex3Plan | None:
-    """A first pass over the file (line by line: memory flat): its plan, or None where georinex should read it."""
+def rinex3_plan(path: str, keep: list | None = None) -> Rinex3Plan | None:
+    """A first pass over the file (line by line: memory flat): its plan, or None where georinex should read it.
+    ``keep``: a list that receives the records read (the whole file's, for a caller that reads it whole)."""
     try:
         with _lines(path) as lines:
             header = _header_of(lines)
@@ -64,8 +66,10 @@ def rinex3_plan(path: str) -> Rinex3Plan | None:
                 return None
             types, columns, wanted = header
             seen_value = {s: np.zeros(len(columns[s]), bool) for s in columns}
-            for _time, sats in _records(lines, columns):
-                for sv, values in sats:
+            for record in _records(lines, columns):
+                if keep is not None:
+                    keep.append(record)
+                for sv, values in record[1]:
                     if sv[0] in seen_value:
                         seen_value[sv[0]] |= np.isfinite(values)
             for _ in lines:  # (what follows the records is not read, but must be ASCII text too)
@@ -158,17 +162,17 @@ def _records(lines, columns: dict[str, list[int]]) -> Iterator[tuple[dt.datetime
 
 def _block_rows(block: list[tuple[dt.datetime, list]], plan: Rinex3Plan) -> pd.DataFrame:
     """The rows of a block of records (time, satellites' values), sorted by time and satellite."""
+    read = {system: ([], [], []) for system, code in plan.codes.items() if code is not None}  # epochs, satellites, values
+    for k, (_time, sats) in enumerate(block):
+        for sv, v in sats:
+            if sv[0] in read:
+                epochs, svs, values = read[sv[0]]
+                epochs.append(k)
+                svs.append(sv)
+                values.append(v)
     frames = []
-    for system, code in plan.codes.items():
-        if code is None:
-            continue
-        epochs, svs, values = [], [], []
-        for k, (_time, sats) in enumerate(block):
-            for sv, v in sats:
-                if sv[0] == system:
-                    epochs.append(k)
-                    svs.append(sv)
-                    values.append(v)
+    for system, (epochs, svs, values) in read.items():
+        code = plan.codes[system]
         table = np.array(values, float).reshape(len(epochs), len(plan.columns[system]))
         index = {plan.types[system][i]: k for k, i in enumerate(plan.columns[system])}
         snr = table[:, index["S" + code[1:]]] if "S" + code[1:] in index else np.full(len(epochs), np.nan)
