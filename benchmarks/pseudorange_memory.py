@@ -6,8 +6,8 @@ simulated city drive, on the whole of it, and on a drive twice as long, in the s
 The drive is ``tollcli simulate --nlos --odometry --duration 8000 --rate 5 --seed 11`` (40 000 epochs at 5 Hz, written
 once into ``benchmarks/integrity_truth/sim/city-long``, ≈ 80 s), as libRSF text (pseudoranges and odometry) and as a
 GSDC derived CSV, and the derived CSV's measurements as a GSDC ``device_gnss.csv`` (:func:`device_gnss`); the longer
-one the same with ``--duration 16000`` (``sim/city-80000``, ≈ 3 min once). Then RINEX 3 observations of a static
-receiver at 10 Hz (:func:`rinex_drive`, ``sim/rinex-static``; ``--rinex-only``: only those) of a quarter, the whole
+one the same with ``--duration 16000`` (``sim/city-80000``, ≈ 3 min once). Then RINEX 3 and RINEX 2 observations of a
+static receiver at 10 Hz (:func:`rinex_drive`, ``sim/rinex-static``; ``--rinex-only``: only those) of a quarter, the whole
 and the longer number of epochs. Each is cut to its first quarter (whole lines, the same epochs) and run with the whole and the longer drive. The ratios of the
 peak RSS say how memory grows with the log (4.0 whole / quarter: in proportion; 1.0: flat). Every format is read in
 blocks and placed segment by segment (``tollcli/job/pseudorange_segments.py``: cores of 8 192 epochs and at least
@@ -83,16 +83,17 @@ def device_gnss(derived: Path, out: Path, chunk_rows: int = 200_000) -> None:
             header = False
 
 
-def rinex_drive(folder: Path, epochs: int, rate_hz: int = 10) -> tuple[Path, Path]:
-    """A static receiver's RINEX 3.04 observations (GPS and Galileo, ``rate_hz``) and navigation file, from the test
-    suite's simulator (``tests/rinex_synth.py``: light-time pseudoranges, Klobuchar, Saastamoinen): each second
-    simulated, the epochs between interpolated linearly (a range's curvature over a second: millimetres). Written once."""
+def rinex_drive(folder: Path, epochs: int, rate_hz: int = 10, version: int = 3) -> tuple[Path, Path]:
+    """A static receiver's RINEX 3.04 (``version`` 2: 2.11) observations (GPS and Galileo, ``rate_hz``) and navigation
+    file, from the test suite's simulator (``tests/rinex_synth.py``: light-time pseudoranges, Klobuchar, Saastamoinen):
+    each second simulated, the epochs between interpolated linearly (a range's curvature over a second: millimetres).
+    Written once."""
     import datetime as dt
 
     sys.path.insert(0, str(ROOT / "tests"))
     from rinex_synth import constellation, observe, write_nav
 
-    obs, nav = folder / f"static-{epochs}.24o", folder / "static.24n"
+    obs, nav = folder / f"static{'' if version == 3 else version}-{epochs}.24o", folder / "static.24n"
     if obs.exists() and nav.exists():
         return obs, nav
     folder.mkdir(parents=True, exist_ok=True)
@@ -108,6 +109,9 @@ def rinex_drive(folder: Path, epochs: int, rate_hz: int = 10) -> tuple[Path, Pat
             f"{'E    2 C1C S1C':<60}SYS / # / OBS TYPES",
             f"{start.year:6d}{start.month:6d}{start.day:6d}{start.hour:6d}{start.minute:6d}{start.second:13.7f}     GPS         TIME OF FIRST OBS",
             f"{'':60}END OF HEADER"]  # fmt: skip
+    if version == 2:
+        head = [f"{'2.11':>9}{'':11}{'OBSERVATION DATA':<20}{'M (MIXED)':<20}RINEX VERSION / TYPE", f"{'     2    C1    S1':<60}# / TYPES OF OBSERV",
+                head[3], head[4]]  # fmt: skip
     with open(obs, "w") as out:
         out.write("\n".join(head) + "\n")
         for e in range(epochs):
@@ -115,10 +119,15 @@ def rinex_drive(folder: Path, epochs: int, rate_hz: int = 10) -> tuple[Path, Pat
             now, then = by_second.get(k, {}), by_second.get(k + 1, {})
             both = sorted(set(now) & set(then))
             t = start + dt.timedelta(seconds=e / rate_hz)
-            lines = [f"> {t:%Y %m %d %H %M}{t.second + t.microsecond / 1e6:11.7f}  0{len(both):3d}"]
+            if version == 2:
+                svs = "".join(both)
+                lines = [f" {t:%y} {t.month:2d} {t.day:2d} {t.hour:2d} {t.minute:2d}{t.second + t.microsecond / 1e6:11.7f}  0{len(both):3d}{svs[:36]}"]
+                lines += [f"{'':32}{svs[i : i + 36]}" for i in range(36, len(svs), 36)]
+            else:
+                lines = [f"> {t:%Y %m %d %H %M}{t.second + t.microsecond / 1e6:11.7f}  0{len(both):3d}"]
             for sv in both:
                 pr = now[sv][0] + (then[sv][0] - now[sv][0]) * f / rate_hz
-                lines.append(f"{sv}{pr:14.3f}  {now[sv][1]:14.3f}  ")
+                lines.append(f"{sv if version == 3 else ''}{pr:14.3f}  {now[sv][1]:14.3f}  ")
             out.write("\n".join(lines) + "\n")
     return obs, nav
 
@@ -129,19 +138,21 @@ def rinex_memory(quarter_epochs: int, epochs: int, longer: int) -> None:
     tollcli = [sys.executable, "-m", "tollcli", "integrity"]
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for n in (quarter_epochs, epochs, longer):
-            obs, nav = rinex_drive(folder, n)
-            runs[n] = timed([*tollcli, str(obs), "--nav", str(nav), "-q", "-o", str(Path(tmp) / "table.csv")])
-            print(f"  RINEX 3 (10 Hz)  {n // 1000:3d}k epochs {obs.stat().st_size / 1e6:5.0f} MB: {runs[n][0]:6.2f} s, peak RSS {runs[n][1]:6.0f} MB")
-    print(f"  RINEX 3          {epochs // 1000}k / {quarter_epochs // 1000}k: peak RSS {runs[epochs][1] / runs[quarter_epochs][1]:.2f}; "
-          f"{longer // 1000}k / {epochs // 1000}k: {runs[longer][1] / runs[epochs][1]:.2f}")  # fmt: skip
+        for version in (3, 2):
+            for n in (quarter_epochs, epochs, longer):
+                obs, nav = rinex_drive(folder, n, version=version)
+                runs[n] = timed([*tollcli, str(obs), "--nav", str(nav), "-q", "-o", str(Path(tmp) / "table.csv")])
+                print(f"  RINEX {version} (10 Hz)  {n // 1000:3d}k epochs {obs.stat().st_size / 1e6:5.0f} MB: {runs[n][0]:6.2f} s, "
+                      f"peak RSS {runs[n][1]:6.0f} MB")  # fmt: skip
+            print(f"  RINEX {version}          {epochs // 1000}k / {quarter_epochs // 1000}k: peak RSS {runs[epochs][1] / runs[quarter_epochs][1]:.2f}; "
+                  f"{longer // 1000}k / {epochs // 1000}k: {runs[longer][1] / runs[epochs][1]:.2f}")  # fmt: skip
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--epochs", type=int, default=40_000, help="the whole drive's epochs (5 Hz)")
     parser.add_argument("--longer", type=int, default=80_000, help="a longer drive's epochs (0: none)")
-    parser.add_argument("--rinex-only", action="store_true", help="only the RINEX 3 files (a static receiver at 10 Hz)")
+    parser.add_argument("--rinex-only", action="store_true", help="only the RINEX files (3 and 2: a static receiver at 10 Hz)")
     args = parser.parse_args()
     if args.rinex_only:
         rinex_memory(args.epochs // 4, args.epochs, args.longer or 2 * args.epochs)

@@ -414,34 +414,43 @@ def test_a_long_android_log_is_placed_in_segments(phone_drive, monkeypatch, kind
 def test_a_long_rinex_file_is_read_in_two_passes_and_placed_in_segments(tmp_path, monkeypatch):
     """A receiver simulated for 300 s (RINEX 3.04 observations and navigation), cut into cores of 100 epochs: the rows
     read a block of epochs at a time are the whole file's; snapshot positions the whole log's, smoothed each within its
-    bound; the same file of one segment placed to the bit as before. The same observations in RINEX 2.11 (left to
-    georinex) are read and placed whole, as before; without --nav the error is the same."""
+    bound; the same file of one segment placed to the bit as before. The same observations in RINEX 2.11: the same,
+    read by the RINEX 2 reader (they were read whole by georinex before); a copy the direct readers leave to georinex
+    (an epoch flagged 6) is read and placed whole; without --nav the error is the same."""
     from rinex_synth import make_rinex
 
     from tollcli.errors import UsageError
-    from tollcli.readers.rinex3_obs import iter_rinex3_observation_rows, rinex3_observation_rows, rinex3_plan
+    from tollcli.readers.rinex3_obs import rinex3_plan
+    from tollcli.readers.rinex_obs import iter_observation_rows, observation_plan, observation_rows
 
     obs, nav, _rows = make_rinex(tmp_path, n_epochs=300, noise_m=1.0, seed=4)
     obs, nav = str(obs), str(nav)
-    parts = list(iter_rinex3_observation_rows(obs, rinex3_plan(obs), 37))
-    assert len(parts) == 9
-    pd.testing.assert_frame_equal(pd.concat(parts, ignore_index=True), rinex3_observation_rows(obs))
-    epochs, meas, _ = with_trajectory(*pseudorange_epochs(obs, "rinex", nav, "nominal", 5.0, NominalModel()), "auto")
-    with segments.placed_log(obs, "rinex", nav, "nominal", 5.0, NominalModel(), False, "auto") as placed:
-        (one, one_meas), = placed.chunks(10_000)
-    assert placed.segments == 1 and (one["positioning"] == "smoothed").all()
-    pd.testing.assert_frame_equal(one, epochs)
-    _same_measurements(one_meas, meas)
-    with pytest.raises(UsageError, match="give --nav"):
-        segments.placed_log(obs, "rinex", None, "nominal", 5.0, NominalModel(), False, "auto")
+    (tmp_path / "v2").mkdir()
+    version2 = str(make_rinex(tmp_path / "v2", n_epochs=300, noise_m=1.0, seed=4, version=2)[0])
+    assert rinex3_plan(version2) is None and observation_plan(version2).version == 2
+    for path in (obs, version2):
+        parts = list(iter_observation_rows(path, observation_plan(path), 37))
+        assert len(parts) == 9
+        pd.testing.assert_frame_equal(pd.concat(parts, ignore_index=True), observation_rows(path))
+        epochs, meas, _ = with_trajectory(*pseudorange_epochs(path, "rinex", nav, "nominal", 5.0, NominalModel()), "auto")
+        with segments.placed_log(path, "rinex", nav, "nominal", 5.0, NominalModel(), False, "auto") as placed:
+            (one, one_meas), = placed.chunks(10_000)
+        assert placed.segments == 1 and (one["positioning"] == "smoothed").all()
+        pd.testing.assert_frame_equal(one, epochs)
+        _same_measurements(one_meas, meas)
+        with pytest.raises(UsageError, match="give --nav"):
+            segments.placed_log(path, "rinex", None, "nominal", 5.0, NominalModel(), False, "auto")
     monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 100)
     monkeypatch.setattr(segments, "SEGMENT_MIN_S", 100.0)
     monkeypatch.setattr(segments, "MARGIN_EPOCHS", 40)
-    _placed_in_three_segments(obs, "rinex", nav, 42.6987, 2.8956, p95_m=5.0, velocity_en_mps=(0.0, 0.0))
-    (tmp_path / "v2").mkdir()
-    version2 = str(make_rinex(tmp_path / "v2", n_epochs=300, noise_m=1.0, seed=4, version=2)[0])
-    assert rinex3_plan(version2) is None
-    epochs, _, _ = with_trajectory(*pseudorange_epochs(version2, "rinex", nav, "nominal", 5.0, NominalModel()), "auto")
-    with segments.placed_log(version2, "rinex", nav, "nominal", 5.0, NominalModel(), False, "auto") as placed:
+    for path in (obs, version2):
+        _placed_in_three_segments(path, "rinex", nav, 42.6987, 2.8956, p95_m=5.0, velocity_en_mps=(0.0, 0.0))
+    lines = open(version2).read().splitlines(keepends=True)
+    at = next(i for i, line in enumerate(lines) if "END OF HEADER" in line) + 1
+    flagged = tmp_path / "v2" / "flagged.24o"
+    flagged.write_text("".join(lines[:at] + [lines[at][:28] + "6" + lines[at][29:]] + lines[at + 1 :]))
+    assert observation_plan(str(flagged)) is None
+    epochs, _, _ = with_trajectory(*pseudorange_epochs(str(flagged), "rinex", nav, "nominal", 5.0, NominalModel()), "auto")
+    with segments.placed_log(str(flagged), "rinex", nav, "nominal", 5.0, NominalModel(), False, "auto") as placed:
         assert placed.segments == 1
         pd.testing.assert_frame_equal(pd.concat([p for p, _ in placed.chunks(70)], ignore_index=True), epochs)

@@ -1,6 +1,6 @@
 """RINEX 3 observation + navigation files → WLS positions and RAIM measurements (GPS, Galileo, GLONASS, BeiDou).
 
-* Observations (:mod:`tollcli.readers.rinex3_obs` for RINEX 3, else :mod:`tollcli.readers.rinex`, the same rows):
+* Observations (:mod:`tollcli.readers.rinex_obs`, else :mod:`tollcli.readers.rinex`, the same rows):
   one code pseudorange per system (L1/E1/G1 ``C1C``…, BeiDou B1I
   ``C2I``/``C1I``, else B3I ``C6I``, else B2I ``C7I``) and its C/N0 (``S…``); receiver time from the file (GPS time).
   A BeiDou B1I or B2I code takes its group delay against B3I (TGD1, TGD2), to which the broadcast clock refers.
@@ -27,7 +27,7 @@ from tollcli.gnss.satellite_states import load_navigation, navigation_files, sat
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.gps_time import gps_millis_to_utc, gps_seconds
 from tollcli.readers.rinex import NAMES, load_rinex, observations
-from tollcli.readers.rinex3_obs import rinex3_observation_rows
+from tollcli.readers.rinex_obs import observation_rows
 
 #: the systems, in the order their receiver clocks are numbered
 SYSTEMS = ("G", "E", "R", "C")
@@ -55,7 +55,7 @@ def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m:
     navigation file or a list of them, :func:`~tollcli.gnss.satellite_states.load_navigation`)."""
     if sigma_model == "input":
         raise UsageError("--sigma-model input: RINEX observations carry no per-measurement σ; use nominal or constant")
-    rows = rinex3_observation_rows(obs_path)  # RINEX 3 read directly; else (or where the two could differ) georinex
+    rows = observation_rows(obs_path)  # read directly; else (where the two could differ) georinex
     obs = load_rinex(obs_path, "observation") if rows is None else None
     ephemerides, coeffs = load_navigation(nav_path)
     if rows is None:

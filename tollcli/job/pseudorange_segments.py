@@ -1,14 +1,14 @@
 """A pseudorange log solved and placed segment by segment: memory flat in the log's length.
 
-libRSF logs, GSDC derived CSVs, u-blox RAWX logs, Android logs (GnssLogger text, GSDC ``device_gnss.csv``) and RINEX 3
-observation files (:data:`SEGMENTED_KINDS`) are read this way; a RINEX file the direct reader leaves to georinex
-(RINEX 2, and the cases :mod:`tollcli.readers.rinex3_obs` names) is read and solved whole
+libRSF logs, GSDC derived CSVs, u-blox RAWX logs, Android logs (GnssLogger text, GSDC ``device_gnss.csv``) and RINEX 2
+and 3 observation files (:data:`SEGMENTED_KINDS`) are read this way; a RINEX file the direct readers leave to georinex
+(the cases :mod:`tollcli.readers.rinex2_obs` and :mod:`tollcli.readers.rinex3_obs` name) is read and solved whole
 (:func:`~tollcli.gnss.pseudorange_inputs.pseudorange_epochs`).
 
 The log is read in blocks of rows (:func:`~tollcli.readers.librsf.iter_librsf`,
 :func:`~tollcli.readers.gsdc.iter_gsdc_derived`, :func:`~tollcli.readers.ubx.iter_rawx` after a first pass over the
 u-blox log for its navigation data, :func:`~tollcli.readers.gnsslogger.iter_gnsslogger`,
-:func:`~tollcli.readers.gnsslogger.iter_device_gnss`, :func:`~tollcli.readers.rinex3_obs.iter_rinex3_observation_rows`
+:func:`~tollcli.readers.gnsslogger.iter_device_gnss`, :func:`~tollcli.readers.rinex_obs.iter_observation_rows`
 after a first pass that chooses each system's code: :mod:`tollcli.job.segment_formats`). Its epochs are cut into segments of
 :data:`SEGMENT_EPOCHS` (the segment's *core*); each segment is solved (snapshot WLS) and placed by the trajectory
 estimator (:func:`~tollcli.integrity.trajectory.with_trajectory`) together with :data:`MARGIN_EPOCHS` epochs before

@@ -128,23 +128,23 @@ def _android(kind: str, nav) -> SegmentFormat:
 
 
 def _rinex(nav) -> SegmentFormat:
-    """A RINEX 3 observation file (orbits from ``--nav``), read directly in two passes: the first chooses each system's
+    """A RINEX 2 or 3 observation file (orbits from ``--nav``), read directly in two passes: the first chooses each system's
     code, the second gives the rows a block of epochs at a time. A file the direct reader leaves to georinex, or
     without ``--nav``, is read whole (where those say what is wrong)."""
     from tollcli.gnss.pseudorange_inputs import is_rinex_navigation
     from tollcli.gnss.rinex_positions import rinex_rows_epochs
     from tollcli.gnss.satellite_states import load_navigation
     from tollcli.readers.gps_time import gps_seconds
-    from tollcli.readers.rinex3_obs import iter_rinex3_observation_rows, rinex3_plan
+    from tollcli.readers.rinex_obs import iter_observation_rows, observation_plan
 
     known: dict = {}
 
     def blocks(path, _strict):
-        plan = rinex3_plan(path) if nav is not None and not is_rinex_navigation(path) else None
+        plan = observation_plan(path) if nav is not None and not is_rinex_navigation(path) else None
         if plan is None:
             raise ReadWhole("read by georinex, or not to be solved")
         known["ephemerides"], known["coeffs"], known["path"] = *load_navigation(nav), path
-        for rows in iter_rinex3_observation_rows(path, plan):
+        for rows in iter_observation_rows(path, plan):
             yield rows, None, 0
 
     def solve(rows, _odometry, sigma_model, sigma_m, nominal):

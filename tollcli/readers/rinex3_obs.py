@@ -22,45 +22,21 @@ from __future__ import annotations
 
 import datetime as dt
 from collections.abc import Iterator
-from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 
 from tollcli.readers.rinex import CODES
+from tollcli.readers.rinex_records import ObservationPlan, Refused, plan_of, text_lines
 
 #: the systems read (georinex's ``use``)
 SYSTEMS = tuple(CODES)
 
 
-def rinex3_observation_rows(path: str) -> pd.DataFrame | None:
-    """One row per (epoch, satellite) with a pseudorange — time (GPS time, ns), sv, pr_m, cn0_dbhz, code — sorted by
-    time and satellite; None where georinex should read the file (see the module's docstring). Its blocks
-    (:func:`iter_rinex3_observation_rows`) joined."""
-    records: list = []
-    plan = rinex3_plan(path, keep=records)  # (read once: its records kept)
-    return None if plan is None else _block_rows(records, plan)
-
-
-#: epochs of a RINEX 3 observation file turned into rows at a time by :func:`iter_rinex3_observation_rows`
-BLOCK_EPOCHS = 4_096
-
-
-@dataclass(frozen=True)
-class Rinex3Plan:
-    """What a first pass over a RINEX 3 observation file found: each system's observation types and the columns read
-    (the candidate codes and their C/N0), the code each system's pseudorange is read from (None: none has a value)."""
-
-    types: dict[str, list[str]]
-    columns: dict[str, list[int]]
-    codes: dict[str, str | None]
-
-
-def rinex3_plan(path: str, keep: list | None = None) -> Rinex3Plan | None:
+def rinex3_plan(path: str, keep: list | None = None) -> ObservationPlan | None:
     """A first pass over the file (line by line: memory flat): its plan, or None where georinex should read it.
     ``keep``: a list that receives the records read (the whole file's, for a caller that reads it whole)."""
     try:
-        with _lines(path) as lines:
+        with text_lines(path) as lines:
             header = _header_of(lines)
             if header is None:
                 return None
@@ -74,39 +50,17 @@ def rinex3_plan(path: str, keep: list | None = None) -> Rinex3Plan | None:
                         seen_value[sv[0]] |= np.isfinite(values)
             for _ in lines:  # (what follows the records is not read, but must be ASCII text too)
                 pass
-    except (ValueError, IndexError, KeyError, OSError, UnicodeDecodeError, _Refused):
+    except (ValueError, IndexError, KeyError, OSError, UnicodeDecodeError, Refused):
         return None
-    codes = {}
-    for system in columns:
-        index = {types[system][i]: k for k, i in enumerate(columns[system])}
-        codes[system] = next((c for c in wanted[system] if seen_value[system][index[c]]), None)
-    if not any(codes.values()):  # (no satellite of any system with a pseudorange)
-        return None
-    return Rinex3Plan(types, columns, codes)
+    return plan_of(types, columns, wanted, seen_value, version=3)
 
 
-def iter_rinex3_observation_rows(path: str, plan: Rinex3Plan, block_epochs: int | None = None) -> Iterator[pd.DataFrame]:
-    """The file's rows (as :func:`rinex3_observation_rows`), :data:`BLOCK_EPOCHS` epochs at a time, in time order, by
-    the ``plan`` its first pass made (:func:`rinex3_plan`)."""
-    block: list[tuple[dt.datetime, list]] = []
-    with _lines(path) as lines:
+def iter_rinex3_records(path: str, plan: ObservationPlan) -> Iterator[tuple[dt.datetime, list]]:
+    """The file's records (time, satellites' values of the plan's columns), in file order, by the ``plan`` its first
+    pass made (:func:`rinex3_plan`)."""
+    with text_lines(path) as lines:
         _header_of(lines)
-        for record in _records(lines, plan.columns):
-            block.append(record)
-            if len(block) == (block_epochs or BLOCK_EPOCHS):
-                yield _block_rows(block, plan)
-                block = []
-    if block:
-        yield _block_rows(block, plan)
-
-
-class _Refused(Exception):
-    """The file is one georinex should read (the module's docstring says when)."""
-
-
-def _lines(path: str):
-    """The file's lines as georinex's text file gives them (universal newlines), ASCII only."""
-    return open(path, encoding="ascii", newline=None)
+        yield from _records(lines, plan.columns)
 
 
 def _header_of(lines) -> tuple[dict[str, list[str]], dict[str, list[int]], dict[str, list[str]]] | None:
@@ -133,7 +87,7 @@ def _header_of(lines) -> tuple[dict[str, list[str]], dict[str, list[int]], dict[
 def _records(lines, columns: dict[str, list[int]]) -> Iterator[tuple[dt.datetime, list[tuple[str, np.ndarray]]]]:
     """Each epoch's time and its satellites' values of ``columns`` (the systems read), as georinex reads the records:
     a time it cannot read passed over (and the lines after it end the records), the records ending at the first line
-    that is not an epoch's. Raises _Refused where georinex should read the file."""
+    that is not an epoch's. Raises Refused where georinex should read the file."""
     seen_times: set[dt.datetime] = set()
     for line in lines:
         if not line.startswith(">"):
@@ -144,45 +98,20 @@ def _records(lines, columns: dict[str, list[int]]) -> Iterator[tuple[dt.datetime
             continue
         n_sats = int(line[33:35])
         if time in seen_times:
-            raise _Refused
+            raise Refused
         seen_times.add(time)
         seen, sats = set(), []
         for _ in range(n_sats):
             sat_line = next(lines, None)
             if sat_line is None:  # (the file ends inside the epoch)
-                raise _Refused
+                raise Refused
             sv, data = sat_line[:3], sat_line[3:]
             if not data.strip("\r\n") or "#" in data or sv in seen:
-                raise _Refused
+                raise Refused
             seen.add(sv)
             if sv[0] in columns:
                 sats.append((sv.replace(" ", "0"), np.array([_value(data[16 * i : 16 * i + 14]) for i in columns[sv[0]]], float)))
         yield time, sats
-
-
-def _block_rows(block: list[tuple[dt.datetime, list]], plan: Rinex3Plan) -> pd.DataFrame:
-    """The rows of a block of records (time, satellites' values), sorted by time and satellite."""
-    read = {system: ([], [], []) for system, code in plan.codes.items() if code is not None}  # epochs, satellites, values
-    for k, (_time, sats) in enumerate(block):
-        for sv, v in sats:
-            if sv[0] in read:
-                epochs, svs, values = read[sv[0]]
-                epochs.append(k)
-                svs.append(sv)
-                values.append(v)
-    frames = []
-    for system, (epochs, svs, values) in read.items():
-        code = plan.codes[system]
-        table = np.array(values, float).reshape(len(epochs), len(plan.columns[system]))
-        index = {plan.types[system][i]: k for k, i in enumerate(plan.columns[system])}
-        snr = table[:, index["S" + code[1:]]] if "S" + code[1:] in index else np.full(len(epochs), np.nan)
-        frames.append(pd.DataFrame({"epoch": np.asarray(epochs, np.int64), "sv": np.asarray(svs, dtype=object), "pr_m": table[:, index[code]],
-                                    "cn0_dbhz": snr, "code": code}))  # fmt: skip
-    out = pd.concat(frames, ignore_index=True)
-    out = out[np.isfinite(out["pr_m"].to_numpy())]
-    stamps = np.array([time for time, _ in block], dtype="datetime64[us]").astype("datetime64[ns]")
-    out.insert(0, "time", stamps[out["epoch"].to_numpy()])
-    return out.drop(columns="epoch").sort_values(["time", "sv"], kind="stable").reset_index(drop=True)
 
 
 def _header(lines: list[str]) -> tuple[dict[str, list[str]], int] | None:
@@ -191,6 +120,7 @@ def _header(lines: list[str]) -> tuple[dict[str, list[str]], int] | None:
     FIRST OBS)."""
     if not lines or "RINEX VERSION / TYPE" not in lines[0][60:80] or lines[0][20:21] != "O" or not lines[0][:9].strip().startswith("3"):
         return None
+    float(lines[0][:9])  # (a version that does not read: ValueError, as georinex's)
     types: dict[str, list[str]] = {}
     labels = set()
     at = 1
