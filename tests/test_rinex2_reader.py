@@ -13,30 +13,16 @@ import numpy as np
 import pandas as pd
 import pytest
 from conftest import shared
+from rinex_compare import damaged_copies_read_alike, edited_copy, same_rows
+from rinex_compare import georinex_rows as _georinex
 from rinex_synth import make_rinex
 
-from tollcli.readers.rinex import load_rinex, observations
 from tollcli.readers.rinex2_obs import rinex2_plan
 from tollcli.readers.rinex3_obs import rinex3_plan
 from tollcli.readers.rinex_obs import iter_observation_rows, observation_plan, observation_rows
 
 CONVBIN = shutil.which("convbin")
 needs_convbin = pytest.mark.skipif(CONVBIN is None, reason="RTKLIB's convbin not installed (Debian: apt-get install rtklib)")
-
-
-def _georinex(path, fast: bool = True) -> pd.DataFrame:
-    if fast:
-        return observations(load_rinex(str(path), "observation"))
-    import georinex
-
-    return observations(georinex.load(str(path), use={"G", "E", "R", "C"}, fast=False))
-
-
-def _same(a: pd.DataFrame, b: pd.DataFrame) -> bool:
-    if list(a.columns) != list(b.columns) or len(a) != len(b) or dict(a.dtypes) != dict(b.dtypes):
-        return False
-    return all(np.array_equal(a[c].to_numpy(), b[c].to_numpy(), equal_nan=True) if a[c].dtype.kind == "f" else
-               (a[c].to_numpy() == b[c].to_numpy()).all() for c in a.columns)  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -65,11 +51,11 @@ def test_a_real_receivers_rinex_2_file_gives_georinexs_rows(walk_rinex2):
     assert head.startswith("     2.11") and "     8    C1    L1    D1    S1    C2    L2    D2    S2" in head
     rows = observation_rows(obs)
     assert rows is not None and len(rows) > 5000 and set(rows["sv"].str[0]) == {"G", "E"} and set(rows["code"]) == {"C1"}
-    assert _same(rows, _georinex(obs))
+    assert same_rows(rows, _georinex(obs))
     plan = observation_plan(obs)
     assert plan.version == 2 and rinex3_plan(obs) is None
     parts = list(iter_observation_rows(obs, plan, 37))
-    assert len(parts) == 15 and _same(pd.concat(parts, ignore_index=True), rows)
+    assert len(parts) == 15 and same_rows(pd.concat(parts, ignore_index=True), rows)
 
 
 @needs_convbin
@@ -96,18 +82,10 @@ def synthetic(tmp_path_factory):
 
 def test_a_synthetic_file_and_its_line_endings(synthetic, tmp_path):
     rows = observation_rows(str(synthetic))
-    assert rows is not None and rinex2_plan(str(synthetic)) is not None and _same(rows, _georinex(synthetic))
+    assert rows is not None and rinex2_plan(str(synthetic)) is not None and same_rows(rows, _georinex(synthetic))
     crlf = tmp_path / "crlf.24o"
     crlf.write_bytes(synthetic.read_bytes().replace(b"\n", b"\r\n"))
-    assert _same(observation_rows(str(crlf)), rows)
-
-
-def _edited(synthetic, tmp_path, edit) -> str:
-    lines = synthetic.read_text().splitlines(keepends=True)
-    body = next(i for i, line in enumerate(lines) if "END OF HEADER" in line) + 1
-    out = tmp_path / "edited.24o"
-    out.write_text("".join(edit(lines, body)))
-    return str(out)
+    assert same_rows(observation_rows(str(crlf)), rows)
 
 
 def _second_epoch(lines, body) -> int:
@@ -176,17 +154,17 @@ UNCHANGED_ROWS = ("an event flag 4 and its comment", "a blank line between epoch
 
 @pytest.mark.parametrize("case", sorted(READ_ALIKE))
 def test_what_georinex_passes_over_or_reads_is_read_alike(synthetic, tmp_path, case):
-    path = _edited(synthetic, tmp_path, READ_ALIKE[case])
+    path = edited_copy(synthetic, tmp_path, READ_ALIKE[case])
     rows = observation_rows(path)
-    assert rows is not None and _same(rows, _georinex(path))
-    assert _same(rows, observation_rows(str(synthetic))) == (case in UNCHANGED_ROWS)  # (the edit shows in the rows)
+    assert rows is not None and same_rows(rows, _georinex(path))
+    assert same_rows(rows, observation_rows(str(synthetic))) == (case in UNCHANGED_ROWS)  # (the edit shows in the rows)
 
 
 @pytest.mark.parametrize("case", sorted(LEFT_TO_GEORINEX))
 def test_what_the_two_could_read_differently_is_left_to_georinex(synthetic, tmp_path, case):
     from tollcli.errors import TollError
 
-    path = _edited(synthetic, tmp_path, LEFT_TO_GEORINEX[case])
+    path = edited_copy(synthetic, tmp_path, LEFT_TO_GEORINEX[case])
     assert observation_rows(path) is None
     logging.disable(logging.ERROR)
     try:
@@ -215,7 +193,7 @@ def test_a_file_of_more_epochs_than_georinex_guesses_is_read(tmp_path):
     with pytest.raises(DataError, match="IndexError"):
         _georinex(path)
     rows = observation_rows(str(path))
-    assert rows is not None and len(rows) == 80 and _same(rows, _georinex(path, fast=False))
+    assert rows is not None and len(rows) == 80 and same_rows(rows, _georinex(path, fast=False))
 
 
 @needs_convbin
@@ -224,38 +202,6 @@ def test_damaged_copies_of_a_real_file_are_read_as_georinex_reads_them(walk_rine
     records: the direct reader gives georinex's rows, or leaves the file to georinex. (Checked when written on 500 such
     copies of its first 60 kB, 199 read alike, 200 of the whole walk, 92, and 300 of the synthetic file, 71: every
     other one left to georinex.)"""
-    import random
-
-    from tollcli.errors import TollError
-
     clean = open(walk_rinex2(3.0)[0], "rb").read()
-    header = clean.index(b"END OF HEADER")
-    rng = random.Random(8)
-    read_alike = 0
-    logging.disable(logging.ERROR)
-    try:
-        for k in range(12):
-            data = bytearray(clean)
-            for _ in range(rng.randint(1, 4)):
-                at = rng.randrange(header + 80) if rng.random() < 0.3 else rng.randrange(len(data))
-                change = rng.random()
-                if change < 0.5:
-                    data[at] = rng.choice(b"0123456789 .-+GREC\n56")
-                elif change < 0.75:
-                    del data[at : at + rng.randint(1, 30)]
-                else:
-                    data[at:at] = bytes(rng.choice(b"0123456789 .\n") for _ in range(rng.randint(1, 16)))
-            path = tmp_path / f"damaged-{k}.obs"
-            path.write_bytes(bytes(data))
-            rows = observation_rows(str(path))
-            if rows is None:
-                continue
-            try:
-                reference = _georinex(path)
-            except TollError as exc:
-                raise AssertionError(f"copy {k}: read directly, refused by georinex ({exc})") from None
-            assert _same(rows, reference), k
-            read_alike += 1
-    finally:
-        logging.disable(logging.NOTSET)
+    read_alike = damaged_copies_read_alike(clean, tmp_path, 12, 0.3, b"0123456789 .-+GREC\n56")
     assert read_alike >= 3  # (many damaged copies still read)

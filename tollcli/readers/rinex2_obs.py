@@ -31,7 +31,7 @@ from math import ceil
 import numpy as np
 
 from tollcli.readers.rinex import CODES
-from tollcli.readers.rinex_records import ObservationPlan, Refused, plan_of, text_lines
+from tollcli.readers.rinex_records import ObservationPlan, Refused, plan_of, text_lines, values_seen
 
 #: the systems read (georinex's ``use``)
 SYSTEMS = tuple(CODES)
@@ -49,12 +49,7 @@ def rinex2_plan(path: str, keep: list | None = None) -> ObservationPlan | None:
             if header is None:
                 return None
             types, columns, wanted, per_satellite = header
-            seen_value = {s: np.zeros(len(columns[s]), bool) for s in columns}
-            for record in _records(lines, columns, len(types[next(iter(types))]), per_satellite):
-                if keep is not None:
-                    keep.append(record)
-                for sv, values in record[1]:
-                    seen_value[sv[0]] |= np.isfinite(values)
+            seen_value = values_seen(_records(lines, columns, len(types[next(iter(types))]), per_satellite), columns, keep)
     except (ValueError, IndexError, KeyError, OSError, UnicodeDecodeError, Refused):
         return None
     return plan_of(types, columns, wanted, seen_value, version=2)

@@ -26,7 +26,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from tollcli.readers.rinex import CODES
-from tollcli.readers.rinex_records import ObservationPlan, Refused, plan_of, text_lines
+from tollcli.readers.rinex_records import ObservationPlan, Refused, plan_of, text_lines, values_seen
 
 #: the systems read (georinex's ``use``)
 SYSTEMS = tuple(CODES)
@@ -41,13 +41,7 @@ def rinex3_plan(path: str, keep: list | None = None) -> ObservationPlan | None:
             if header is None:
                 return None
             types, columns, wanted = header
-            seen_value = {s: np.zeros(len(columns[s]), bool) for s in columns}
-            for record in _records(lines, columns):
-                if keep is not None:
-                    keep.append(record)
-                for sv, values in record[1]:
-                    if sv[0] in seen_value:
-                        seen_value[sv[0]] |= np.isfinite(values)
+            seen_value = values_seen(_records(lines, columns), columns, keep)
             for _ in lines:  # (what follows the records is not read, but must be ASCII text too)
                 pass
     except (ValueError, IndexError, KeyError, OSError, UnicodeDecodeError, Refused):

@@ -27,6 +27,19 @@ class Refused(Exception):
     """The file is one georinex should read (the readers' docstrings say when)."""
 
 
+def values_seen(records, columns: dict[str, list[int]], keep: list | None) -> dict[str, np.ndarray]:
+    """A first pass over ``records`` (time, satellites' values of ``columns``): per system, which columns ever had a
+    value; ``keep`` (a list, or None) receives the records."""
+    seen_value = {s: np.zeros(len(columns[s]), bool) for s in columns}
+    for record in records:
+        if keep is not None:
+            keep.append(record)
+        for sv, values in record[1]:
+            if sv[0] in seen_value:
+                seen_value[sv[0]] |= np.isfinite(values)
+    return seen_value
+
+
 def plan_of(types: dict[str, list[str]], columns: dict[str, list[int]], wanted: dict[str, list[str]],
             seen_value: dict[str, np.ndarray], version: int) -> ObservationPlan | None:
     """The plan of a file whose first pass saw, per system, which of the ``columns`` read ever had a value
