@@ -454,3 +454,86 @@ def test_a_long_rinex_file_is_read_in_two_passes_and_placed_in_segments(tmp_path
     with segments.placed_log(str(flagged), "rinex", nav, "nominal", 5.0, NominalModel(), False, "auto") as placed:
         assert placed.segments == 1
         pd.testing.assert_frame_equal(pd.concat([p for p, _ in placed.chunks(70)], ignore_index=True), epochs)
+
+
+def _shifted_after(obs, out, after: tuple[int, int, int], hours: float) -> str:
+    """A copy of a RINEX 3 observation file whose epochs from ``after`` (hour, minute, second of its day) on are
+    ``hours`` later: beyond its navigation file's orbits (4 h)."""
+    import datetime as dt
+
+    lines = []
+    for line in open(obs).read().splitlines(keepends=True):
+        if line.startswith("> "):
+            t = dt.datetime(int(line[2:6]), int(line[7:9]), int(line[10:12]), int(line[13:15]), int(line[16:18]), int(line[19:21]))
+            if (t.hour, t.minute, t.second) >= after:
+                t += dt.timedelta(hours=hours)
+                line = f"> {t:%Y %m %d %H %M}{t.second:11.7f}" + line[29:]
+        lines.append(line)
+    open(out, "w").write("".join(lines))
+    return str(out)
+
+
+def test_a_segment_without_orbits_is_placed_without_positions(tmp_path, monkeypatch):
+    """The simulated receiver's RINEX log whose last 150 epochs come 5 h later, beyond its navigation file: read whole
+    they are epochs without a measurement to solve; cut into segments, the segment of those epochs alone is placed
+    without positions (it stopped the whole log with "no observation has a satellite orbit" before), the note says
+    which epochs and why, and the others are placed as before. A log none of whose segments has an orbit is the error
+    it is read whole."""
+    from rinex_synth import make_rinex
+
+    obs, nav, _rows = make_rinex(tmp_path, n_epochs=300, noise_m=1.0, seed=4)
+    gap = _shifted_after(obs, tmp_path / "gap.24o", (8, 2, 30), 5.0)
+    whole, _ = pseudorange_epochs(gap, "rinex", str(nav), "nominal", 5.0, NominalModel())
+    assert whole["lat_deg"].notna().sum() == 150
+    monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 100)
+    monkeypatch.setattr(segments, "SEGMENT_MIN_S", 100.0)
+    monkeypatch.setattr(segments, "MARGIN_EPOCHS", 40)
+    for positioning in ("snapshot", "auto"):
+        with segments.placed_log(gap, "rinex", str(nav), "nominal", 5.0, NominalModel(), False, positioning) as placed:
+            epochs = pd.concat([p for p, _ in placed.chunks(70)], ignore_index=True)
+        assert placed.segments == 3 and len(epochs) == 300 and epochs["lat_deg"].iloc[200:].isna().all()
+        assert placed.note.startswith("epochs 200–299: no observation has a satellite orbit in") and gap not in placed.note
+        if positioning == "snapshot":
+            pd.testing.assert_frame_equal(epochs.drop(columns=["epoch"]), whole.drop(columns=["epoch"]), check_exact=False, rtol=1e-12,
+                                          atol=1e-6)  # fmt: skip
+        else:
+            assert epochs["lat_deg"].iloc[:150].notna().all() and placed.positioning == "smoothed"
+    late = _shifted_after(obs, tmp_path / "late.24o", (0, 0, 0), 5.0)
+    with pytest.raises(DataError, match="no observation has a satellite orbit"):
+        pseudorange_epochs(late, "rinex", str(nav), "nominal", 5.0, NominalModel())
+    with pytest.raises(DataError, match="no observation has a satellite orbit"):
+        segments.placed_log(late, "rinex", str(nav), "nominal", 5.0, NominalModel(), False, "auto")
+
+
+def test_measurements_without_orbits_give_the_columns_of_a_solved_segment(phone_drive):
+    """The simulated phone's measurements with no satellite orbit: an error where the orbits are required (a log read
+    whole), else its epochs without positions, in the columns a solved segment has (the segments are stored and read
+    back as one table), and measurements of no satellite."""
+    from tollcli.gnss.android_raw import raw_pseudoranges
+    from tollcli.gnss.pseudorange_inputs import navigation_of
+    from tollcli.gnss.raw_positions import SAT_COLUMNS, raw_epochs, with_broadcast_satellites
+    from tollcli.gnss.satellite_states import NoOrbitForRows
+    from tollcli.readers.gnsslogger import read_device_gnss
+
+    device = read_device_gnss(str(phone_drive[0] / "device_gnss.csv"))
+    rows = with_broadcast_satellites(raw_pseudoranges(device), navigation_of(phone_drive[1])[0])
+    solved, _ = raw_epochs(rows)
+    bare = rows.assign(**{c: np.nan for c in SAT_COLUMNS})
+    with pytest.raises(NoOrbitForRows):
+        raw_epochs(bare)
+    epochs, meas = raw_epochs(bare, orbits_required=False)
+    assert list(epochs.columns) == list(solved.columns) and len(epochs) == len(solved) and epochs["lat_deg"].isna().all()
+    assert meas.mask.shape == (len(epochs), 0)
+
+
+def test_a_sigma_model_rinex_cannot_give_is_refused_before_the_log_is_read(tmp_path, monkeypatch):
+    """``--sigma-model input`` of a RINEX log: refused before its first pass (which reads the whole file)."""
+    from rinex_synth import make_rinex
+
+    from tollcli.errors import UsageError
+    from tollcli.readers import rinex_obs
+
+    obs, nav, _rows = make_rinex(tmp_path, n_epochs=5)
+    monkeypatch.setattr(rinex_obs, "observation_plan", lambda *a, **k: pytest.fail("the log was read"))
+    with pytest.raises(UsageError, match="--sigma-model input: RINEX observations carry no per-measurement σ"):
+        segments.placed_log(str(obs), "rinex", str(nav), "input", 5.0, NominalModel(), False, "auto")

@@ -33,7 +33,7 @@ from tollcli.gnss.pseudorange_wls import (
     solvable,
     solve_positions,
 )
-from tollcli.gnss.satellite_states import satellite_states
+from tollcli.gnss.satellite_states import NoOrbitForRows, satellite_states
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.gps_time import gps_millis_to_utc
 
@@ -90,8 +90,10 @@ def with_device_gnss_satellites(m: pd.DataFrame, device: pd.DataFrame) -> pd.Dat
 
 
 def raw_epochs(m: pd.DataFrame, sigma_model: str = "nominal", sigma_m: float = 5.0, nominal: NominalModel | None = None,
-               iono_coeffs=None) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
-    """WLS position and Doppler velocity per epoch (an epoch table) and the RAIM measurements there."""
+               iono_coeffs=None, orbits_required: bool = True) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
+    """WLS position and Doppler velocity per epoch (an epoch table) and the RAIM measurements there. Measurements none
+    of which has an orbit raise :class:`~tollcli.gnss.satellite_states.NoOrbitForRows`, or (``orbits_required``
+    False) give epochs without positions."""
     timed = np.isfinite(m["t_rx_gps_s"].to_numpy(float))
     if not timed.all():  # a record whose clock fields are missing or damaged has no time: it belongs to no epoch
         m = m[timed].reset_index(drop=True)
@@ -103,8 +105,8 @@ def raw_epochs(m: pd.DataFrame, sigma_model: str = "nominal", sigma_m: float = 5
     epoch_t = m["t_rx_gps_s"].to_numpy(float)[first]
     sat = m[list(SAT_COLUMNS[:3])].to_numpy(float)
     usable = m["pr_valid"].to_numpy(bool) & np.isfinite(sat).all(axis=1) & np.isfinite(m["sat_clock_m"].to_numpy(float))
-    if not usable.any():
-        raise DataError("no measurement has both a whole pseudorange and a satellite orbit "
+    if not usable.any() and orbits_required:
+        raise NoOrbitForRows("no measurement has both a whole pseudorange and a satellite orbit "
                         "(a navigation file for the day, --nav, gives the orbits)")  # fmt: skip
     d = m[usable]
     row = np.searchsorted(epoch_keys, d["epoch_key"].to_numpy())

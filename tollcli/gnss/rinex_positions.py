@@ -18,12 +18,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from tollcli.errors import DataError, UsageError
+from tollcli.errors import UsageError
 from tollcli.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
 from tollcli.gnss.measurements import Measurements, pad, slots
 from tollcli.gnss.orbits import WEEK_S
 from tollcli.gnss.pseudorange_wls import C_MPS, final_geometry, solvable, solve_positions
-from tollcli.gnss.satellite_states import load_navigation, navigation_files, satellite_states
+from tollcli.gnss.satellite_states import NoOrbitForRows, load_navigation, navigation_files, satellite_states
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.readers.gps_time import gps_millis_to_utc, gps_seconds
 from tollcli.readers.rinex import NAMES, load_rinex, observations
@@ -49,12 +49,17 @@ def carrier_hz(system: np.ndarray, code: np.ndarray, glonass_channel: np.ndarray
     return out
 
 
+def check_sigma_model(sigma_model: str) -> None:
+    """Refuse a σ model RINEX observations cannot give (``input``: they carry no per-measurement σ)."""
+    if sigma_model == "input":
+        raise UsageError("--sigma-model input: RINEX observations carry no per-measurement σ; use nominal or constant")
+
+
 def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m: float = 5.0,
                  nominal: NominalModel | None = None) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
     """WLS position per epoch (an epoch table) and the RAIM measurements at that position (``nav_path``: one
     navigation file or a list of them, :func:`~tollcli.gnss.satellite_states.load_navigation`)."""
-    if sigma_model == "input":
-        raise UsageError("--sigma-model input: RINEX observations carry no per-measurement σ; use nominal or constant")
+    check_sigma_model(sigma_model)
     rows = observation_rows(obs_path)  # read directly; else (where the two could differ) georinex
     obs = load_rinex(obs_path, "observation") if rows is None else None
     ephemerides, coeffs = load_navigation(nav_path)
@@ -64,12 +69,14 @@ def rinex_epochs(obs_path: str, nav_path, sigma_model: str = "nominal", sigma_m:
 
 
 def rinex_rows_epochs(rows: pd.DataFrame, ephemerides: pd.DataFrame, coeffs, sigma_model: str = "nominal", sigma_m: float = 5.0,
-                      nominal: NominalModel | None = None, obs_path: str = "", nav_path="") -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
+                      nominal: NominalModel | None = None, obs_path: str = "", nav_path="",
+                      orbits_required: bool = True) -> tuple[pd.DataFrame, Measurements]:  # fmt: skip
     """:func:`rinex_epochs` of observation rows (:func:`tollcli.readers.rinex.observations`' columns) with the
     navigation files' ``ephemerides`` and ionosphere ``coeffs`` (:func:`~tollcli.gnss.satellite_states.load_navigation`);
-    ``obs_path`` and ``nav_path`` name the files in an error."""
-    if sigma_model == "input":
-        raise UsageError("--sigma-model input: RINEX observations carry no per-measurement σ; use nominal or constant")
+    ``obs_path`` and ``nav_path`` name the files in an error. Rows none of which has an orbit raise
+    :class:`~tollcli.gnss.satellite_states.NoOrbitForRows`, or (``orbits_required`` False) give epochs without
+    positions."""
+    check_sigma_model(sigma_model)
     t_rx = gps_seconds(rows["time"].to_numpy())
     sv = rows["sv"].to_numpy(str)
     pr = rows["pr_m"].to_numpy(float)
@@ -80,8 +87,8 @@ def rinex_rows_epochs(rows: pd.DataFrame, ephemerides: pd.DataFrame, coeffs, sig
     b1i, b2i = (system == "C") & np.isin(code, ("C2I", "C1I", "C2")), (system == "C") & (code == "C7I")
     clock = clock - np.where(b1i, np.nan_to_num(states["tgd1_s"]), 0.0) - np.where(b2i, np.nan_to_num(states["tgd2_s"]), 0.0)
     carrier = carrier_hz(system, code, states["freq_num"])
-    if not usable.any():  # a navigation file of another day: say so, not "every epoch insufficient"
-        raise DataError(f"{obs_path}: no observation has a satellite orbit in {', '.join(navigation_files(nav_path))} ({orbit_coverage(ephemerides, t_rx)}); "
+    if not usable.any() and orbits_required:  # a navigation file of another day: say so, not "every epoch insufficient"
+        raise NoOrbitForRows(f"{obs_path}: no observation has a satellite orbit in {', '.join(navigation_files(nav_path))} ({orbit_coverage(ephemerides, t_rx)}); "
                         "a navigation file for the day of the observations gives the orbits")  # fmt: skip
 
     epoch_times, row = np.unique(rows["time"].to_numpy(), return_inverse=True)

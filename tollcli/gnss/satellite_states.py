@@ -29,6 +29,12 @@ DIFF_S = 0.05
 MAX_AGE_S = 4 * 3600.0
 
 
+class NoOrbitForRows(DataError):
+    """None of a set of measurements has a satellite orbit (the navigation data are of another time, or none). Read
+    whole, a log without one is an error; a segment of a longer log (:mod:`tollcli.job.pseudorange_segments`) is
+    solved without positions instead, as the same epochs are within the whole log."""
+
+
 def rinex_ephemeris_table(nav) -> pd.DataFrame:
     """A georinex navigation dataset (RINEX 2 or 3: GPS, Galileo, BeiDou, GLONASS) as one ephemeris per row.
 

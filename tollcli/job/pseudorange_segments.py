@@ -140,8 +140,10 @@ def _segments(fmt: SegmentFormat, log: str, sigma_model: str, sigma_m: float, no
     """A log placed segment by segment; None where its lines are not in time order (read it whole)."""
     from tollcli.errors import DataError
 
+    if fmt.check is not None:
+        fmt.check(sigma_model)
     cutter = _Cutter(fmt.keys)
-    placer = _Placer(fmt, positioning, sigma_model, sigma_m, nominal)
+    placer = _Placer(fmt, positioning, sigma_model, sigma_m, nominal, log)
     skipped = 0
     try:
         for rows, odometry, malformed in fmt.blocks(log, strict):
@@ -155,6 +157,7 @@ def _segments(fmt: SegmentFormat, log: str, sigma_model: str, sigma_m: float, no
             placer.close()
             return _whole(*fmt.solve(rows, odometry, sigma_model, sigma_m, nominal), positioning, skipped)
         placer.place(rows, odometry, core)
+        placer.check_orbits()
     except BaseException as exc:  # nothing stored is left behind, whatever stopped the placing
         placer.close()
         if isinstance(exc, ReadWhole):
@@ -233,8 +236,9 @@ class _Cutter:
 class _Placer:
     """Each segment solved, placed and its core stored; what the segments said, gathered."""
 
-    def __init__(self, fmt: SegmentFormat, positioning: str, sigma_model: str, sigma_m: float, nominal: NominalModel):
+    def __init__(self, fmt: SegmentFormat, positioning: str, sigma_model: str, sigma_m: float, nominal: NominalModel, log: str):
         self.fmt, self.positioning, self.sigma_model, self.sigma_m, self.nominal = fmt, positioning, sigma_model, sigma_m, nominal
+        self.log = log  # (a note does not name it: it may be a run's copy of the log)
         self.folder: str | None = None
         self.stored: list[str] = []
         self.n_segments = 0
@@ -242,13 +246,23 @@ class _Placer:
         self.used: list[str] = []
         self.notes: list[str] = []
         self.correlation_s: float | None = None
+        self.with_orbits = False  # whether a segment had a measurement with an orbit
+        self.no_orbits: Exception | None = None  # the first segment's error where one had none
 
     def place(self, rows: pd.DataFrame, odo: pd.DataFrame | None, core: tuple[int, int | None]) -> None:
         """Solve and place a segment's ``rows`` (and odometry ``odo``), and store the epochs of its ``core`` (its first
         epoch key and the first key after it, ms; None: to the end)."""
         from tollcli.integrity.trajectory import with_trajectory
 
-        epochs, meas = self.fmt.solve(rows, odo, self.sigma_model, self.sigma_m, self.nominal)
+        from tollcli.gnss.satellite_states import NoOrbitForRows
+
+        missing = None
+        try:
+            epochs, meas = self.fmt.solve(rows, odo, self.sigma_model, self.sigma_m, self.nominal)
+            self.with_orbits = True
+        except NoOrbitForRows as exc:  # (its epochs without positions, as they are in the whole log: said in the note)
+            self.no_orbits, missing = self.no_orbits or exc, exc
+            epochs, meas = self.fmt.solve(rows, odo, self.sigma_model, self.sigma_m, self.nominal, orbits_required=False)
         epochs, meas, used = with_trajectory(epochs, meas, self.positioning)
         if used == "snapshot" and self.positioning != "snapshot":  # refused here: the columns of the placed segments
             epochs = epochs.assign(snapshot_lat_deg=epochs["lat_deg"].to_numpy(float), snapshot_lon_deg=epochs["lon_deg"].to_numpy(float),
@@ -267,13 +281,19 @@ class _Placer:
                                      "they are charged: TMPDIR names a larger disk)", exc.filename) from None  # fmt: skip
         self.stored.append(path)
         self.used.append(used)
-        note = epochs.attrs.get("positioning_note")
+        note = str(missing).removeprefix(f"{self.log}: ") if missing is not None else epochs.attrs.get("positioning_note")
         if note:
             self.notes.append(f"epochs {self.n_epochs}–{self.n_epochs + len(part) - 1}: {note}")
         if "trajectory_correlation_s" in epochs.attrs:
             self.correlation_s = max(self.correlation_s or 0.0, float(epochs.attrs["trajectory_correlation_s"]))
         self.n_segments += 1
         self.n_epochs += len(part)
+
+    def check_orbits(self) -> None:
+        """Raise the first segment's error where no segment had a measurement with an orbit (the log's error read
+        whole; it names that segment's time span)."""
+        if not self.with_orbits and self.no_orbits is not None:
+            raise self.no_orbits
 
     def finish(self, skipped: int) -> PlacedLog:
         used = sorted(set(self.used))

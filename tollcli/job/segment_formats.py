@@ -22,14 +22,17 @@ class ReadWhole(Exception):
 class SegmentFormat:
     """How a segmented format is read and solved: ``blocks(path, strict)`` its rows in file order, a block at a time
     (measurement rows, odometry rows or None, malformed lines); ``keys(rows)`` each row's epoch key (ms, int64);
-    ``solve(rows, odometry, sigma_model, sigma_m, nominal)`` a segment's (epochs, measurements), and ``epoch_keys``
-    those epochs' keys; ``no_rows``: the error of a log without a measurement."""
+    ``solve(rows, odometry, sigma_model, sigma_m, nominal, orbits_required=True)`` a segment's (epochs, measurements) —
+    rows none of which has an orbit raise :class:`~tollcli.gnss.satellite_states.NoOrbitForRows`, or give epochs without
+    positions — and ``epoch_keys`` those epochs' keys; ``no_rows``: the error of a log without a measurement; ``check(sigma_model)``, where set, refuses
+    a σ model the format cannot give before the log is read."""
 
     blocks: Callable[[str, bool], Iterator[tuple[pd.DataFrame, pd.DataFrame | None, int]]]
     keys: Callable[[pd.DataFrame], np.ndarray]
     solve: Callable[..., tuple[pd.DataFrame, Measurements]]
     epoch_keys: Callable[[pd.DataFrame], np.ndarray]
     no_rows: str
+    check: Callable[[str], None] | None = None  # refuses a σ model the format cannot give, before anything is read
 
 
 def _librsf() -> SegmentFormat:
@@ -40,7 +43,7 @@ def _librsf() -> SegmentFormat:
         for part in iter_librsf(path, strict):
             yield part.pseudoranges, part.odometry, part.malformed
 
-    def solve(rows, odometry, sigma_model, sigma_m, nominal):
+    def solve(rows, odometry, sigma_model, sigma_m, nominal, orbits_required=True):  # (its orbits are in the log)
         if odometry is None:
             odometry = pd.DataFrame(np.zeros((0, len(ODOMETRY_COLUMNS))), columns=list(ODOMETRY_COLUMNS))
         return librsf_epochs(LibrsfLog(rows, odometry, pd.DataFrame(), 0), sigma_model, sigma_m, nominal)
@@ -60,7 +63,7 @@ def _gsdc_derived() -> SegmentFormat:
         for table in iter_gsdc_derived(path, strict):
             yield table, None, int(table.attrs["skipped_lines"])
 
-    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
+    def solve(rows, _odometry, sigma_model, sigma_m, nominal, orbits_required=True):  # (its satellites are in the log)
         return gsdc_epochs(rows, sigma_model, sigma_m, nominal)
 
     return SegmentFormat(blocks, lambda rows: rows["millisSinceGpsEpoch"].to_numpy(np.int64), solve,
@@ -87,8 +90,8 @@ def _ubx(nav) -> SegmentFormat:
             yield with_broadcast_satellites(rawx_measurements(part), known["orbits"]), None, damaged
             damaged = 0
 
-    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
-        epochs, meas = raw_epochs(rows, sigma_model, sigma_m, nominal, iono_coeffs=known["iono"])
+    def solve(rows, _odometry, sigma_model, sigma_m, nominal, orbits_required=True):
+        epochs, meas = raw_epochs(rows, sigma_model, sigma_m, nominal, iono_coeffs=known["iono"], orbits_required=orbits_required)
         return with_receiver_solution(epochs, known["pvt"]), meas
 
     return SegmentFormat(blocks, lambda rows: rows["epoch_key"].to_numpy(np.int64), solve,
@@ -120,8 +123,8 @@ def _android(kind: str, nav) -> SegmentFormat:
             m = with_device_gnss_satellites(m, device) if ephemerides is None else with_broadcast_satellites(m, ephemerides)
             yield m[np.isfinite(m["t_rx_gps_s"].to_numpy(float))].reset_index(drop=True), None, int(device.attrs["skipped_lines"])
 
-    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
-        return raw_epochs(rows, sigma_model, sigma_m, nominal, iono_coeffs=known["iono"])
+    def solve(rows, _odometry, sigma_model, sigma_m, nominal, orbits_required=True):
+        return raw_epochs(rows, sigma_model, sigma_m, nominal, iono_coeffs=known["iono"], orbits_required=orbits_required)
 
     return SegmentFormat(blocks, lambda rows: np.round(rows["t_rx_gps_s"].to_numpy(float) * 1000).astype(np.int64), solve,
                          lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no measurement epochs")  # fmt: skip
@@ -132,7 +135,7 @@ def _rinex(nav) -> SegmentFormat:
     code, the second gives the rows a block of epochs at a time. A file the direct reader leaves to georinex, or
     without ``--nav``, is read whole (where those say what is wrong)."""
     from tollcli.gnss.pseudorange_inputs import is_rinex_navigation
-    from tollcli.gnss.rinex_positions import rinex_rows_epochs
+    from tollcli.gnss.rinex_positions import check_sigma_model, rinex_rows_epochs
     from tollcli.gnss.satellite_states import load_navigation
     from tollcli.readers.gps_time import gps_seconds
     from tollcli.readers.rinex_obs import iter_observation_rows, observation_plan
@@ -147,14 +150,15 @@ def _rinex(nav) -> SegmentFormat:
         for rows in iter_observation_rows(path, plan):
             yield rows, None, 0
 
-    def solve(rows, _odometry, sigma_model, sigma_m, nominal):
-        return rinex_rows_epochs(rows, known["ephemerides"], known["coeffs"], sigma_model, sigma_m, nominal, known["path"], nav)
+    def solve(rows, _odometry, sigma_model, sigma_m, nominal, orbits_required=True):
+        return rinex_rows_epochs(rows, known["ephemerides"], known["coeffs"], sigma_model, sigma_m, nominal, known["path"], nav,
+                                 orbits_required)  # fmt: skip
 
     def millis(times) -> np.ndarray:
         return np.round(gps_seconds(np.asarray(times, "datetime64[ns]")) * 1000).astype(np.int64)
 
     return SegmentFormat(blocks, lambda rows: millis(rows["time"].to_numpy()), solve, lambda epochs: millis(epochs["time_gps"].to_numpy()),
-                         "no pseudorange")  # fmt: skip
+                         "no pseudorange", check_sigma_model)  # fmt: skip
 
 
 FORMATS = {"librsf": lambda _nav: _librsf(), "gsdc-derived": lambda _nav: _gsdc_derived(), "ubx": _ubx,
