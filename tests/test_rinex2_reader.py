@@ -31,12 +31,12 @@ def walk_rinex2(tmp_path_factory):
     folder = tmp_path_factory.mktemp("walk2")
     ubx = shared("rtklibexplorer", "gnss_1730.ubx")
 
-    def convert(seconds: float | None = None) -> tuple[str, str]:
-        name = f"walk-{seconds or 'all'}"
+    def convert(seconds: float | None = None, options: tuple[str, ...] = ("-v", "2.11", "-od", "-os")) -> tuple[str, str]:
+        name = f"walk-{seconds or 'all'}{''.join(options)}"
         minute, second = divmod(int(39.7 + (seconds or 0.0)), 60)
         end = [] if seconds is None else ["-te", "2025/08/28", f"17:{30 + minute:02d}:{second:02d}"]
-        subprocess.run([CONVBIN, "-r", "ubx", "-v", "2.11", "-od", "-os", *end, "-o", str(folder / f"{name}.obs"), "-n",
-                        str(folder / f"{name}.nav"), str(ubx)], check=True, capture_output=True)  # fmt: skip
+        subprocess.run([CONVBIN, "-r", "ubx", *options, *end, "-o", str(folder / f"{name}.obs"), "-n", str(folder / f"{name}.nav"),
+                        str(ubx)], check=True, capture_output=True)  # fmt: skip
         return str(folder / f"{name}.obs"), str(folder / f"{name}.nav")
 
     return convert
@@ -56,6 +56,19 @@ def test_a_real_receivers_rinex_2_file_gives_georinexs_rows(walk_rinex2):
     assert plan.version == 2 and rinex3_plan(obs) is None
     parts = list(iter_observation_rows(obs, plan, 37))
     assert len(parts) == 15 and same_rows(pd.concat(parts, ignore_index=True), rows)
+
+
+@needs_convbin
+@pytest.mark.parametrize("options", [("-v", "2.10", "-f", "1", "-od", "-os"), ("-v", "2.12", "-f", "3", "-od", "-os", "-ol", "-oi")])
+def test_other_rinex_2_layouts_give_georinexs_rows(walk_rinex2, options):
+    """convbin's RINEX 2.10 of one frequency (C1 L1 D1 S1: a satellite's values on one short line; georinex then keeps
+    the times to the millisecond, .747 where the file says .7479990) and RINEX 2.12 of three (12 types, their list
+    continued on a second header line, three lines a satellite)."""
+    obs, _ = walk_rinex2(30.0, options)
+    rows = observation_rows(obs)
+    assert rows is not None and len(rows) > 500 and same_rows(rows, _georinex(obs))
+    if "2.10" in options:
+        assert (rows["time"].dt.microsecond % 1000 == 0).all() and (rows["time"].dt.microsecond > 0).any()
 
 
 @needs_convbin
@@ -200,8 +213,8 @@ def test_a_file_of_more_epochs_than_georinex_guesses_is_read(tmp_path):
 def test_damaged_copies_of_a_real_file_are_read_as_georinex_reads_them(walk_rinex2, tmp_path):
     """Twelve copies of the real walk's first 3 s as RINEX 2.11, each with bytes changed, cut or added in its header or
     records: the direct reader gives georinex's rows, or leaves the file to georinex. (Checked when written on 500 such
-    copies of its first 60 kB, 199 read alike, 200 of the whole walk, 92, and 300 of the synthetic file, 71: every
-    other one left to georinex.)"""
+    copies of its first 60 kB, 199 read alike, 200 of the whole walk, 92, 150 of its RINEX 2.10, 74, and 300 of the
+    synthetic file, 71: every other one left to georinex.)"""
     clean = open(walk_rinex2(3.0)[0], "rb").read()
     read_alike = damaged_copies_read_alike(clean, tmp_path, 12, 0.3, b"0123456789 .-+GREC\n56")
     assert read_alike >= 3  # (many damaged copies still read)

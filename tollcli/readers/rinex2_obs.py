@@ -9,17 +9,18 @@ in 14, loss of lock and signal strength in one each), five to an 80-column line.
 
 This reader takes those lines the way georinex does: every line after the header is tried as an epoch line and passed
 over where it is not one (a time that does not parse, an event flag 2–4: ``georinex.obs2._timeobs``); a satellite's
-lines are cut at 80 columns and padded to them; a satellite named with a blank system letter is GPS. It gives the file
-back to georinex (None) wherever the two could differ or georinex would refuse it: not RINEX 2 observations, not plain
-ASCII text, a first line longer than 80 columns, a file system other than GPS, GLONASS, Galileo, BeiDou or mixed
-(georinex reads nothing of a blank one), a mixed file without TIME OF FIRST OBS (its time system), observation types
-not as many as said or one twice, an event flag 5 or 6, an epoch line cut short or a satellite list that does not
-read, a satellite number outside 1–36, an epoch time twice, a satellite twice in an epoch, a value that is not a
-number in a satellite of a system read, or no pseudorange at all. Tested row for row against georinex on a real
-receiver's log turned into RINEX 2.11 by RTKLIB's ``convbin``, on synthetic files and on 1 000 randomly damaged copies
-(every one read alike or left to georinex). One difference is kept on purpose: georinex (its default ``fast`` reading)
-guesses the number of epochs from the file's size and the first epoch and stops with an IndexError when a file has
-more; this reader reads such a file.
+lines are cut at 80 columns and padded to them; a satellite named with a blank system letter is GPS; the times are
+kept to the millisecond where georinex reads them first (a file whose first satellite's lines are all shorter than 79
+columns). It gives the file back to georinex (None) wherever the two could differ or georinex would refuse it: not
+RINEX 2 observations, not plain ASCII text, a first line longer than 80 columns, a file system other than GPS,
+GLONASS, Galileo, BeiDou or mixed (georinex reads nothing of a blank one), a mixed file without TIME OF FIRST OBS (its
+time system), observation types not as many as said or one twice, an event flag 5 or 6, an epoch line cut short or a
+satellite list that does not read, a satellite number outside 1–36, an epoch time twice, a satellite twice in an
+epoch, a value that is not a number in a satellite of a system read, or no pseudorange at all. Tested row for row
+against georinex on a real receiver's log turned into RINEX 2.11 by RTKLIB's ``convbin``, on synthetic files and on
+1 150 randomly damaged copies (every one read alike or left to georinex). One difference is kept on purpose: georinex
+(its default ``fast`` reading) guesses the number of epochs from the file's size and the first epoch and stops with an
+IndexError when a file has more; this reader reads such a file.
 """
 
 from __future__ import annotations
@@ -103,6 +104,7 @@ def _records(lines, columns: dict[str, list[int]], n_types: int, per_satellite: 
     """Each epoch's time and its satellites' values of ``columns`` (the systems read), as georinex reads the records
     (see the module). Raises Refused where georinex should read the file."""
     seen_times: set[dt.datetime] = set()
+    to_ms = None  # whether georinex keeps the times to the millisecond only (:func:`_to_the_millisecond`)
     for line in lines:
         try:
             time = _epoch_time(line)
@@ -114,17 +116,33 @@ def _records(lines, columns: dict[str, list[int]], n_types: int, per_satellite: 
         svs = _satellites(line, min(12, n_sats))
         for _ in range((n_sats - 1) // 12):
             svs += _satellites(next(lines, ""), min(12, n_sats - len(svs)))
-        if len(svs) != n_sats or time in seen_times or len(set(svs)) != n_sats:
+        if len(svs) != n_sats or len(set(svs)) != n_sats:
             raise Refused
-        seen_times.add(time)
         sats = []
         for sv in svs:
-            raw = "".join(f"{next(lines, '')[:80]:80s}" for _ in range(per_satellite))  # (georinex: past the end, blank)
+            sat_lines = [next(lines, "") for _ in range(per_satellite)]  # (georinex: past the end, blank)
+            if to_ms is None:
+                to_ms = _to_the_millisecond(sat_lines)
+            raw = "".join(f"{text[:80]:80s}" for text in sat_lines)
             if sv[0] not in columns:
                 continue
             values = [_value(raw[16 * k : 16 * k + 14]) for k in range(n_types)]  # (every one read: a bad one refuses)
             sats.append((sv, np.array([values[i] for i in columns[sv[0]]], float)))
+        if to_ms is None:  # (an epoch of no satellite first: georinex would size its arrays from the next epoch's lines)
+            raise Refused
+        if to_ms:
+            time = time.replace(microsecond=time.microsecond // 1000 * 1000)
+        if time in seen_times:
+            raise Refused
+        seen_times.add(time)
         yield time, sats
+
+
+def _to_the_millisecond(first_satellite: list[str]) -> bool:
+    """Whether georinex keeps this file's epoch times to the millisecond only: it reads the times first, as
+    ``datetime64[ms]``, unless the first epoch's first satellite has a line of 79 columns or more (then it guesses the
+    epochs from the file's size, keeping the times to the microsecond: ``georinex.obs2._fast_alloc``)."""
+    return max(len(text) for text in first_satellite) < 79
 
 
 def _satellites(line: str, n: int) -> list[str]:
