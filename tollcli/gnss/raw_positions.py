@@ -107,7 +107,7 @@ def raw_epochs(m: pd.DataFrame, sigma_model: str = "nominal", sigma_m: float = 5
     usable = m["pr_valid"].to_numpy(bool) & np.isfinite(sat).all(axis=1) & np.isfinite(m["sat_clock_m"].to_numpy(float))
     if not usable.any() and orbits_required:
         raise NoOrbitForRows("no measurement has both a whole pseudorange and a satellite orbit "
-                        "(a navigation file for the day, --nav, gives the orbits)")  # fmt: skip
+                             "(a navigation file for the day, --nav, gives the orbits)")  # fmt: skip
     d = m[usable]
     row = np.searchsorted(epoch_keys, d["epoch_key"].to_numpy())
     order = np.argsort(row, kind="stable")

@@ -89,7 +89,7 @@ def rinex_rows_epochs(rows: pd.DataFrame, ephemerides: pd.DataFrame, coeffs, sig
     carrier = carrier_hz(system, code, states["freq_num"])
     if not usable.any() and orbits_required:  # a navigation file of another day: say so, not "every epoch insufficient"
         raise NoOrbitForRows(f"{obs_path}: no observation has a satellite orbit in {', '.join(navigation_files(nav_path))} ({orbit_coverage(ephemerides, t_rx)}); "
-                        "a navigation file for the day of the observations gives the orbits")  # fmt: skip
+                             "a navigation file for the day of the observations gives the orbits")  # fmt: skip
 
     epoch_times, row = np.unique(rows["time"].to_numpy(), return_inverse=True)
     keep = np.flatnonzero(usable)

@@ -252,9 +252,8 @@ class _Placer:
     def place(self, rows: pd.DataFrame, odo: pd.DataFrame | None, core: tuple[int, int | None]) -> None:
         """Solve and place a segment's ``rows`` (and odometry ``odo``), and store the epochs of its ``core`` (its first
         epoch key and the first key after it, ms; None: to the end)."""
-        from tollcli.integrity.trajectory import with_trajectory
-
         from tollcli.gnss.satellite_states import NoOrbitForRows
+        from tollcli.integrity.trajectory import with_trajectory
 
         missing = None
         try:
