@@ -82,6 +82,12 @@ GYRO_BIAS0_RADPS = 0.005
 #: the receiver clock drift's σ at the start (m/s): a receiver's TCXO may be 1 ppm off (300 m/s; a u-blox walk's is
 #: −60 m/s) — with 10 m/s the first epochs' clocks ran off their prior and a pass started "lost"
 DRIFT0_MPS = 300.0
+#: how fast the vehicle may have gone (m/s; the start's velocity σ without odometry) between a pass's first epoch and
+#: its first snapshot fix, where the log starts or ends without one: the start's position is that fix's, widened by
+#: this speed times the time between. Started there as certain as at a fix (30 m), a backward pass over a phone's last
+#: 60 s on 3 satellites (20 m/s) began 1.2 km off and stayed 500 m off: the passes disagreed, every epoch of that
+#: minute and 3 s before it a fault (``tests/test_trajectory_ends.py``)
+START_SPEED_MPS = 20.0
 #: the σ of a measurement the error model gives none (m)
 FALLBACK_SIGMA_M = 30.0
 #: the median of χ²₁
@@ -256,6 +262,7 @@ def _start(inp: TrajectoryInputs, odometry: bool, m: int, direction: int) -> tup
     p[m - 1, m - 1] = DRIFT0_MPS**2  # drift
     p[np.arange(m, n_states), np.arange(m, n_states)] = 100.0**2
     window = fixed[:HEADING_WINDOW] if direction > 0 else fixed[-HEADING_WINDOW:][::-1]
+    first = 0 if direction > 0 else inp.t_s.size - 1  # the epoch the pass starts at
     x0 = np.zeros(n_states)
     if odometry:
         psi, start, misfit = _fitted_start(inp, window)
@@ -267,6 +274,14 @@ def _start(inp: TrajectoryInputs, odometry: bool, m: int, direction: int) -> tup
         x0[:2] = inp.fix_enu_m[window[0], :2]
         p[3, 3] = p[4, 4] = 20.0**2  # the velocity
     x0[2] = np.median(inp.fix_enu_m[window[: min(30, window.size)], 2])
+    if window[0] != first:  # no fix where the pass starts: the vehicle may have gone far from (and turned since) its first fix
+        between = slice(min(first, window[0]) + 1, max(first, window[0]) + 1)
+        gone_m = START_SPEED_MPS * abs(float(inp.t_s[window[0]] - inp.t_s[first]))
+        p[0, 0] += gone_m**2
+        p[1, 1] += gone_m**2
+        if odometry:  # the turn the gyro measured between (rad)
+            turn = np.abs(np.nan_to_num(inp.yaw_rate_radps[between])) * np.diff(inp.t_s)[between.start - 1 : between.stop - 1]
+            p[3, 3] += float(np.sum(turn)) ** 2
     return x0, p
 
 
