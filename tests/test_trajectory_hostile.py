@@ -30,6 +30,7 @@ def _t(line: str) -> float:
 
 CASES = {
     "short": lambda lines: lines[:2000],  # the first 8 s
+    "a_second": lambda lines: [ln for ln in lines if _t(ln) < 1.0],  # 5 epochs: too few fixes to start from
     "late_galileo": lambda lines: [ln for ln in lines if not (ln.startswith("pseudorange3") and int(_fields(ln)[7]) >= 300 and _t(ln) < 200)],
     "pseudorange_hole": lambda lines: [ln for ln in lines if not (ln.startswith("pseudorange3") and 100 < _t(ln) < 160)],
     "far_outliers": lambda lines: [" ".join([*_fields(ln)[:2], str(float(_fields(ln)[2]) + 1e7), *_fields(ln)[3:]])
@@ -51,6 +52,9 @@ def test_an_odd_log_never_misleads(tmp_path, case):
         summary = json.loads(proc.stdout)
         if case == "short":  # 8 s: no noise can be measured from it; the snapshot positions, and why
             assert summary["positioning_used"] == "snapshot" and "less than the 120 s" in summary["positioning_note"]
+        if case == "a_second":  # the snapshot positions, and why (it said nothing)
+            assert summary["positioning_used"] == "snapshot" and summary["positioning_note"] == (
+                "the log has 5 snapshot fixes, fewer than the 10 a trajectory starts from")
         if case == "odometer_stuck":  # a speed of 0 while the fixes move: the odometry is not used, and the user told
             assert "contradicts the fixes" in summary["positioning_note"], summary
         proc = run_cli("audit", "--epochs", str(table), "--truth", str(shared(*TRUTH)), "-o", str(report), "-q")

@@ -344,9 +344,9 @@ def with_trajectory(epochs, meas, positioning: str):
         return epochs, meas, "snapshot"
     if positioning == "auto":
         positioning = "smoothed"
-    fixes = np.isfinite(epochs["lat_deg"].to_numpy(float)).sum()
+    fixes = int(np.isfinite(epochs["lat_deg"].to_numpy(float)).sum())
     if fixes < MIN_FIXES:
-        return epochs, meas, "snapshot"
+        return _refused(epochs, f"the log has {fixes} snapshot fixes, fewer than the {MIN_FIXES} a trajectory starts from"), meas, "snapshot"
     inp = trajectory_inputs(epochs, meas)
     duration_s = float(inp.t_s[-1] - inp.t_s[0]) if inp.t_s.size else 0.0
     if duration_s < MIN_DURATION_S:
