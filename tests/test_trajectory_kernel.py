@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 import pytest
 from conftest import shared
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
@@ -140,6 +140,7 @@ def _random_spd(rng, n):
 
 @settings(max_examples=80, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(6, 10))
+@example(97240, 10)
 def test_the_weight_found_by_halving_is_the_grids_first_least(seed, n):
     """Property: the horizontal variance of (ω P_f⁻¹ + (1 − ω) P_b⁻¹)⁻¹ is convex in ω, so the kernel's halving finds
     the first least of the grid, as trying all 19 does (wherever the two best differ beyond rounding)."""
@@ -154,7 +155,10 @@ def test_the_weight_found_by_halving_is_the_grids_first_least(seed, n):
     close = np.abs(traces - traces[best]) <= 1e-9 * traces[best]
     assert close[chosen], (traces, best, chosen)
     w = OMEGAS[chosen]
-    assert np.allclose(p[0], np.linalg.inv(w * info_f + (1 - w) * info_b), rtol=1e-8, atol=1e-12)
+    expected = np.linalg.inv(w * info_f + (1 - w) * info_b)
+    # to rounding of the matrix's own scale: an entry 1e-6 of its largest differed by 7e-12 (seed 97240, n 10) between two
+    # inversions of the same matrix, beyond 1e-8 of itself
+    assert np.allclose(p[0], expected, rtol=1e-8, atol=1e-12 * np.abs(expected).max())
     assert np.allclose(x[0], p[0] @ (w * info_f @ xf + (1 - w) * info_b @ xb), rtol=1e-7, atol=1e-9)
 
 
