@@ -26,35 +26,26 @@ from collections.abc import Iterator
 import numpy as np
 
 from tollcli.readers.rinex import CODES
-from tollcli.readers.rinex_records import ObservationPlan, Refused, plan_of, text_lines, values_seen
+from tollcli.readers.rinex_records import ObservationPlan, Refused, file_records, first_pass
 
 #: the systems read (georinex's ``use``)
 SYSTEMS = tuple(CODES)
 
 
 def rinex3_plan(path: str, keep: list | None = None) -> ObservationPlan | None:
-    """A first pass over the file (line by line: memory flat): its plan, or None where georinex should read it.
-    ``keep``: a list that receives the records read (the whole file's, for a caller that reads it whole)."""
-    try:
-        with text_lines(path) as lines:
-            header = _header_of(lines)
-            if header is None:
-                return None
-            types, columns, wanted = header
-            seen_value = values_seen(_records(lines, columns), columns, keep)
-            for _ in lines:  # (what follows the records is not read, but must be ASCII text too)
-                pass
-    except (ValueError, IndexError, KeyError, OSError, UnicodeDecodeError, Refused):
-        return None
-    return plan_of(types, columns, wanted, seen_value, version=3)
+    """A first pass over a RINEX 3 observation file (:func:`~tollcli.readers.rinex_records.first_pass`): its plan, or
+    None where georinex should read it."""
+    return first_pass(path, 3, _header_of, _records_of, keep)
 
 
 def iter_rinex3_records(path: str, plan: ObservationPlan) -> Iterator[tuple[dt.datetime, list]]:
-    """The file's records (time, satellites' values of the plan's columns), in file order, by the ``plan`` its first
-    pass made (:func:`rinex3_plan`)."""
-    with text_lines(path) as lines:
-        _header_of(lines)
-        yield from _records(lines, plan.columns)
+    """The file's records (time, satellites' values of the plan's columns), in file order, once its first pass
+    (:func:`rinex3_plan`) made ``plan``."""
+    return file_records(path, _header_of, _records_of)
+
+
+def _records_of(lines, header) -> Iterator[tuple[dt.datetime, list]]:
+    return _records(lines, header[1])
 
 
 def _header_of(lines) -> tuple[dict[str, list[str]], dict[str, list[int]], dict[str, list[str]]] | None:

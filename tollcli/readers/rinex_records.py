@@ -5,6 +5,7 @@ that a file is georinex's to read."""
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +26,30 @@ class ObservationPlan:
 
 class Refused(Exception):
     """The file is one georinex should read (the readers' docstrings say when)."""
+
+
+def first_pass(path: str, version: int, header_of, records_of, keep: list | None = None) -> ObservationPlan | None:
+    """A first pass over a RINEX observation file of ``version`` (line by line: memory flat): its plan, or None where
+    georinex should read it. ``header_of(lines)``: the version's header (types, columns, wanted, …) with ``lines`` left
+    at the first record, None where georinex should read the file; ``records_of(lines, header)``: its records.
+    ``keep``: a list that receives the records read (the whole file's, for a caller that reads it whole)."""
+    try:
+        with text_lines(path) as lines:
+            header = header_of(lines)
+            if header is None:
+                return None
+            seen_value = values_seen(records_of(lines, header), header[1], keep)
+            for _ in lines:  # (what follows the records is not read, but must be ASCII text too)
+                pass
+    except (ValueError, IndexError, KeyError, OSError, UnicodeDecodeError, Refused):
+        return None
+    return plan_of(*header[:3], seen_value, version)
+
+
+def file_records(path: str, header_of, records_of) -> Iterator[tuple[dt.datetime, list]]:
+    """The records of a file whose first pass (:func:`first_pass`) made a plan, in file order."""
+    with text_lines(path) as lines:
+        yield from records_of(lines, header_of(lines))
 
 
 def values_seen(records, columns: dict[str, list[int]], keep: list | None) -> dict[str, np.ndarray]:
