@@ -1,7 +1,7 @@
 """The trajectory's verdicts where a drive has too few satellites: at its start, in its middle or at its end, with and
 without odometry, audited against the simulator's truth.
 
-    python benchmarks/trajectory_ends.py [--duration 1200] [--stretch 120] [--seed 13]
+    python benchmarks/trajectory_ends.py [--duration 1200] [--stretch 120] [--seed 13] [--only middle-gap]
 
 A simulated city drive (``tollcli simulate --nlos --odometry --duration D --rate 5 --seed S``, written once into a
 temporary folder) is edited: in a stretch of ``--stretch`` seconds at the start, in the middle or at the end, each
@@ -55,6 +55,8 @@ def main() -> int:
     parser.add_argument("--duration", type=float, default=1200.0, help="the drive (s, at 5 Hz)")
     parser.add_argument("--stretch", type=float, default=120.0, help="the stretch with few satellites (s)")
     parser.add_argument("--seed", type=int, default=13)
+    parser.add_argument("--only", nargs="*", default=None, metavar="STRETCH-K",
+                        help="only these cases, e.g. middle-gap start-2 (default: all)")
     args = parser.parse_args()
     d, s = args.duration, args.stretch
     where = {"start": (0.0, s), "middle": ((d - s) / 2, (d + s) / 2), "end": (d - s, d)}
@@ -68,6 +70,8 @@ def main() -> int:
         bad = 0
         for name, (lo, hi) in where.items():
             for keep in ([3, 2, 1, None] if name == "middle" else [3, 2, 1]):
+                if args.only is not None and f"{name}-{'gap' if keep is None else keep}" not in args.only:
+                    continue
                 for odometry in (True, False):
                     log, table, report = Path(tmp) / "drive.txt", Path(tmp) / "epochs.csv", Path(tmp) / "audit.json"
                     edited(sim / "drive-librsf.txt", log, lo, hi, keep, odometry)

@@ -106,3 +106,64 @@ def test_a_phones_last_minute_on_three_satellites_is_within_its_bound():
     assert (hpe < hpl).all(), (hpe[hpe >= hpl], hpl[hpe >= hpl])
     status = run_raim(placed_meas, RaimParams("ss"))["raim_status"].to_numpy(str)
     assert not (status[n - 63 :] == "fault_detected").any()
+
+
+def _nothing_logged(drive, out, lo: float, hi: float) -> None:
+    """The drive without any line (pseudoranges and odometry) timed in [lo, hi) s: the logger stopped while the car
+    drove on."""
+    kept = [line for line in open(drive).read().splitlines(keepends=True) if not lo <= float(line.split()[1]) < hi]
+    open(out, "w").write("".join(kept))
+
+
+def test_a_logging_gap_while_driving_is_crossed_without_losing_the_vehicle(city_drive, tmp_path):
+    """Nothing logged for a minute in the middle of the simulated drive (odometry included) while the car drove on
+    (~600 m). Across the gap each pass's position is now as uncertain as the distance the car may have gone
+    (``trajectory_filter.wander_m2``): all 1 200 epochs valid, none misleading. Before, the gap added a random walk of
+    55 m σ where the car went hundreds of metres; the pass coming out of it rejected the measurements and lost the
+    vehicle: 532 of the 1 200 epochs were faults (304 of 5 400 in the 1 200-s drive of
+    ``benchmarks/trajectory_ends.py``)."""
+    lo, hi = 120.0, 180.0
+    log = tmp_path / "drive.txt"
+    _nothing_logged(city_drive / "drive-librsf.txt", log, lo, hi)
+    table, report = tmp_path / "epochs.csv", tmp_path / "audit.json"
+    proc = run_cli("integrity", str(log), "-o", str(table), "-q")
+    assert proc.returncode == 0, proc.stderr.decode()
+    proc = run_cli("audit", "--epochs", str(table), "--truth", str(city_drive / "truth-librsf.txt"), "-o", str(report), "-q")
+    assert proc.returncode == 0, proc.stderr.decode()
+    audit = json.loads(report.read_text())["integrity"]
+    assert audit["regions"]["misleading"] == 0 and audit["regions"]["hazardous"] == 0
+    with open(table, newline="") as f:
+        status = np.array([r["raim_status"] for r in csv.DictReader(f)])
+    assert status.size == 1_200  # 300 s at 5 Hz less the minute
+    assert not (status == "fault_detected").any() and (status == "valid").mean() > 0.95
+
+
+def _gap_inputs(t_s, missing, fixed):
+    """What :func:`wander_m2` reads of a log: its times, the intervals without odometry and the epochs with a fix."""
+    from types import SimpleNamespace
+
+    fix = np.where(np.asarray(fixed)[:, None], 0.0, np.nan) * np.ones((len(t_s), 3))
+    return SimpleNamespace(t_s=np.asarray(t_s, float), missing_odometry=np.asarray(missing, bool), fix_enu_m=fix)
+
+
+@pytest.mark.parametrize("direction", [1, -1])
+@pytest.mark.parametrize("epochs_inside", [0, 1, 7, 600])
+def test_a_gap_without_fix_or_odometry_adds_the_distance_the_vehicle_may_have_gone(direction, epochs_inside):
+    """Across 120 s with neither a fix nor odometry the variance a pass adds is (20 m/s × 120 s)², however many
+    epochs were logged inside (none: one interval); between two fixes it is (20 m/s × dt)² an interval; where the
+    odometry is present, nothing."""
+    from tollcli.integrity.trajectory_filter import START_SPEED_MPS, wander_m2
+
+    inside = np.linspace(10.0, 130.0, epochs_inside + 2)[1:-1]
+    t = np.concatenate([np.arange(0.0, 10.5, 0.5), inside, np.arange(130.0, 140.5, 0.5)])
+    n, before = t.size, np.arange(0.0, 10.5, 0.5).size
+    missing = np.zeros(n, bool)
+    missing[before : before + epochs_inside + 1] = True  # the intervals from 10 s to 130 s
+    missing[-4:] = True  # and the last 1.5 s, between fixes
+    fixed = np.ones(n, bool)
+    fixed[before : before + epochs_inside] = False
+    added = wander_m2(_gap_inputs(t, missing, fixed), direction, START_SPEED_MPS)
+    gap = slice(before, before + epochs_inside + 1)
+    assert added[gap].sum() == pytest.approx((START_SPEED_MPS * 120.0) ** 2, rel=1e-12)
+    assert np.allclose(added[-4:], (START_SPEED_MPS * 0.5) ** 2)
+    assert (added[~missing] == 0.0).all()

@@ -39,13 +39,13 @@ typedef struct {
     Py_ssize_t n_epochs, n_slots;
     int n_states, n_clocks, odometry, direction, iterations, lost_min, keep_prior, keep_post;
     double omega, c_mps, cauchy, relinearise;
-    const double *t, *sat, *pr, *sigma2, *robust2, *speed, *yaw, *forward, *left, *origin, *rot, *noise;
+    const double *t, *sat, *pr, *sigma2, *robust2, *speed, *yaw, *forward, *left, *wander, *origin, *rot, *noise;
     const uint8_t *mask;
     const int64_t *clock;
 } Pass;
 
 /* noise fields (trajectory_filter.NOISE_FIELDS) */
-enum { ALONG, SHARE, POSITION, NO_ODO, YAW, HEADING, UP, CLOCK, DRIFT, ACCEL, GYRO_BIAS };
+enum { ALONG, SHARE, POSITION, GAP_SPEED, YAW, HEADING, UP, CLOCK, DRIFT, ACCEL, GYRO_BIAS };
 
 /* ranges (m) and east-north-up unit vectors from the position x[0..2] to the n used satellites of epoch k */
 static void ranges(const Pass *c, const double *x, Py_ssize_t k, const int *used, int n, double *rng, double *u) {
@@ -250,9 +250,10 @@ INLINE void predict(const Pass *c, double *x, double *p, double dt, Py_ssize_t i
             q[0] = (ae * ae + nz[POSITION] * dt) + lat * lat;
             q[1] = (an * an + nz[POSITION] * dt) + lat * lat;
             q[3] = ay * ay + nz[HEADING] * dt;
-        } else { /* an interval without odometry: the position wanders, the heading too */
-            q[0] = nz[NO_ODO] * dt;
-            q[1] = nz[NO_ODO] * dt;
+        } else { /* an interval without odometry: the position wanders (as far as the vehicle may have gone since the
+                    last interval with odometry: trajectory_filter.wander_m2), the heading too */
+            q[0] = c->wander[interval];
+            q[1] = c->wander[interval];
             q[3] = 0.1 * dt;
         }
         q[2] = nz[UP] * dt;
@@ -469,10 +470,10 @@ static int check(Py_buffer *b, Py_ssize_t items, Py_ssize_t itemsize, const char
     return 1;
 }
 
-#define N_IN 17
+#define N_IN 18
 #define N_OUT 10
 
-/* run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left, origin, rot, noise, start_x, start_p,
+/* run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left, wander, origin, rot, noise, start_x, start_p,
  *          start_started, prior_x, prior_p, post_x, post_p, z, w, started, relocked, prior_y, post_y,
  *          direction, odometry, n_clocks, iterations, lost_min, keep_prior, keep_post, resume, omega, c_mps, cauchy,
  *          relinearise)
@@ -491,9 +492,9 @@ static PyObject *run_pass(PyObject *self, PyObject *args) {
     memset(in, 0, sizeof(in));
     memset(out, 0, sizeof(out));
     int resume = 0;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*w*w*w*w*w*w*w*w*w*w*iiiiiiiidddd", &in[0], &in[1], &in[2],
-                          &in[3], &in[4], &in[5], &in[6], &in[7], &in[8], &in[9], &in[10], &in[11], &in[12], &in[13],
-                          &in[14], &in[15], &in[16], &out[0], &out[1], &out[2], &out[3], &out[4], &out[5], &out[6], &out[7],
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*y*w*w*w*w*w*w*w*w*w*w*iiiiiiiidddd", &in[0], &in[1], &in[2],
+                          &in[3], &in[4], &in[5], &in[6], &in[7], &in[8], &in[9], &in[10], &in[11], &in[12], &in[13], &in[14],
+                          &in[15], &in[16], &in[17], &out[0], &out[1], &out[2], &out[3], &out[4], &out[5], &out[6], &out[7],
                           &out[8], &out[9],
                           &c.direction, &c.odometry, &c.n_clocks, &c.iterations, &c.lost_min, &c.keep_prior, &c.keep_post, &resume,
                           &c.omega, &c.c_mps, &c.cauchy, &c.relinearise))
@@ -511,8 +512,8 @@ static PyObject *run_pass(PyObject *self, PyObject *args) {
     if (!check(&in[1], E * N * 3, 8, "sat") || !check(&in[2], E * N, 8, "pr") || !check(&in[3], E * N, 1, "mask") ||
         !check(&in[4], E * N, 8, "clock") || !check(&in[5], E * N, 8, "sigma2") || !check(&in[6], E * N, 8, "robust2") ||
         !check(&in[7], E, 8, "speed") || !check(&in[8], E, 8, "yaw") || !check(&in[9], E, 8, "forward") ||
-        !check(&in[10], E, 8, "left") || !check(&in[11], 3, 8, "origin") || !check(&in[12], 9, 8, "rot") ||
-        !check(&in[13], N_NOISE, 8, "noise") || !check(&in[14], S, 8, "start_x") || !check(&in[15], S * S, 8, "start_p") || !check(&in[16], c.n_clocks, 1, "start_started") ||
+        !check(&in[10], E, 8, "left") || !check(&in[11], E, 8, "wander") || !check(&in[12], 3, 8, "origin") || !check(&in[13], 9, 8, "rot") ||
+        !check(&in[14], N_NOISE, 8, "noise") || !check(&in[15], S, 8, "start_x") || !check(&in[16], S * S, 8, "start_p") || !check(&in[17], c.n_clocks, 1, "start_started") ||
         !check(&out[0], c.keep_prior ? E * S : 0, 8, "prior_x") || !check(&out[1], c.keep_prior ? E * S * S : 0, 8, "prior_p") ||
         !check(&out[2], c.keep_post ? E * S : 0, 8, "post_x") || !check(&out[3], c.keep_post ? E * S * S : 0, 8, "post_p") || !check(&out[4], E * N, 8, "z") ||
         !check(&out[5], E * N, 8, "w") || !check(&out[6], E * c.n_clocks, 1, "started") ||
@@ -528,7 +529,7 @@ static PyObject *run_pass(PyObject *self, PyObject *args) {
     }
     c.t = in[0].buf; c.sat = in[1].buf; c.pr = in[2].buf; c.mask = in[3].buf; c.clock = in[4].buf;
     c.sigma2 = in[5].buf; c.robust2 = in[6].buf; c.speed = in[7].buf; c.yaw = in[8].buf; c.forward = in[9].buf;
-    c.left = in[10].buf; c.origin = in[11].buf; c.rot = in[12].buf; c.noise = in[13].buf;
+    c.left = in[10].buf; c.wander = in[11].buf; c.origin = in[12].buf; c.rot = in[13].buf; c.noise = in[14].buf;
     double *prior_x = out[0].buf, *prior_p = out[1].buf, *post_x = out[2].buf, *post_p = out[3].buf;
     double *z_all = out[4].buf, *w_all = out[5].buf;
     uint8_t *started_all = out[6].buf, *relocked = out[7].buf;
@@ -546,9 +547,9 @@ static PyObject *run_pass(PyObject *self, PyObject *args) {
     Work wk = {values + slots, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
     wk.a = wk.info + nn; wk.li = wk.a + nn; wk.x = wk.li + nn; wk.b = wk.x + S;
     wk.rng = wk.b + S; wk.u = wk.rng + slots; wk.z = wk.u + 3 * slots; wk.w = wk.z + slots; wk.a_info = wk.w + slots;
-    memcpy(x, in[14].buf, sizeof(double) * S);
-    memcpy(p, in[15].buf, sizeof(double) * nn);
-    for (int g = 0; g < c.n_clocks; g++) started[g] = ((const uint8_t *)in[16].buf)[g] != 0;
+    memcpy(x, in[15].buf, sizeof(double) * S);
+    memcpy(p, in[16].buf, sizeof(double) * nn);
+    for (int g = 0; g < c.n_clocks; g++) started[g] = ((const uint8_t *)in[17].buf)[g] != 0;
     Py_BEGIN_ALLOW_THREADS
     pass_loop(&c, resume, x, p, fp, xq, pq, values, used, started, &wk, prior_x, prior_p, post_x, post_p, z_all, w_all,
               started_all, relocked, prior_y, post_y, S);

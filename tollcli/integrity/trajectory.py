@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
-from tollcli.integrity.trajectory_filter import MOTION_STATES, MotionNoise, PassBuffers, run_pass
+from tollcli.integrity.trajectory_filter import MOTION_STATES, START_SPEED_MPS, MotionNoise, PassBuffers, run_pass
 from tollcli.integrity.trajectory_inputs import TrajectoryInputs
 from tollcli.integrity.trajectory_noise import (
     correlation_inflation,
@@ -82,12 +82,6 @@ GYRO_BIAS0_RADPS = 0.005
 #: the receiver clock drift's σ at the start (m/s): a receiver's TCXO may be 1 ppm off (300 m/s; a u-blox walk's is
 #: −60 m/s) — with 10 m/s the first epochs' clocks ran off their prior and a pass started "lost"
 DRIFT0_MPS = 300.0
-#: how fast the vehicle may have gone (m/s; the start's velocity σ without odometry) between a pass's first epoch and
-#: its first snapshot fix, where the log starts or ends without one: the start's position is that fix's, widened by
-#: this speed times the time between. Started there as certain as at a fix (30 m), a backward pass over a phone's last
-#: 60 s on 3 satellites (20 m/s) began 1.2 km off and stayed 500 m off: the passes disagreed, every epoch of that
-#: minute and 3 s before it a fault (``tests/test_trajectory_ends.py``)
-START_SPEED_MPS = 20.0
 #: the σ of a measurement the error model gives none (m)
 FALLBACK_SIGMA_M = 30.0
 #: the median of χ²₁

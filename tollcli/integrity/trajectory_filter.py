@@ -56,6 +56,13 @@ CAUCHY_C = 2.5
 #: d leaves a range's linearisation error below d² / (2 × 20 000 km), 2.5 µm at 10 m, and the weights (of the
 #: innovations, the same to first order wherever the update is linearised) change by as little
 RELINEARISE_M = 10.0
+#: how fast the vehicle may have gone (m/s; the start's velocity σ without odometry) where nothing says where it went.
+#: At a pass's start, between its first epoch and its first snapshot fix, where the log starts or ends without one
+#: (:mod:`tollcli.integrity.trajectory`): the start's position is that fix's, widened by this speed times the time
+#: between. Started there as certain as at a fix (30 m), a backward pass over a phone's last 60 s on 3 satellites
+#: (20 m/s) began 1.2 km off and stayed 500 m off: the passes disagreed, every epoch of that minute and 3 s before it a
+#: fault (``tests/test_trajectory_ends.py``). And across a stretch without odometry (:func:`wander_m2`)
+START_SPEED_MPS = 20.0
 
 
 @dataclass(frozen=True)
@@ -66,7 +73,7 @@ class MotionNoise:
     along_track_share: float = 0.03  # ... this share of the speed
     position_m2ps: float = 0.1  # position random walk beside the odometry (lateral slip: ~3 m in 100 s), chosen on the
     # simulator's city drives (benchmarks/trajectory_settings.py: the smallest worst 95th-percentile error, none misleading)
-    no_odometry_m2ps: float = 25.0  # position random walk where an odometry interval is missing
+    gap_speed_mps: float = START_SPEED_MPS  # how fast the vehicle may go where an odometry interval is missing (:func:`wander_m2`)
     yaw_rate_radps: float = 0.01  # gyro error
     heading_rad2ps: float = 1e-5  # heading random walk
     up_m2ps: float = 0.01  # height random walk
@@ -181,9 +188,10 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
                      array("started", (n_epochs, inp.n_clocks), 0, np.uint8), array("relocked", (n_epochs,), 0, np.uint8),
                      states(keep_prior, "prior_y")[1], states(keep_post, "post_y")[1])  # fmt: skip
     t, sat, pr, mask, clock, speed, yaw, forward, left, origin, rot = inp.kernel_arrays
+    wander = wander_m2(inp, direction, noise.gap_speed_mps)
     started0 = np.zeros(inp.n_clocks, np.uint8) if resume is None else np.ascontiguousarray(resume.started, np.uint8)
     args = (t[span], sat[span], pr[span], mask[span], clock[span], _c64(sigma2_m2[span]), _c64(robust[span]), speed[span],
-            yaw[span], forward[span], left[span], origin, rot, np.array([getattr(noise, f) for f in NOISE_FIELDS], np.float64),
+            yaw[span], forward[span], left[span], wander[span], origin, rot, np.array([getattr(noise, f) for f in NOISE_FIELDS], np.float64),
             _c64(start_x), _c64(start_p), started0, out.prior_x, out.prior_p, out.post_x, out.post_p, out.z, out.weight,
             out.started, out.relocked, out.prior_y, out.post_y, int(direction), int(bool(odometry)), int(inp.n_clocks), ITERATIONS, LOST_LOCK_MIN,
             int(keep_prior), int(keep_post), int(resume is not None), OMEGA_EARTH_RADPS, C_MPS, CAUCHY_C, RELINEARISE_M)  # fmt: skip
@@ -201,6 +209,37 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
             if value is not None:
                 setattr(out, name, value[inner])
     return out
+
+
+def wander_m2(inp: TrajectoryInputs, direction: int, speed_mps: float) -> np.ndarray:
+    """(E,) the position variance (m², east and north each) a pass in ``direction`` adds over each interval without
+    odometry (the one ending at each epoch; 0 where it has odometry). Nothing says where the vehicle went since the
+    pass last knew where it was — an epoch with a snapshot fix, or an interval with odometry (or the pass's start):
+    ``g`` seconds before this interval of ``dt``. It may have gone ``speed_mps`` × the time since, in any direction, so
+    the variance grows as that distance squared: ``speed_mps² × ((g + dt)² − g²)`` — over a gap of T seconds with no
+    fix and no odometry, ``(speed_mps × T)²``; between two fixes, ``(speed_mps × dt)²``. A random walk (25 m²/s, the
+    rule before) gave 55 m after 120 s where a car goes a kilometre: the pass coming out of a logging gap in a simulated
+    city drive rejected the measurements, lost the vehicle, and the minute around the gap was a fault
+    (``benchmarks/trajectory_ends.py``). The same bits whole or in chunks: each interval's value comes from the whole
+    log's arrays."""
+    missing, t = inp.missing_odometry, inp.t_s
+    n = t.size
+    dt = np.abs(np.diff(t, prepend=t[:1]))
+    fixed = np.isfinite(inp.fix_enu_m).all(axis=1)
+    index = np.arange(n)
+    if direction > 0:  # interval k runs from epoch k - 1: known there at a fix, after odometry, or at the start
+        known = fixed | ~missing
+        known[:1] = True
+        last = np.maximum.accumulate(np.where(known, index, 0))
+        gap = np.zeros(n)
+        gap[1:] = t[:-1] - t[last[:-1]]
+    else:  # interval k runs from epoch k: known there at a fix, before odometry, or at the start (the last epoch)
+        known = fixed.copy()
+        known[:-1] |= ~missing[1:]
+        known[-1:] = True
+        following = np.minimum.accumulate(np.where(known, index, n - 1)[::-1])[::-1]
+        gap = t[following] - t
+    return np.where(missing, speed_mps * speed_mps * (dt * (2.0 * np.abs(gap) + dt)), 0.0)
 
 
 def state_after(fp: FilterPass, row: int) -> PassState:
@@ -302,7 +341,7 @@ def _kernel():
 
 _COMPILED = False
 #: :class:`MotionNoise`'s fields in the order the kernel reads them
-NOISE_FIELDS = ("along_track_mps", "along_track_share", "position_m2ps", "no_odometry_m2ps", "yaw_rate_radps",
+NOISE_FIELDS = ("along_track_mps", "along_track_share", "position_m2ps", "gap_speed_mps", "yaw_rate_radps",
                 "heading_rad2ps", "up_m2ps", "clock_m2ps", "drift_m2ps3", "acceleration_m2ps3", "gyro_bias_rad2ps3")  # fmt: skip
 
 

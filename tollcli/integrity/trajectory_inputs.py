@@ -66,6 +66,15 @@ class TrajectoryInputs:
                 c64(self.speed_mps), c64(self.yaw_rate_radps), c64(self.forward_m), c64(self.left_m),
                 c64(self.origin_ecef_m), c64(self.ecef2enu))  # fmt: skip
 
+    @cached_property
+    def missing_odometry(self) -> np.ndarray:
+        """(E,) the intervals (each ending at its epoch; the first epoch's none) without odometry, as the pass reads
+        them: speed, yaw rate, forward or left not a number."""
+        present = np.isfinite(self.speed_mps) & np.isfinite(self.yaw_rate_radps) & np.isfinite(self.forward_m) & np.isfinite(self.left_m)
+        missing = ~present
+        missing[:1] = False
+        return missing
+
     @property
     def has_odometry(self) -> bool:
         """Odometry over at least half of the log's intervals."""

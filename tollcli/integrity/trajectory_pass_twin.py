@@ -25,7 +25,7 @@ import numpy as np
 M = 6
 #: the Earth's mean radius (m): the tangent plane's fall below the road, (e² + n²) / 2R (:func:`_follow_surface`)
 EARTH_RADIUS_M = 6_371_000.0
-ALONG, SHARE, POSITION, NO_ODO, YAW, HEADING, UP, CLOCK, DRIFT, ACCEL, GYRO_BIAS = range(11)
+ALONG, SHARE, POSITION, GAP_SPEED, YAW, HEADING, UP, CLOCK, DRIFT, ACCEL, GYRO_BIAS = range(11)
 
 
 def _ranges(c, x, k, used):
@@ -160,9 +160,9 @@ def _predict(c, x, p, dt, interval):
             q[0] = (ae * ae + nz[POSITION] * dt) + lat * lat
             q[1] = (an * an + nz[POSITION] * dt) + lat * lat
             q[3] = ay * ay + nz[HEADING] * dt
-        else:
-            q[0] = nz[NO_ODO] * dt
-            q[1] = nz[NO_ODO] * dt
+        else:  # as far as the vehicle may have gone since the last interval with odometry (trajectory_filter.wander_m2)
+            q[0] = c["wander"][interval]
+            q[1] = c["wander"][interval]
             q[3] = 0.1 * dt
         q[2] = nz[UP] * dt
         q[4] = nz[GYRO_BIAS] * dt
@@ -281,7 +281,7 @@ def _widen(p, ns, odometry):
     p[4 * ns + 4] += 0.01 * 0.01 if odometry else 10.0 * 10.0
 
 
-def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left, origin, rot, noise, start_x, start_p,
+def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left, wander, origin, rot, noise, start_x, start_p,
              start_started, prior_x, prior_p, post_x, post_p, z_all, w_all, started_all, relocked, prior_y, post_y,
              direction, odometry, n_clocks, iterations, lost_min, keep_prior, keep_post, resume, omega, c_mps, cauchy,
              relinearise):  # fmt: skip
@@ -294,7 +294,7 @@ def run_pass(t, sat, pr, mask, clock, sigma2, robust2, speed, yaw, forward, left
              iterations=iterations, relinearise=relinearise, omega=omega, c_mps=c_mps, cauchy=cauchy, sat=sat.ravel().tolist(),
              pr=pr.ravel().tolist(), clock=clock.ravel().tolist(), sigma2=sigma2.ravel().tolist(),
              robust2=robust2.ravel().tolist(), speed=speed.tolist(), yaw=yaw.tolist(), forward=forward.tolist(),
-             left=left.tolist(), origin=origin.tolist(), rot=rot.ravel().tolist(), noise=noise.tolist())  # fmt: skip
+             left=left.tolist(), wander=wander.tolist(), origin=origin.tolist(), rot=rot.ravel().tolist(), noise=noise.tolist())  # fmt: skip
     tt = t.tolist()
     x, p = start_x.tolist(), start_p.ravel().tolist()
     started = [1 if v else 0 for v in start_started.tolist()]
