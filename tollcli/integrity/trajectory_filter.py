@@ -188,7 +188,7 @@ def run_pass(inp: TrajectoryInputs, sigma2_m2: np.ndarray, direction: int, start
                      array("started", (n_epochs, inp.n_clocks), 0, np.uint8), array("relocked", (n_epochs,), 0, np.uint8),
                      states(keep_prior, "prior_y")[1], states(keep_post, "post_y")[1])  # fmt: skip
     t, sat, pr, mask, clock, speed, yaw, forward, left, origin, rot = inp.kernel_arrays
-    wander = wander_m2(inp, direction, noise.gap_speed_mps)
+    wander = wander_m2(inp, direction, noise.gap_speed_mps) if odometry else np.zeros(t.size)  # (read with odometry only)
     started0 = np.zeros(inp.n_clocks, np.uint8) if resume is None else np.ascontiguousarray(resume.started, np.uint8)
     args = (t[span], sat[span], pr[span], mask[span], clock[span], _c64(sigma2_m2[span]), _c64(robust[span]), speed[span],
             yaw[span], forward[span], left[span], wander[span], origin, rot, np.array([getattr(noise, f) for f in NOISE_FIELDS], np.float64),
@@ -224,6 +224,8 @@ def wander_m2(inp: TrajectoryInputs, direction: int, speed_mps: float) -> np.nda
     log's arrays."""
     missing, t = inp.missing_odometry, inp.t_s
     n = t.size
+    if not missing.any():  # (the usual log: nothing to add)
+        return np.zeros(n)
     dt = np.abs(np.diff(t, prepend=t[:1]))
     fixed = np.isfinite(inp.fix_enu_m).all(axis=1)
     index = np.arange(n)
