@@ -44,6 +44,20 @@ def _three_satellites(drive, out, at: str) -> None:
     open(out, "w").write("".join(lines))
 
 
+def _never_misleading(log, truth, tmp_path) -> list[dict]:
+    """``log`` through ``tollcli integrity`` (defaults) and ``tollcli audit`` against ``truth``: no misleading or
+    hazardous epoch; the epoch table's rows."""
+    table, report = tmp_path / "epochs.csv", tmp_path / "audit.json"
+    proc = run_cli("integrity", str(log), "-o", str(table), "-q")
+    assert proc.returncode == 0, proc.stderr.decode()
+    proc = run_cli("audit", "--epochs", str(table), "--truth", str(truth), "-o", str(report), "-q")
+    assert proc.returncode == 0, proc.stderr.decode()
+    audit = json.loads(report.read_text())["integrity"]
+    assert audit["regions"]["misleading"] == 0 and audit["regions"]["hazardous"] == 0
+    with open(table, newline="") as f:
+        return list(csv.DictReader(f))
+
+
 @pytest.mark.parametrize("at", ["start", "end"])
 def test_a_drive_that_starts_or_ends_on_three_satellites_keeps_its_bound_and_its_evidence(city_drive, tmp_path, at):
     """The simulated drive's first (or last) minute on three satellites: audited against its truth, no misleading or
@@ -52,15 +66,7 @@ def test_a_drive_that_starts_or_ends_on_three_satellites_keeps_its_bound_and_its
     of that minute are valid, and 1 467 and 1 375 of the drive."""
     log = tmp_path / "drive.txt"
     _three_satellites(city_drive / "drive-librsf.txt", log, at)
-    table, report = tmp_path / "epochs.csv", tmp_path / "audit.json"
-    proc = run_cli("integrity", str(log), "-o", str(table), "-q")
-    assert proc.returncode == 0, proc.stderr.decode()
-    proc = run_cli("audit", "--epochs", str(table), "--truth", str(city_drive / "truth-librsf.txt"), "-o", str(report), "-q")
-    assert proc.returncode == 0, proc.stderr.decode()
-    audit = json.loads(report.read_text())["integrity"]
-    assert audit["regions"]["misleading"] == 0 and audit["regions"]["hazardous"] == 0
-    with open(table, newline="") as f:
-        rows = list(csv.DictReader(f))
+    rows = _never_misleading(log, city_drive / "truth-librsf.txt", tmp_path)
     t = (pd.to_datetime([r["time_utc"] for r in rows]) - pd.to_datetime(rows[0]["time_utc"])).total_seconds().to_numpy()
     status = np.array([r["raim_status"] for r in rows])
     stretch = t >= DRIVE_S - STRETCH_S if at == "end" else t < STRETCH_S
@@ -125,15 +131,7 @@ def test_a_logging_gap_while_driving_is_crossed_without_losing_the_vehicle(city_
     lo, hi = 120.0, 180.0
     log = tmp_path / "drive.txt"
     _nothing_logged(city_drive / "drive-librsf.txt", log, lo, hi)
-    table, report = tmp_path / "epochs.csv", tmp_path / "audit.json"
-    proc = run_cli("integrity", str(log), "-o", str(table), "-q")
-    assert proc.returncode == 0, proc.stderr.decode()
-    proc = run_cli("audit", "--epochs", str(table), "--truth", str(city_drive / "truth-librsf.txt"), "-o", str(report), "-q")
-    assert proc.returncode == 0, proc.stderr.decode()
-    audit = json.loads(report.read_text())["integrity"]
-    assert audit["regions"]["misleading"] == 0 and audit["regions"]["hazardous"] == 0
-    with open(table, newline="") as f:
-        status = np.array([r["raim_status"] for r in csv.DictReader(f)])
+    status = np.array([r["raim_status"] for r in _never_misleading(log, city_drive / "truth-librsf.txt", tmp_path)])
     assert status.size == 1_200  # 300 s at 5 Hz less the minute
     assert not (status == "fault_detected").any() and (status == "valid").mean() > 0.95
 
