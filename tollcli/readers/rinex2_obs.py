@@ -32,7 +32,7 @@ from math import ceil
 import numpy as np
 
 from tollcli.readers.rinex import CODES
-from tollcli.readers.rinex_records import ObservationPlan, Refused, file_records, first_pass
+from tollcli.readers.rinex_records import ObservationPlan, Refused, first_pass
 
 #: the systems read (georinex's ``use``)
 SYSTEMS = tuple(CODES)
@@ -43,21 +43,16 @@ MAX_SVID = 36
 def rinex2_plan(path: str, keep: list | None = None) -> ObservationPlan | None:
     """A first pass over a RINEX 2 observation file (:func:`~tollcli.readers.rinex_records.first_pass`): its plan, or
     None where georinex should read it."""
-    return first_pass(path, 2, _header_of, _records_of, keep)
+    return first_pass(path, 2, header_of, records_of, keep)
 
 
-def iter_rinex2_records(path: str, plan: ObservationPlan) -> Iterator[tuple[dt.datetime, list]]:
-    """The file's records (time, satellites' values of the plan's columns), in file order, once its first pass
-    (:func:`rinex2_plan`) made ``plan``."""
-    return file_records(path, _header_of, _records_of)
-
-
-def _records_of(lines, header) -> Iterator[tuple[dt.datetime, list]]:
+def records_of(lines, header) -> Iterator[tuple[dt.datetime, list]]:
+    """The records (time, satellites' values of the header's columns) of the lines after the header (:func:`header_of`)."""
     types, columns, _wanted, per_satellite = header
     return _records(lines, columns, len(next(iter(types.values()))), per_satellite)
 
 
-def _header_of(lines) -> tuple[dict[str, list[str]], dict[str, list[int]], dict[str, list[str]], int] | None:
+def header_of(lines) -> tuple[dict[str, list[str]], dict[str, list[int]], dict[str, list[str]], int] | None:
     """The observation types of each system read (the header's one list, for each), the columns read of each, its
     candidate codes (in CODES' order) and the lines a satellite's values take; ``lines`` left at the first record.
     None where georinex should read the file."""

@@ -26,7 +26,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from tollcli.readers.rinex import CODES
-from tollcli.readers.rinex_records import ObservationPlan, Refused, file_records, first_pass
+from tollcli.readers.rinex_records import ObservationPlan, Refused, first_pass
 
 #: the systems read (georinex's ``use``)
 SYSTEMS = tuple(CODES)
@@ -35,20 +35,15 @@ SYSTEMS = tuple(CODES)
 def rinex3_plan(path: str, keep: list | None = None) -> ObservationPlan | None:
     """A first pass over a RINEX 3 observation file (:func:`~tollcli.readers.rinex_records.first_pass`): its plan, or
     None where georinex should read it."""
-    return first_pass(path, 3, _header_of, _records_of, keep)
+    return first_pass(path, 3, header_of, records_of, keep)
 
 
-def iter_rinex3_records(path: str, plan: ObservationPlan) -> Iterator[tuple[dt.datetime, list]]:
-    """The file's records (time, satellites' values of the plan's columns), in file order, once its first pass
-    (:func:`rinex3_plan`) made ``plan``."""
-    return file_records(path, _header_of, _records_of)
-
-
-def _records_of(lines, header) -> Iterator[tuple[dt.datetime, list]]:
+def records_of(lines, header) -> Iterator[tuple[dt.datetime, list]]:
+    """The records (time, satellites' values of the header's columns) of the lines after the header (:func:`header_of`)."""
     return _records(lines, header[1])
 
 
-def _header_of(lines) -> tuple[dict[str, list[str]], dict[str, list[int]], dict[str, list[str]]] | None:
+def header_of(lines) -> tuple[dict[str, list[str]], dict[str, list[int]], dict[str, list[str]]] | None:
     """The header's observation types, the columns read of each system and its candidate codes (in CODES' order);
     ``lines`` left at the first record. None where georinex should read the file."""
     header = []

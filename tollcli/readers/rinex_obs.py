@@ -10,10 +10,12 @@ from collections.abc import Iterator
 
 import pandas as pd
 
-from tollcli.readers.rinex2_obs import iter_rinex2_records, rinex2_plan
-from tollcli.readers.rinex3_obs import iter_rinex3_records, rinex3_plan
-from tollcli.readers.rinex_records import ObservationPlan, block_rows
+from tollcli.readers import rinex2_obs, rinex3_obs
+from tollcli.readers.rinex_records import ObservationPlan, block_rows, file_records, first_pass
 
+#: each version's header and records (:func:`~tollcli.readers.rinex_records.first_pass`,
+#: :func:`~tollcli.readers.rinex_records.file_records`)
+VERSIONS = {2: rinex2_obs, 3: rinex3_obs}
 #: epochs of a RINEX observation file turned into rows at a time by :func:`iter_observation_rows`
 BLOCK_EPOCHS = 4_096
 
@@ -26,17 +28,15 @@ def observation_plan(path: str, keep: list | None = None) -> ObservationPlan | N
             version = fh.read(9).strip()[:1]
     except OSError:  # (georinex says what is wrong)
         return None
-    if version == b"2":
-        return rinex2_plan(path, keep)
-    if version == b"3":
-        return rinex3_plan(path, keep)
-    return None
+    reader = VERSIONS.get(int(version)) if version.isdigit() else None
+    return None if reader is None else first_pass(path, int(version), reader.header_of, reader.records_of, keep)
 
 
 def iter_observation_rows(path: str, plan: ObservationPlan, block_epochs: int | None = None) -> Iterator[pd.DataFrame]:
     """The file's rows (as :func:`observation_rows`), :data:`BLOCK_EPOCHS` epochs at a time, in file order, by the
     ``plan`` its first pass made (:func:`observation_plan`)."""
-    records = iter_rinex2_records(path, plan) if plan.version == 2 else iter_rinex3_records(path, plan)
+    reader = VERSIONS[plan.version]
+    records = file_records(path, reader.header_of, reader.records_of)
     block: list = []
     for record in records:
         block.append(record)
