@@ -164,18 +164,42 @@ class HalFreeTerms:
                             self.model_hpl_m[rows] if model and self.model_hpl_m is not None else None)  # fmt: skip
 
 
-def hal_free_terms(meas: Measurements, params: RaimParams, geometry: Geometry, model_hpl_m: np.ndarray | None = None) -> HalFreeTerms | None:
+def hal_free_terms(meas: Measurements, params: RaimParams, geometry: Geometry, model_hpl_m: np.ndarray | None = None,
+                   untested: bool = True) -> HalFreeTerms | None:  # fmt: skip
     """:class:`HalFreeTerms` of ``meas`` (None: positions the trajectory estimator placed, judged by its bound);
-    ``model_hpl_m``: :func:`model_hpl` of ``meas`` when already computed (with ``params.p_md``)."""
+    ``model_hpl_m``: :func:`model_hpl` of ``meas`` when already computed (with ``params.p_md``).
+
+    ``untested``: False when the caller reads no epoch's ``hpl_m`` but where the residual test decides (a ``process``
+    without map matching or an epoch table): the solution separation is then solved only for the epochs whose
+    separation some verdict reads (:func:`separation_read`), and the others' ``hpl_m`` is NaN. Their statuses and every
+    other column are the same (``tests/test_separation_untested.py``); on a receiver that writes no range residuals
+    (the 10 h NEO-M9N NMEA drive of ``benchmarks/process_throughput.py``) no epoch is solved at all."""
     if meas.trajectory_hpl_m is not None:
         return None
     separation = None
     if params.mode == "ss":
         residual, _ = post_fit_residuals(meas.H, geometry, meas.mask, meas.dy_m, meas.residual_m)
-        per_satellite = np.isfinite(wsse(residual, geometry))
+        t = wsse(residual, geometry)
+        per_satellite = np.isfinite(t)
+        rows = None if untested else np.flatnonzero(separation_read(meas, t))
         separation = epoch_separation(meas.H, meas.sigma_m, meas.mask, np.where(per_satellite[:, None], residual, np.nan),
-                                      geometry, params)  # fmt: skip
+                                      geometry, params, rows=rows)  # fmt: skip
     return HalFreeTerms(separation, model_hpl(meas, geometry, params.p_md) if model_hpl_m is None else model_hpl_m)
+
+
+def separation_read(meas: Measurements, test_stat: np.ndarray) -> np.ndarray:
+    """(E,) the epochs whose solution separation a verdict reads: those with a test statistic (``test_stat``, the WSSE
+    of :func:`wsse`, NaN where a used residual is missing; a GST RMS's statistic stands in, as in :func:`run_raim`) or
+    whose statistic's source is a residual one or a GST (their status there — ``unavailable`` when the HPL exceeds the
+    HAL, else ``unmonitored`` — is that source's verdict). For every other epoch the residual test's status falls to
+    ``unmonitored`` whatever its HPL: only its ``hpl_m`` column reads the separation."""
+    t = test_stat
+    if meas.test_stat_override is not None:
+        t = np.where(np.isnan(t), meas.test_stat_override, t)
+    read = np.isfinite(t)
+    if meas.test_stat_source is not None:
+        read |= meas.test_stat_source != "none"
+    return read
 
 
 def _names(verdict: np.ndarray):

@@ -493,13 +493,32 @@ def _have_residuals(mask: np.ndarray, residual_m: np.ndarray, geometry: Geometry
 
 
 def epoch_separation(H: np.ndarray, sigma_m: np.ndarray, mask: np.ndarray, residual_m: np.ndarray, geometry: Geometry,
-                     params) -> SeparationResult:  # fmt: skip
+                     params, rows: np.ndarray | None = None) -> SeparationResult:  # fmt: skip
     """:func:`solution_separation` of every epoch as :func:`separation_detection` takes it (``residual_m``: the
-    all-in-view post-fit residuals, NaN where there are none: the protection level alone)."""
+    all-in-view post-fit residuals, NaN where there are none: the protection level alone).
+
+    ``rows``: solve these epochs only (each epoch's result does not depend on the others'); the rest are
+    :func:`not_solved`."""
+    if rows is not None:
+        from tollcli.gnss.wls import take_epochs
+
+        out = not_solved(mask.shape[0])
+        if rows.size:
+            part = epoch_separation(H[rows], sigma_m[rows], mask[rows], residual_m[rows], take_epochs(geometry, rows), params)
+            for f in SeparationResult.__dataclass_fields__:
+                getattr(out, f)[rows] = getattr(part, f)
+        return out
     have = _have_residuals(mask, residual_m, geometry)
     r = np.where(mask & have[:, None], np.nan_to_num(residual_m), 0.0)
     return solution_separation(H, sigma_m, mask, r, clock_columns(H, mask), geometry, params.p_md, params.p_fa,
                                params.p_sat, params.p_const)  # fmt: skip
+
+
+def not_solved(n_epochs: int) -> SeparationResult:
+    """The separation of ``n_epochs`` epochs left unsolved: HPL and ratio NaN, no mode monitored, no slot."""
+    nan = np.full(n_epochs, np.nan)
+    return SeparationResult(nan, nan.copy(), np.full(n_epochs, -1, np.int64), np.zeros(n_epochs), np.zeros(n_epochs, np.int64),
+                            np.ones(n_epochs, bool))  # fmt: skip
 
 
 def take_separation(result: SeparationResult, rows: np.ndarray) -> SeparationResult:

@@ -458,7 +458,9 @@ def _charge_chunks(chunks, settings: ChargeSettings, geo, params: RaimParams, ep
         epochs, meas, satellites, params, env_columns, geometry = (chunk.epochs, chunk.meas, chunk.satellites, chunk.params,
                                                                    chunk.env_columns, chunk.geometry)  # fmt: skip
         epoch_raim = replace(epoch_raim, sources=params.sources)
-        hal_free = hal_free_terms(meas, epoch_raim, geometry, chunk.model_hpl_m)  # once for the epoch RAIM and every HAL
+        # once for the epoch RAIM and every HAL; an epoch's HPL where no residual test decides is read only by map
+        # matching's bound and an epoch table: without them it is not solved
+        hal_free = hal_free_terms(meas, epoch_raim, geometry, chunk.model_hpl_m, untested=epoch_table is not None or charger.roads_path is not None)
         raim = run_raim(meas, epoch_raim, geometry=geometry, hal_free=hal_free)
         pairs = inside_pairs(epochs, meas, geo, params, row_offset=offset, geometry=geometry, environment=settings.environment,
                              hal_free=hal_free)  # fmt: skip
