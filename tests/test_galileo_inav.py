@@ -19,7 +19,7 @@ from tollcli.gnss.satellite_states import satellite_states
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.gnss.ubx_measurements import sfrbx_ephemerides
 from tollcli.readers.gps_time import gps_seconds
-from tollcli.readers.ubx import read_ubx
+from tollcli.readers.ubx import read_ubx, subframe_words
 
 C = 299_792_458.0
 LOGS = ("ublox-x20p", "ublox-zed-f9p-sfrbx")
@@ -32,7 +32,7 @@ def _ubx(name):
 def _inav_words(ubx):
     sf = ubx.sfrbx
     sf = sf[(sf["gnssId"] == 2) & sf["sigId"].isin([1, 5])]
-    return sf, np.stack([np.asarray(w[:8], np.uint64) for w in sf["words"]])
+    return sf, subframe_words(sf, 8)[0].astype(np.uint64)
 
 
 @pytest.mark.parametrize("name", LOGS)

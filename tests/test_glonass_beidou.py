@@ -27,7 +27,7 @@ from tollcli.gnss.satellite_states import load_navigation, satellite_states
 from tollcli.gnss.sigma_models import NominalModel
 from tollcli.gnss.ubx_measurements import rawx_measurements, sfrbx_ephemerides
 from tollcli.readers.gps_time import gps_seconds, leap_seconds_at_gps
-from tollcli.readers.ubx import read_ubx
+from tollcli.readers.ubx import read_ubx, subframe_words
 
 WALK = ("rtklibexplorer", "gnss_1730.ubx")
 LETTER = {0: "G", 2: "E", 3: "C", 6: "R"}
@@ -77,7 +77,7 @@ def _sky_against_orbits(log) -> pd.DataFrame:
 
 def test_glonass_strings_of_a_real_receiver_pass_their_hamming_code_and_one_wrong_bit_fails():
     ubx = read_ubx(str(shared("gpsd", "ublox-glo.log")))
-    words = np.stack(ubx.sfrbx["words"].map(lambda w: np.asarray(w[:4], np.uint32)).to_numpy())
+    words = subframe_words(ubx.sfrbx, 4)[0]
     strings = glonass_strings.decode_strings(words)
     assert len(strings) == 584 and strings["ok"].all()
     assert set(strings["m"]) == set(range(1, 16))  # the 15 strings of a frame
@@ -133,7 +133,7 @@ def test_beidou_d1_ephemerides_of_a_triple_band_receiver(walk):
     assert np.allclose(beidou["sqrtA"], 5282.6, atol=0.1)
     sub = ubx.sfrbx[(ubx.sfrbx["gnssId"] == 3) & (ubx.sfrbx["sigId"] == 4)].reset_index(drop=True)
     assert len(beidou_d1.ephemerides(sub)) == 8
-    words = np.stack(sub["words"].map(lambda w: np.asarray(w[:10], np.uint32)).to_numpy())
+    words = subframe_words(sub, 10)[0]
     frn = beidou_d1.decode_subframes(words)["frn"].to_numpy()
     shuffled = sub[frn != 2].reset_index(drop=True)  # no subframe 2: no ephemeris
     assert beidou_d1.ephemerides(shuffled).empty

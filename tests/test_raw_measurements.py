@@ -23,7 +23,7 @@ from tollcli.integrity.speed import SpeedParams, speed_integrity
 from tollcli.io.sources import sniff_format
 from tollcli.readers.gnsslogger import read_device_gnss, read_gnsslogger
 from tollcli.readers.rinex import load_rinex
-from tollcli.readers.ubx import read_ubx
+from tollcli.readers.ubx import read_ubx, subframe_words
 
 C = 299_792_458.0
 #: GSDC 2022's day: 2021-04-29 22:35:44 GPS (GPS week 2155)
@@ -212,7 +212,7 @@ def test_sfrbx_subframes_decode_to_gpsds_ephemeris_fields(name):
     fields as unsigned 32-bit numbers: compared modulo 2³²)."""
     ubx = read_ubx(str(shared("gpsd", f"{name}.log")))
     sf = ubx.sfrbx[(ubx.sfrbx["gnssId"] == 0) & (ubx.sfrbx["sigId"] == 0)]
-    dec = decode_subframes(np.stack(sf["words"].to_numpy()))
+    dec = decode_subframes(subframe_words(sf, 10)[0])
     dec["svid"] = sf["svId"].to_numpy()
     index = {(r["svid"], r["subframe"], r["tow_s"]): r for r in dec.to_dict("records")}
     checked = 0

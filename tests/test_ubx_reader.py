@@ -11,7 +11,7 @@ import pytest
 from conftest import SHARED_DATA, shared
 
 from tollcli.errors import DataError
-from tollcli.readers.ubx import RAWX_COLUMNS, read_ubx
+from tollcli.readers.ubx import RAWX_COLUMNS, SFRBX_COLUMNS, read_ubx, subframe_words
 from tollcli.readers.ubx_frames import frame
 
 GPSD = SHARED_DATA / "gpsd"
@@ -48,14 +48,18 @@ def _pyubx2(path) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, int, int]:
                     rawx.append((msg.rcvTow, msg.week, msg.leapS, *(getattr(msg, f"{c}_{k:02d}") for c in RAWX_COLUMNS[3:]), n))
             elif msg.identity == "RXM-SFRBX":
                 words = tuple(int(getattr(msg, f"dwrd_{k:02d}")) for k in range(1, int(msg.numWords) + 1))
-                sfrbx.append((as_id(msg.gnssId), int(msg.svId), as_id(msg.sigId), words, n))
+                sfrbx.append((as_id(msg.gnssId), int(msg.svId), as_id(msg.sigId), len(words), n, words))
             elif msg.identity == "NAV-PVT":
                 pvt.append((msg.year, msg.month, msg.day, msg.hour, msg.min, msg.second, msg.nano, msg.fixType, msg.lat, msg.lon,
                             msg.height / 1000.0, msg.gSpeed / 1000.0, msg.hAcc / 1000.0, msg.sAcc / 1000.0, msg.numSV, n))  # fmt: skip
     rawx = pd.DataFrame(rawx, columns=[*RAWX_COLUMNS, "message"])
     for name in ("gnssId", "sigId"):
         rawx[name] = [as_id(v) for v in rawx[name]]
-    return (rawx, pd.DataFrame(sfrbx, columns=["gnssId", "svId", "sigId", "words", "message"]),
+    width = max((len(row[-1]) for row in sfrbx), default=0)  # the reader's layout: a column per word, zeros past its count
+    words = pd.DataFrame([list(row[-1]) + [0] * (width - len(row[-1])) for row in sfrbx], columns=[f"w{i}" for i in range(width)],
+                         dtype=np.uint32)  # fmt: skip
+    sfrbx = pd.concat([pd.DataFrame([row[:-1] for row in sfrbx], columns=list(SFRBX_COLUMNS)), words], axis=1)
+    return (rawx, sfrbx,
             pd.DataFrame(pvt, columns=["year", "month", "day", "hour", "minute", "second", "nano", "fix_type", "lat_deg", "lon_deg",
                                        "height_m", "speed_mps", "h_acc_m", "speed_acc_mps", "n_sv", "message"]), n, len(errors))  # fmt: skip
 
@@ -171,3 +175,19 @@ def test_every_command_counts_a_damaged_rawx_logs_skipped_frame(tmp_path, cut):
         err = over.stderr.decode()
         assert over.returncode == 3 and err.count("\n") == 1 and f"{part}: 1 lines skipped, more than --max-bad 0" in err, (args, err)
         assert "tollcli-log-" not in err and os.path.exists(args[-1])
+
+
+def test_a_long_recordings_subframes_are_kept_as_numbers_not_python_objects():
+    """The Galileo OSNMA recording (28 085 RXM-SFRBX subframes): the first pass keeps each subframe as a row of numbers
+    (ids, word count, message, a uint32 column per word), about 100 bytes, where a Python tuple of its words took
+    about 400 (`docs/integrity.md`); the words read back as the frames hold them."""
+    ubx = read_ubx(str(shared("osnma", "ublox", "current_config.ubx")), measurements=False)
+    sf = ubx.sfrbx
+    width = sum(c.startswith("w") for c in sf.columns)
+    assert len(sf) == 28_085 and width >= 8
+    assert all(np.issubdtype(t, np.number) for t in sf.dtypes), sf.dtypes[[not np.issubdtype(t, np.number) for t in sf.dtypes]]
+    assert sf.memory_usage(deep=True).sum() / len(sf) <= 8 * len(SFRBX_COLUMNS) + 4 * width + 1
+    words, count = subframe_words(sf, width)
+    as_tuples = pd.DataFrame({"words": [tuple(int(w) for w in row[:n]) for row, n in zip(words, count)]})
+    again, again_count = subframe_words(as_tuples, width)
+    assert (again == words).all() and (again_count == count).all() and (words[np.arange(width) >= count[:, None]] == 0).all()

@@ -22,6 +22,7 @@ import pandas as pd
 
 from tollcli.gnss.lnav_subframes import PI_GPS, read_bits
 from tollcli.gnss.orbits import WEEK_S
+from tollcli.readers.ubx import subframe_words
 
 #: BDT week 0 is GPS week 1356 (2006-01-01); BDT = GPST − 14 s
 BDT_WEEK_OFFSET = 1356
@@ -96,10 +97,11 @@ def ephemerides(subframes: pd.DataFrame) -> pd.DataFrame:
         return pd.DataFrame(columns=columns)
     prn = subframes["svId"].to_numpy(np.int64)
     keep = ~is_geostationary(prn)
-    words = np.stack(subframes["words"].map(lambda w: np.asarray(w[:10], np.uint32) if len(w) >= 10 else np.zeros(10, np.uint32)).to_numpy())
-    d = decode_subframes(words)
+    words, count = subframe_words(subframes, 10)
+    whole = count >= 10
+    d = decode_subframes(np.where(whole[:, None], words, np.uint32(0)))  # (a shorter one's words are not decoded)
     d["svId"] = prn
-    d = d[keep & subframes["words"].map(len).ge(10).to_numpy() & d["frn"].between(1, 3).to_numpy()]
+    d = d[keep & whole & d["frn"].between(1, 3).to_numpy()]
     one = d[d["frn"] == 1].drop_duplicates(["svId", "sow"], keep="last")
     two = d[d["frn"] == 2].assign(sow=lambda x: x["sow"] - 6).drop_duplicates(["svId", "sow"], keep="last")
     three = d[d["frn"] == 3].assign(sow=lambda x: x["sow"] - 12).drop_duplicates(["svId", "sow"], keep="last")

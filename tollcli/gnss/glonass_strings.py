@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.gnss.lnav_subframes import read_bits
+from tollcli.readers.ubx import subframe_words
 
 #: the 8 Hamming check masks over the string's first 11 bytes (ICD §4.7, as RTKLIB's test_glostr)
 _HAMMING = np.array([
@@ -90,7 +91,7 @@ def ephemerides(strings: pd.DataFrame, receive_gps_s: np.ndarray, leap_s) -> pd.
                "SVrelFreqBias", "FreqNum"]  # fmt: skip
     if strings.empty:
         return pd.DataFrame(columns=columns)
-    d = decode_strings(np.stack(strings["words"].map(lambda w: np.asarray(w[:4], np.uint32)).to_numpy()))
+    d = decode_strings(subframe_words(strings, 4)[0])
     d["svId"] = strings["svId"].to_numpy(np.int64)
     d["t_rx"] = np.asarray(receive_gps_s, float)
     d = d[d["ok"] & d["m"].between(1, 4) & np.isfinite(d["t_rx"])]

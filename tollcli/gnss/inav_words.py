@@ -22,6 +22,7 @@ import pandas as pd
 
 from tollcli.gnss.lnav_subframes import PI_GPS, read_bits
 from tollcli.gnss.orbits import WEEK_S
+from tollcli.readers.ubx import subframe_words
 
 #: GST week 0 is GPS week 1024 (1999-08-22)
 GST_WEEK_OFFSET = 1024
@@ -117,7 +118,7 @@ def ephemerides(pages: pd.DataFrame) -> pd.DataFrame:
     columns = ["sv", "toc_s", "toe_s", "group_delay_s", "health", "iode", *RINEX_NAMES, "Toe"]
     if pages.empty:
         return pd.DataFrame(columns=columns)
-    dec = decode_pages(np.stack([np.asarray(w[:8], np.uint64) for w in pages["words"]]))
+    dec = decode_pages(subframe_words(pages, 8)[0].astype(np.uint64))
     dec["sv"] = pages["sv"].to_numpy(str)
     dec["order"] = np.arange(len(dec))
     dec = dec[dec["valid"]]

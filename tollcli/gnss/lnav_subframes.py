@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.gnss.orbits import WEEK_S
+from tollcli.readers.ubx import subframe_words
 
 PI_GPS = 3.1415926535898  # IS-GPS-200's π for semicircles
 PREAMBLE = 0x8B
@@ -82,7 +83,7 @@ def ephemerides(sfrbx: pd.DataFrame, gps_week_hint: float) -> pd.DataFrame:
     columns = ["sv", "toc_s", "toe_s", "group_delay_s", "health", "iode", *RINEX_NAMES, "Toe"]
     if sfrbx.empty:
         return pd.DataFrame(columns=columns)
-    dec = decode_subframes(np.stack(sfrbx["words"].to_numpy()))
+    dec = decode_subframes(subframe_words(sfrbx, 10)[0])
     dec["sv"] = sfrbx["sv"].to_numpy(str)
     dec = dec[dec["preamble_ok"]]
     one = dec[dec["subframe"] == 1].assign(iode=lambda t: t["IODC_lsb"])

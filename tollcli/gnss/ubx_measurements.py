@@ -86,13 +86,13 @@ def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.Da
     from tollcli.readers.gps_time import leap_seconds_at_gps
 
     sf = ubx.sfrbx
-    gps = sf[(sf["gnssId"] == 0) & (sf["sigId"] == 0) & (sf["words"].map(len) == 10)]  # L1 C/A: LNAV
+    gps = sf[(sf["gnssId"] == 0) & (sf["sigId"] == 0) & (sf["n_words"] == 10)]  # L1 C/A: LNAV
     gps = gps.assign(sv=sv_labels(np.full(len(gps), "GPS", dtype=object), gps["svId"].to_numpy()))
-    gal = sf[(sf["gnssId"] == 2) & sf["sigId"].isin([1, 5]) & (sf["words"].map(len) >= 8)]  # E1-B, E5b-I: I/NAV
+    gal = sf[(sf["gnssId"] == 2) & sf["sigId"].isin([1, 5]) & (sf["n_words"] >= 8)]  # E1-B, E5b-I: I/NAV
     gal = gal.assign(sv=sv_labels(np.full(len(gal), "Galileo", dtype=object), gal["svId"].to_numpy()))
-    galileo = inav_words.ephemerides(gal[["sv", "words"]].reset_index(drop=True))
+    galileo = inav_words.ephemerides(gal.reset_index(drop=True))
     beidou = beidou_d1.ephemerides(sf[(sf["gnssId"] == 3) & sf["sigId"].isin(BEIDOU_D_SIGNALS)].reset_index(drop=True))
-    glo = sf[(sf["gnssId"] == 6) & (sf["words"].map(len) >= 4)].reset_index(drop=True)
+    glo = sf[(sf["gnssId"] == 6) & (sf["n_words"] >= 4)].reset_index(drop=True)
     glonass = glonass_strings.ephemerides(glo, receive_times_gps_s(ubx, glo["message"].to_numpy()), leap_seconds_at_gps)
     if gps_week_hint is None:
         weeks = ubx.rawx["week"].to_numpy(float) if len(ubx.rawx) else _measured_heads(ubx)["week"].to_numpy(float)
@@ -102,7 +102,7 @@ def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.Da
             gps_week_hint = float(np.median(galileo["toe_s"].to_numpy(float)) // WEEK_S)
         else:
             gps_week_hint = _pvt_week(ubx.pvt)
-    lnav = lnav_subframes.ephemerides(gps[["sv", "words"]].reset_index(drop=True), gps_week_hint)
+    lnav = lnav_subframes.ephemerides(gps.reset_index(drop=True), gps_week_hint)
     tables = [t for t in (lnav, galileo, beidou, glonass) if len(t)]
     if len(tables) <= 1:
         return tables[0] if tables else lnav

@@ -48,6 +48,9 @@ _PVT = np.dtype({"names": ["year", "month", "day", "hour", "minute", "second", "
                  "offsets": [4, 6, 7, 8, 9, 10, 16, 20, 23, 24, 28, 32, 40, 60, 68], "itemsize": 84})  # fmt: skip
 PVT_MIN_LENGTH = 84
 HEAD_COLUMNS = ("rcvTow", "week", "leapS", "numMeas", "message")
+#: an RXM-SFRBX row's columns before its words (``w0`` … ``w{n-1}``, n the log's most words in one subframe): each
+#: word a column of 4 bytes, not a Python tuple of integers (≈ 400 bytes a subframe)
+SFRBX_COLUMNS = ("gnssId", "svId", "sigId", "n_words", "message")
 PVT_COLUMNS = ("year", "month", "day", "hour", "minute", "second", "nano", "fix_type", "lat_deg", "lon_deg", "height_m",
                "speed_mps", "h_acc_m", "speed_acc_mps", "n_sv", "message")  # fmt: skip
 
@@ -55,11 +58,28 @@ PVT_COLUMNS = ("year", "month", "day", "hour", "minute", "second", "nano", "fix_
 @dataclass
 class UbxRead:
     rawx: pd.DataFrame  # one row per RXM-RAWX measurement (RAWX_COLUMNS + ``message``)
-    sfrbx: pd.DataFrame  # one row per RXM-SFRBX: gnssId, svId, sigId, words (tuple of uint32), message
+    sfrbx: pd.DataFrame  # one row per RXM-SFRBX: SFRBX_COLUMNS, then its words w0, w1, … (uint32; 0 past n_words)
     pvt: pd.DataFrame  # one row per NAV-PVT
     n_messages: int  # good UBX frames
     n_bad: int  # UBX frames that failed their checksum, or whose message's length is not what its counts say
     rawx_heads: pd.DataFrame | None = None  # one row per RXM-RAWX: rcvTow, week, leapS, numMeas, message
+
+
+def subframe_words(frame: pd.DataFrame, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first ``width`` words of each subframe of ``frame`` as a (rows, ``width``) uint32 array (zeros past a
+    subframe's words) and each subframe's word count: from the reader's ``w0`` … columns and ``n_words``
+    (:data:`SFRBX_COLUMNS`), or from a ``words`` column of sequences (a table made elsewhere: a test's, an encoder's)."""
+    if "words" in frame:
+        rows = [np.asarray(w, np.uint32)[:width] for w in frame["words"]]
+        out = np.zeros((len(rows), width), np.uint32)
+        for i, w in enumerate(rows):
+            out[i, : w.size] = w
+        return out, np.array([len(w) for w in frame["words"]], np.int64)
+    out = np.zeros((len(frame), width), np.uint32)
+    have = [i for i in range(width) if f"w{i}" in frame]
+    if have:
+        out[:, : len(have)] = frame[[f"w{i}" for i in have]].to_numpy(np.uint32)
+    return out, frame["n_words"].to_numpy(np.int64)
 
 
 def is_ubx(head: bytes) -> bool:
@@ -109,11 +129,13 @@ class _Tables:
     def add_sfrbx(self, data: np.ndarray, payload: np.ndarray, numbers: np.ndarray) -> None:
         head = data[payload[:, None] + np.arange(5)].astype(np.int64)
         count = head[:, 4]
-        first = np.repeat(payload + 8 - 4 * np.concatenate([[0], np.cumsum(count)[:-1]]), count)
-        at = first + 4 * np.arange(int(count.sum()))
-        words = data[at[:, None] + np.arange(4)].view("<u4").ravel().tolist()
-        edges = np.cumsum(count).tolist()
-        self.sfrbx.append((head[:, 0], head[:, 1], head[:, 2], [tuple(words[a:b]) for a, b in zip([0, *edges[:-1]], edges)], numbers))
+        words = np.zeros((count.size, int(count.max(initial=0))), np.uint32)  # a row per subframe, zeros past its count
+        if words.size:
+            row = np.repeat(np.arange(count.size), count)
+            col = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+            at = np.repeat(payload + 8, count) + 4 * col
+            words[row, col] = data[at[:, None] + np.arange(4)].view("<u4").ravel()
+        self.sfrbx.append((head[:, 0], head[:, 1], head[:, 2], count, words, numbers))
 
     def add_pvt(self, data: np.ndarray, payload: np.ndarray, numbers: np.ndarray) -> None:
         r = _records(data, payload, _PVT)
@@ -137,11 +159,13 @@ class _Tables:
             else pd.DataFrame({c: np.zeros(0, np.float64 if c == "rcvTow" else np.int64) for c in HEAD_COLUMNS})  # fmt: skip
         if self.sfrbx:
             columns = list(zip(*self.sfrbx))
+            width = max(w.shape[1] for w in columns[4])
+            words = np.concatenate([np.pad(w, ((0, 0), (0, width - w.shape[1]))) for w in columns[4]])
             sfrbx = pd.DataFrame({"gnssId": np.concatenate(columns[0]), "svId": np.concatenate(columns[1]),
-                                  "sigId": np.concatenate(columns[2]), "words": [w for block in columns[3] for w in block],
-                                  "message": np.concatenate(columns[4])})  # fmt: skip
+                                  "sigId": np.concatenate(columns[2]), "n_words": np.concatenate(columns[3]),
+                                  "message": np.concatenate(columns[5]), **{f"w{i}": words[:, i] for i in range(width)}})  # fmt: skip
         else:
-            sfrbx = pd.DataFrame(columns=["gnssId", "svId", "sigId", "words", "message"])
+            sfrbx = pd.DataFrame(columns=list(SFRBX_COLUMNS))
         pvt = pd.DataFrame({c: np.concatenate([b[c] for b in self.pvt]) for c in PVT_COLUMNS}) if self.pvt \
             else pd.DataFrame(columns=list(PVT_COLUMNS))  # fmt: skip
         return rawx, sfrbx, pvt, heads
