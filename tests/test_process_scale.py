@@ -214,6 +214,11 @@ def test_latest_angles_per_satellite_are_groupby_last():
         pd.testing.assert_frame_equal(got, expected, check_dtype=False)
         arrow = pd.array(known["constellation"].to_numpy(), dtype="string[pyarrow]")  # the reader's strings: the same rows
         assert np.array_equal(nmea_measurements._latest_rows(known["t_s"].to_numpy(), arrow, known["svid"].to_numpy()), rows)
+        named = known[known["constellation"].notna()]  # a column without a missing name: coded once, picked by code
+        coded = nmea_measurements._arrow_coded(pd.Series(pd.array(named["constellation"].to_numpy(), dtype="string[pyarrow]")))
+        by_name = nmea_measurements._latest_rows(named["t_s"].to_numpy(), named["constellation"].to_numpy(), named["svid"].to_numpy())
+        by_code = nmea_measurements._latest_rows(named["t_s"].to_numpy(), coded[0], named["svid"].to_numpy())
+        assert np.array_equal(by_code, by_name) and np.array_equal(coded[1][coded[0][by_code]], named["constellation"].to_numpy()[by_name])
 
 
 def test_first_of_each_satellite_is_drop_duplicates():

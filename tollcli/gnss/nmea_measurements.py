@@ -71,15 +71,26 @@ def _first_of_each(epoch: np.ndarray, constellation: np.ndarray, svid: np.ndarra
     return np.sort(first)
 
 
-def _constellation_codes(constellation: pd.Series, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _constellation_codes(constellation: pd.Series, rows: np.ndarray,
+                         coded: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The constellation codes of ``rows`` and the names they index (sorted; names no row has may be among them:
     :func:`_compact` drops them). The reader's Arrow strings are coded whole, without making a Python string of every
-    row; a column with a missing name is coded as ``pandas.factorize`` codes objects (a missing name last, as NaN)."""
-    array = constellation.array
-    if isinstance(array, pd.arrays.ArrowStringArray) and not constellation.hasnans:
-        codes, names = pd.factorize(array, sort=True)
-        return codes[rows], np.asarray(names, dtype=object)
+    row (``coded``: :func:`_arrow_coded` of the column when already made); a column with a missing name is coded as
+    ``pandas.factorize`` codes objects (a missing name last, as NaN)."""
+    coded = coded if coded is not None else _arrow_coded(constellation)
+    if coded is not None:
+        codes, names = coded
+        return codes[rows], names
     return pd.factorize(constellation.to_numpy(dtype=object)[rows], sort=True, use_na_sentinel=False)
+
+
+def _arrow_coded(constellation: pd.Series) -> tuple[np.ndarray, np.ndarray] | None:
+    """Every row's code and the names (sorted, as objects) of the reader's Arrow string column without a missing name;
+    None for another column (a missing name, or objects)."""
+    if isinstance(constellation.array, pd.arrays.ArrowStringArray) and not constellation.hasnans:
+        codes, names = pd.factorize(constellation.array, sort=True)
+        return codes, np.asarray(names, dtype=object)
+    return None
 
 
 def _compact(code: np.ndarray, names) -> tuple[np.ndarray, np.ndarray]:
@@ -106,10 +117,11 @@ def _lookup(keys: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndar
 
 
 def fill_angles(satellites: pd.DataFrame, epochs: pd.DataFrame, carry: AngleCarry | None = None,
-                max_age_s: float = MAX_ANGLE_AGE_S) -> pd.DataFrame:  # fmt: skip
+                max_age_s: float = MAX_ANGLE_AGE_S, coded: tuple[np.ndarray, np.ndarray] | None = None) -> pd.DataFrame:  # fmt: skip
     """The satellite table with missing angles taken from the same satellite's latest GSV.
 
-    Returned as given (not copied) when no used satellite lacks its angles.
+    Returned as given (not copied) when no used satellite lacks its angles. ``coded``: :func:`_arrow_coded` of its
+    constellation column, when made (the latest angles are then picked by code, not by name: the same rows).
     """
     t_s = _lookup(epochs["epoch"].to_numpy(), _epoch_seconds(epochs), satellites["epoch"].to_numpy())
     elev, azim = satellites["elev_deg"].to_numpy(float), satellites["azim_deg"].to_numpy(float)
@@ -135,11 +147,17 @@ def fill_angles(satellites: pd.DataFrame, epochs: pd.DataFrame, carry: AngleCarr
         return sats.drop(columns="t_s")
     if carry is not None:  # nothing to fill: only each satellite's latest angles are kept, from fewer rows
         idx = np.flatnonzero(fresh)
-        const = satellites["constellation"].array[idx]  # as read (an Arrow array: only the latest rows become objects)
         svid = satellites["svid"].to_numpy()[idx]
-        latest = _latest_rows(t_s[idx], const, svid)
+        if coded is not None:  # codes in the names' sorted order: the same groups, in the same order, as the names
+            code = coded[0][idx]
+            latest = _latest_rows(t_s[idx], code, svid)
+            names = coded[1][code[latest]]
+        else:
+            const = satellites["constellation"].array[idx]  # as read (an Arrow array: only the latest rows become objects)
+            latest = _latest_rows(t_s[idx], const, svid)
+            names = np.asarray(const[latest], dtype=object)
         last = carry.last
-        known = {"t_s": t_s[idx][latest], "constellation": np.asarray(const[latest], dtype=object), "svid": svid[latest],
+        known = {"t_s": t_s[idx][latest], "constellation": names, "svid": svid[latest],
                  "elev_deg": elev[idx][latest], "azim_deg": azim[idx][latest]}  # fmt: skip
         known = {c: np.concatenate([last[c].to_numpy(), known[c]]).astype(kind) for c, kind in _KNOWN.items()}
         if known["t_s"].size:
@@ -162,11 +180,15 @@ def _latest_rows(t_s: np.ndarray, constellation, svid: np.ndarray) -> np.ndarray
 
     What ``DataFrame.sort_values("t_s", kind="stable").groupby([...]).last()`` picks, for
     rows without missing values; rows without a constellation are no group, as in groupby. ``constellation``: any
-    array ``pandas.factorize`` takes (names as objects, or the reader's Arrow strings).
+    array ``pandas.factorize`` takes (names as objects, or the reader's Arrow strings), or integer codes ≥ 0 in the
+    names' sorted order (:func:`_arrow_coded`: taken as they are, the same groups in the same order).
     """
     t_s = np.asarray(t_s, float)
     order = np.arange(t_s.size) if not (np.diff(t_s) < 0).any() else np.argsort(t_s, kind="stable")  # a log's rows: in time
-    const, _ = pd.factorize(constellation, sort=True)  # no constellation: -1
+    if isinstance(constellation, np.ndarray) and constellation.dtype.kind in "iu":
+        const = constellation
+    else:
+        const, _ = pd.factorize(constellation, sort=True)  # no constellation: -1
     svid = np.asarray(svid, np.int64)
     ordered = order[const[order] >= 0]
     if not ordered.size:
@@ -189,11 +211,14 @@ def nmea_measurements(
 ) -> Measurements:
     """Padded RAIM inputs for every row of ``epochs`` (``carry``: GSV angles from earlier chunks)."""
     n_epochs = len(epochs)
-    satellites = fill_angles(satellites, epochs, carry)
+    coded = _arrow_coded(satellites["constellation"])  # once, for the angles carried and the clocks
+    filled = fill_angles(satellites, epochs, carry, coded=coded)
+    if filled is not satellites:  # (angles filled: a copy, its names as objects)
+        satellites, coded = filled, None
     elev_all, azim_all = satellites["elev_deg"].to_numpy(float), satellites["azim_deg"].to_numpy(float)
     take = np.flatnonzero(satellites["used"].to_numpy(dtype=bool) & np.isfinite(elev_all) & np.isfinite(azim_all))
     # constellation names coded once, in name order (a receiver clock per constellation, in name order)
-    code_all, names = _constellation_codes(satellites["constellation"], take)
+    code_all, names = _constellation_codes(satellites["constellation"], take, coded)
     sat_epoch = satellites["epoch"].to_numpy()
     first = _first_of_each(sat_epoch[take].astype(np.int64), code_all, satellites["svid"].to_numpy()[take].astype(np.int64))
     take, code_all = take[first], code_all[first]  # = drop_duplicates on the three
