@@ -69,16 +69,14 @@ def subframe_words(frame: pd.DataFrame, width: int) -> tuple[np.ndarray, np.ndar
     """The first ``width`` words of each subframe of ``frame`` as a (rows, ``width``) uint32 array (zeros past a
     subframe's words) and each subframe's word count: from the reader's ``w0`` … columns and ``n_words``
     (:data:`SFRBX_COLUMNS`), or from a ``words`` column of sequences (a table made elsewhere: a test's, an encoder's)."""
-    if "words" in frame:
-        rows = [np.asarray(w, np.uint32)[:width] for w in frame["words"]]
-        out = np.zeros((len(rows), width), np.uint32)
-        for i, w in enumerate(rows):
-            out[i, : w.size] = w
-        return out, np.array([len(w) for w in frame["words"]], np.int64)
     out = np.zeros((len(frame), width), np.uint32)
-    have = [i for i in range(width) if f"w{i}" in frame]
-    if have:
-        out[:, : len(have)] = frame[[f"w{i}" for i in have]].to_numpy(np.uint32)
+    if "words" in frame:
+        sequences = [np.asarray(w, np.uint32) for w in frame["words"]]
+        for i, w in enumerate(sequences):
+            out[i, : min(w.size, width)] = w[:width]
+        return out, np.array([w.size for w in sequences], np.int64)
+    columns = [f"w{i}" for i in range(width) if f"w{i}" in frame]  # (the log's subframes may all be shorter)
+    out[:, : len(columns)] = frame[columns].to_numpy(np.uint32)
     return out, frame["n_words"].to_numpy(np.int64)
 
 
