@@ -1,4 +1,5 @@
-"""``process`` solves the solution separation only where a verdict reads it (:func:`tollcli.integrity.run.separation_read`).
+"""``process`` solves the solution separation only where a verdict reads it (:func:`tollcli.integrity.run.separation_read`),
+and the ``model`` level's HPL only where its level can decide (:func:`tollcli.integrity.run.model_level_read`).
 
 An epoch without range residuals and without a statistic (a receiver that writes no GRS: GBS, GST or the model
 level decide) has no residual test, and its status falls to ``unmonitored`` whatever its HPL; ``process`` without map
@@ -98,11 +99,58 @@ def test_invoices_are_the_same_when_unread_epochs_are_not_solved(tmp_path, monke
     assert invoice["lines"] or invoice["not_charged"]  # passages seen: the comparison covers positions
 
 
+def test_every_real_nmea_logs_verdicts_are_the_same_without_an_unread_model_hpl():
+    """All of ../shared/data/gpsd's NMEA logs, at the level each settles on: where that level has no ``model`` source,
+    the model HPL left unsolved (NaN, as ``process`` leaves it without an epoch table) changes no column but
+    ``hpl_model_m``; where it has one, :func:`run.model_level_read` says it is read."""
+    unread = at_stake = read = 0
+    for name, tables in _nmea_logs():
+        meas = nmea_measurements(tables.epochs, tables.satellites)
+        geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
+        for hal_m in (50.0, 5.0):
+            params = run.settle_sources(RaimParams(mode="ss", hal_m=hal_m), meas)
+            solved = run.hal_free_terms(meas, params, geometry)
+            if run.model_level_read(params):
+                assert params.sources is None or "model" in params.sources, name
+                read += 1
+                continue
+            nan = run.HalFreeTerms(solved.separation, np.full(meas.mask.shape[0], np.nan))
+            full = run.run_raim(meas, params, geometry=geometry, hal_free=solved)
+            part = run.run_raim(meas, params, geometry=geometry, hal_free=nan)
+            pd.testing.assert_frame_equal(full.drop(columns="hpl_model_m"), part.drop(columns="hpl_model_m"), obj=name)
+            unread += 1
+            at_stake += int((full["hpl_model_m"] > hal_m).any())  # the model would have denied there
+    # 5 logs at the receiver (GBS) or covariance (GST) level leave it unread, at both HALs; 92 at the model level or
+    # none read it; at 5 m, 4 of the unread have a model HPL above the HAL (its "unavailable" set aside is at stake)
+    assert unread >= 8 and at_stake >= 3 and read >= 150
+
+
+@pytest.mark.parametrize("sample", ["sim/urban-fault/drive.nmea", "straight-drive.nmea"])
+@pytest.mark.parametrize("drop", [(), ("GRS",), ("GRS", "GST")])
+def test_invoices_are_the_same_when_an_unread_model_hpl_is_not_solved(tmp_path, monkeypatch, sample, drop):
+    log = _stripped(tmp_path, sample, drop)
+    solved = []
+    model_hpl = pipeline.model_hpl
+    monkeypatch.setattr(pipeline, "model_hpl", lambda *a, **kw: (solved.append(1), model_hpl(*a, **kw))[1])
+    invoices, counts = [], []
+    for everywhere in (True, False):
+        monkeypatch.setattr(pipeline, "model_level_read", (lambda params: True) if everywhere else run.model_level_read)
+        solved.clear()
+        invoices.append(invoice_json(charge_log(log, GEO, TARIFF, ChargeSettings(), roads=None)[0]))
+        counts.append(len(solved))
+    assert invoices[0] == invoices[1]
+    level = json.loads(invoices[0])["parameters"]["integrity_sources_used"]
+    assert counts[0] > 0
+    assert counts[1] == (counts[0] if level == "model" else 0), level  # solved only where the level has the model
+
+
 def test_map_matching_and_epoch_tables_still_get_every_epochs_hpl(monkeypatch):
     calls = []
     solve = run.hal_free_terms
     monkeypatch.setattr(pipeline, "hal_free_terms", lambda *a, **kw: (calls.append(kw.get("untested")), solve(*a, **kw))[1])
     log = str(SAMPLES / "sim" / "urban-clean" / "drive.nmea")
     charge_log(log, GEO, TARIFF, ChargeSettings(), roads=str(REPO / "geoobjects" / "example-roads.geojson"))
-    charge_log(log, GEO, TARIFF, ChargeSettings(), epoch_table=[])
+    table = []
+    charge_log(log, GEO, TARIFF, ChargeSettings(), epoch_table=table)
     assert calls and all(calls)
+    assert np.isfinite(table[0]["hpl_model_m"].to_numpy(float)).mean() > 0.9  # the epoch table's model HPL, solved

@@ -257,6 +257,14 @@ def model_hpl(meas: Measurements, geometry: Geometry, p_md: float) -> np.ndarray
     return hpl
 
 
+def model_level_read(params: RaimParams) -> bool:
+    """Whether a verdict can read the ``model`` level's HPL under ``params``: its sources include that level, or are
+    not settled yet (each chunk's own level then decides, :func:`_allowed`). Where not, :func:`run_raim` sets the model's
+    verdict aside (the weakest evidence denies nothing a stronger level vouches for), and only the ``hpl_model_m``
+    column shows that HPL."""
+    return params.sources is None or "model" in params.sources
+
+
 def no_geometry(meas: Measurements) -> np.ndarray:
     """Epochs (E,) whose satellites' geometry is not known: none reported, or none used with its angles (gpsd gives a
     Javad GREIS receiver's satellites without elevations; a GSA names the used ones before the first GSV gives their

@@ -40,7 +40,7 @@ from tollcli.gnss.wls import Geometry, wls_geometry
 from tollcli.integrity.environment import ENVIRONMENTS, EnvironmentCarry
 from tollcli.integrity.nav_authentication import epoch_authentication, not_checked
 from tollcli.integrity.raim import MODES, RaimParams
-from tollcli.integrity.run import hal_free_terms, level_name, model_hpl, run_raim, settle_sources
+from tollcli.integrity.run import hal_free_terms, level_name, model_hpl, model_level_read, run_raim, settle_sources
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.integrity.trajectory import POSITIONINGS
 from tollcli.io.sources import BLOCK_BYTES as SOURCE_BLOCK_BYTES
@@ -246,8 +246,9 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
             # a navigation log's next chunk read (and its measurements made) on a second thread while this one is
             # prepared and charged (:func:`_prepared_chunks`: why the preparing is not on that thread)
             with (read_ahead(chunks) if kind in NAVIGATION_KINDS else contextlib.nullcontext(chunks)) as read:
-                params = _charge_chunks(_prepared_chunks(read, settings, params), settings, geo_objects, params, epoch_raim, charger,
-                                        epoch_table, osnma, auth_counts, failure_fixes, ignored, track)  # fmt: skip
+                prepared = _prepared_chunks(read, settings, params, model_column=epoch_table is not None)
+                params = _charge_chunks(prepared, settings, geo_objects, params, epoch_raim, charger, epoch_table, osnma,
+                                        auth_counts, failure_fixes, ignored, track)  # fmt: skip
             if kind in NAVIGATION_KINDS:
                 check_usable(stats)
         stats.source, stats.first_problem = run.named(stats.source), run.named(stats.first_problem)  # (not the log's copy)
@@ -417,11 +418,13 @@ class PreparedChunk:
     model_hpl_m: np.ndarray | None  # the model level's HPL (:func:`~tollcli.integrity.run.model_hpl`; None: a trajectory's positions)
 
 
-def _prepared_chunks(chunks, settings: ChargeSettings, params: RaimParams) -> Iterator[PreparedChunk]:
+def _prepared_chunks(chunks, settings: ChargeSettings, params: RaimParams, model_column: bool = True) -> Iterator[PreparedChunk]:
     """Each chunk (epochs, RAIM measurements, satellite table or None) with what needs no geo-object: the integrity
     sources the log settled on so far (``params``), its measured environment (the σ of the epochs the residuals say
     urban, and that column), its WLS geometry, its C/N0 summary and its model level's HPL. Chunks in order: the
-    environment carries from one to the next.
+    environment carries from one to the next. ``model_column`` False: the caller keeps no ``hpl_model_m`` column (no
+    epoch table), so the model level's HPL is solved only where a verdict can read it (:func:`model_level_read`), NaN
+    elsewhere: a log the receiver's RAIM (GBS) or a residual test vouches for has none to solve.
 
     Made on the thread that charges, not on the reading thread: the reading (the NMEA reader and the measurements) is
     the longer half, and with this on its side the charging thread waited for chunks. ``process`` of the 10 h NEO-M9N
@@ -435,7 +438,10 @@ def _prepared_chunks(chunks, settings: ChargeSettings, params: RaimParams) -> It
         params = settle_sources(params, meas)  # the log's level, from its first epoch with a source
         meas, env_columns = measured_environment(epochs, meas, settings.environment, env_carry)
         geometry = wls_geometry(meas.H, meas.sigma_m, meas.mask)
-        model = model_hpl(meas, geometry, params.p_md) if meas.trajectory_hpl_m is None else None
+        model = None  # a trajectory's positions: its own bound
+        if meas.trajectory_hpl_m is None:
+            read = model_column or model_level_read(params)
+            model = model_hpl(meas, geometry, params.p_md) if read else np.full(meas.mask.shape[0], np.nan)
         yield PreparedChunk(epochs, meas, satellites, params, env_columns, geometry,
                             cn0_summary(satellites, len(epochs), int(epochs["epoch"].iat[0])), model)  # fmt: skip
 
