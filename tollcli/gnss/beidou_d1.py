@@ -22,7 +22,7 @@ import pandas as pd
 
 from tollcli.gnss.lnav_subframes import PI_GPS, read_bits
 from tollcli.gnss.orbits import WEEK_S
-from tollcli.readers.ubx import subframe_words
+from tollcli.readers.ubx import last_of_each, subframe_words
 
 #: BDT week 0 is GPS week 1356 (2006-01-01); BDT = GPST − 14 s
 BDT_WEEK_OFFSET = 1356
@@ -93,30 +93,9 @@ def ephemerides(subframes: pd.DataFrame) -> pd.DataFrame:
     Subframes 1, 2 and 3 join when their seconds of week are t, t + 6 and t + 12; a geostationary satellite's, or
     one whose clock time differs from its ephemeris time, is left out."""
     columns = ["sv", "toc_s", "toe_s", "group_delay_s", "health", *RINEX_NAMES, "TGD1", "TGD2"]
-    if subframes.empty:
-        return pd.DataFrame(columns=columns)
-    prn = subframes["svId"].to_numpy(np.int64)
-    keep = ~is_geostationary(prn)
-    words, count = subframe_words(subframes, 10)
-    whole = count >= 10
-    d = decode_subframes(np.where(whole[:, None], words, np.uint32(0)))  # (a shorter one's words are not decoded)
-    d["svId"] = prn
-    d = d[keep & whole & d["frn"].between(1, 3).to_numpy()]
-    one = d[d["frn"] == 1].drop_duplicates(["svId", "sow"], keep="last")
-    two = d[d["frn"] == 2].assign(sow=lambda x: x["sow"] - 6).drop_duplicates(["svId", "sow"], keep="last")
-    three = d[d["frn"] == 3].assign(sow=lambda x: x["sow"] - 12).drop_duplicates(["svId", "sow"], keep="last")
-    joined = one.set_index(["svId", "sow"]).add_suffix("_1").join(two.set_index(["svId", "sow"]).add_suffix("_2"), how="inner")
-    joined = joined.join(three.set_index(["svId", "sow"]).add_suffix("_3"), how="inner").reset_index()
-    toe = (joined["toe_msb_2"].to_numpy(np.int64) * 2**15 + joined["toe_lsb_3"].to_numpy(np.int64)) * 8.0
-    toc = joined["toc_1"].to_numpy(float)
-    joined = joined[toe == toc]
-    toe = toe[toe == toc]
+    joined, t_gps = _triples(subframes)
     if joined.empty:
         return pd.DataFrame(columns=columns)
-    sow = joined["sow"].to_numpy(float)
-    week = joined["WN_1"].to_numpy(float)
-    week = np.where(toe > sow + WEEK_S / 2, week + 1, np.where(toe < sow - WEEK_S / 2, week - 1, week))  # ephemeris across a week's turn
-    t_gps = (week + BDT_WEEK_OFFSET) * WEEK_S + toe + BDT_GPS_S
     source = {"a0": "a0_1", "a1": "a1_1", "a2": "a2_1", "deltan": "deltan_2", "M0": "M0_2", "Cuc": "Cuc_2", "e": "e_2",
               "Cus": "Cus_2", "Crc": "Crc_2", "Crs": "Crs_2", "sqrtA": "sqrtA_2", "i0": "i0_3", "Cic": "Cic_3",
               "Omegad": "Omegad_3", "Cis": "Cis_3", "IDOT": "IDOT_3", "Omega0": "Omega0_3", "omega": "omega_3"}  # fmt: skip
@@ -127,3 +106,70 @@ def ephemerides(subframes: pd.DataFrame) -> pd.DataFrame:
     out["TGD1"] = joined["TGD1_1"].to_numpy(float)
     out["TGD2"] = joined["TGD2_1"].to_numpy(float)
     return out.drop_duplicates(["sv", "toc_s"], keep="last").sort_values(["sv", "toc_s"], kind="stable").reset_index(drop=True)
+
+
+def _decoded(subframes: pd.DataFrame) -> pd.DataFrame:
+    """Every subframe decoded (a shorter one's words are not: zeros), with ``svId``, its ``row`` in ``subframes`` and
+    ``ok``: a whole subframe 1–3 of a satellite that is not geostationary."""
+    prn = subframes["svId"].to_numpy(np.int64)
+    words, count = subframe_words(subframes, 10)
+    whole = count >= 10
+    d = decode_subframes(np.where(whole[:, None], words, np.uint32(0)))
+    d["svId"] = prn
+    d["row"] = np.arange(len(d))
+    d["ok"] = ~is_geostationary(prn) & whole & d["frn"].between(1, 3).to_numpy()
+    return d
+
+
+def _triples(subframes: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray]:
+    """The joined subframes 1, 2, 3 of each (satellite, seconds of week) whose clock time is their ephemeris time (the
+    last of each subframe where one came twice), in the order of their subframes 1, with each part's ``row_1`` …
+    ``row_3``; and their ephemeris time (GPS seconds)."""
+    if subframes.empty:
+        return pd.DataFrame(), np.zeros(0)
+    d = _decoded(subframes)
+    d = d[d["ok"].to_numpy()]
+    one = d[d["frn"] == 1].drop_duplicates(["svId", "sow"], keep="last")
+    two = d[d["frn"] == 2].assign(sow=lambda x: x["sow"] - 6).drop_duplicates(["svId", "sow"], keep="last")
+    three = d[d["frn"] == 3].assign(sow=lambda x: x["sow"] - 12).drop_duplicates(["svId", "sow"], keep="last")
+    joined = one.set_index(["svId", "sow"]).add_suffix("_1").join(two.set_index(["svId", "sow"]).add_suffix("_2"), how="inner")
+    joined = joined.join(three.set_index(["svId", "sow"]).add_suffix("_3"), how="inner").reset_index()
+    toe = (joined["toe_msb_2"].to_numpy(np.int64) * 2**15 + joined["toe_lsb_3"].to_numpy(np.int64)) * 8.0
+    toc = joined["toc_1"].to_numpy(float)
+    joined = joined[toe == toc]
+    toe = toe[toe == toc]
+    if joined.empty:
+        return joined, np.zeros(0)
+    sow = joined["sow"].to_numpy(float)
+    week = joined["WN_1"].to_numpy(float)
+    week = np.where(toe > sow + WEEK_S / 2, week + 1, np.where(toe < sow - WEEK_S / 2, week - 1, week))  # ephemeris across a week's turn
+    return joined, (week + BDT_WEEK_OFFSET) * WEEK_S + toe + BDT_GPS_S
+
+
+#: how far back (s of BeiDou time) a subframe can still arrive after its satellite's latest one (a second signal's
+#: copy of the same subframe comes within seconds): :func:`kept` keeps the subframes of that span
+LATE_S = 120.0
+
+
+def kept(subframes: pd.DataFrame) -> np.ndarray:
+    """(n,) the subframes of ``subframes`` (as :func:`ephemerides` takes them, in log order) that can still change its
+    result as more follow: of the whole subframes 1–3 of satellites not geostationary, the last of each (satellite,
+    subframe, seconds of week) that is part of the latest triple of its ephemeris time (the one :func:`ephemerides`
+    keeps) or within :data:`LATE_S` of its satellite's latest subframe (a triple still to be completed, or a copy
+    from another signal still to come). A subframe arriving more than :data:`LATE_S` after its satellite's later ones
+    (a log out of order) could have joined a triple whose other parts are no longer kept."""
+    if subframes.empty:
+        return np.zeros(0, bool)
+    d = _decoded(subframes)
+    ok = d["ok"].to_numpy(bool)
+    prn, sow = d["svId"].to_numpy(np.int64), d["sow"].to_numpy(np.int64)
+    last = last_of_each(ok, prn, d["frn"].to_numpy(np.int64), sow)
+    latest = pd.Series(sow[ok]).groupby(prn[ok]).last()  # each satellite's latest subframe's seconds of week
+    behind = (latest.reindex(prn).to_numpy(float) - sow) % WEEK_S  # (across a week's turn too)
+    keep = last & (behind <= LATE_S)
+    joined, t_gps = _triples(subframes)
+    if len(joined):
+        winners = joined.assign(t=t_gps).drop_duplicates(["svId", "t"], keep="last")
+        for part in ("row_1", "row_2", "row_3"):
+            keep[winners[part].to_numpy(np.int64)] = True
+    return keep

@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.gnss.lnav_subframes import read_bits
-from tollcli.readers.ubx import subframe_words
+from tollcli.readers.ubx import last_of_each, subframe_words
 
 #: the 8 Hamming check masks over the string's first 11 bytes (ICD §4.7, as RTKLIB's test_glostr)
 _HAMMING = np.array([
@@ -80,6 +80,19 @@ def decode_strings(words: np.ndarray) -> pd.DataFrame:
         raw = _field(bits, start, n, sm)
         out[name] = raw * scale if scale != 1.0 else raw
     return pd.DataFrame(out)
+
+
+def kept(strings: pd.DataFrame) -> np.ndarray:
+    """(n,) the strings of ``strings`` (as :func:`ephemerides` takes them, in log order) that can still change its
+    result, whatever strings follow: of those passing their Hamming check, the last string 1–4 of each satellite and
+    frame (the ones :func:`ephemerides` joins: it keeps the last of each; their receive times, read from their
+    ``message`` numbers afterwards, are what they would be). As many are kept as the receiver's frame numbers take
+    values (the recordings here have no GLONASS navigation data to measure it on)."""
+    if strings.empty:
+        return np.zeros(0, bool)
+    d = decode_strings(subframe_words(strings, 4)[0])
+    ok = d["ok"].to_numpy(bool) & d["m"].between(1, 4).to_numpy()
+    return last_of_each(ok, strings["svId"].to_numpy(np.int64), d["frame"].to_numpy(np.int64), d["m"].to_numpy(np.int64))
 
 
 def ephemerides(strings: pd.DataFrame, receive_gps_s: np.ndarray, leap_s) -> pd.DataFrame:

@@ -22,7 +22,7 @@ import pandas as pd
 
 from tollcli.gnss.lnav_subframes import PI_GPS, read_bits
 from tollcli.gnss.orbits import WEEK_S
-from tollcli.readers.ubx import subframe_words
+from tollcli.readers.ubx import last_of_each, subframe_words
 
 #: GST week 0 is GPS week 1024 (1999-08-22)
 GST_WEEK_OFFSET = 1024
@@ -110,7 +110,7 @@ def ephemerides(pages: pd.DataFrame) -> pd.DataFrame:
     (satellite, IODnav).
 
     Word types 1–4 of the same IODnav form the orbit and clock; the satellite's word type 5 nearest in the
-    log gives health (RINEX 3 bit layout: E1-B DVS bit 0, HS bits 1–2; E5b DVS bit 6, HS bits 7–8), the
+    log (by the pages' ``message`` numbers, else their rows) gives health (RINEX 3 bit layout: E1-B DVS bit 0, HS bits 1–2; E5b DVS bit 6, HS bits 7–8), the
     group delays and the week. An ephemeris without a word type 5 of its satellite is not produced (its
     health is unknown). Columns: those of :func:`tollcli.gnss.lnav_subframes.ephemerides` plus
     ``BGDe5a``/``BGDe5b``; ``group_delay_s`` is BGD(E1, E5b), the single-frequency E1 correction of I/NAV.
@@ -120,7 +120,7 @@ def ephemerides(pages: pd.DataFrame) -> pd.DataFrame:
         return pd.DataFrame(columns=columns)
     dec = decode_pages(subframe_words(pages, 8)[0].astype(np.uint64))
     dec["sv"] = pages["sv"].to_numpy(str)
-    dec["order"] = np.arange(len(dec))
+    dec["order"] = _order(pages)
     dec = dec[dec["valid"]]
     keep = {1: ["toe", "M0", "e", "sqrtA"], 2: ["Omega0", "i0", "omega", "IDOT"],
             3: ["Omegad", "deltan", "Cuc", "Cus", "Crc", "Crs"], 4: ["Cic", "Cis", "toc", "af0", "af1", "af2"]}  # fmt: skip
@@ -148,6 +148,40 @@ def ephemerides(pages: pd.DataFrame) -> pd.DataFrame:
     eph["health"] = (joined["E1b_DVS"].to_numpy(np.int64) | joined["E1b_HS"].to_numpy(np.int64) << 1
                      | joined["E5b_DVS"].to_numpy(np.int64) << 6 | joined["E5b_HS"].to_numpy(np.int64) << 7)  # fmt: skip
     return eph[columns].reset_index(drop=True)
+
+
+def _order(pages: pd.DataFrame) -> np.ndarray:
+    """Where each page is in the log: its ``message`` number (a sifted table's pages keep theirs), else its row."""
+    return pages["message"].to_numpy(np.int64) if "message" in pages else np.arange(len(pages))
+
+
+def kept(pages: pd.DataFrame) -> np.ndarray:
+    """(n,) the pages of ``pages`` (as :func:`ephemerides` takes them, in log order) that can still change its result,
+    whatever pages follow: of the valid ones, the last word type 1–4 of each satellite and IODnav (the ones
+    :func:`ephemerides` joins), and of word type 5 the satellite's last and those nearest before and after each kept
+    word type 1 (the ones its nearest match can pick; a later page is nearer only to a later word type 1)."""
+    if pages.empty:
+        return np.zeros(0, bool)
+    dec = decode_pages(subframe_words(pages, 8)[0].astype(np.uint64))
+    valid = dec["valid"].to_numpy(bool)
+    wt = dec["word_type"].to_numpy(np.int64)
+    sv = pages["svId"].to_numpy(np.int64)
+    iod = np.select([wt == 1, wt == 2, wt == 3, wt == 4], [dec["IODnav"], dec["IODnav2"], dec["IODnav3"], dec["IODnav4"]], -1)
+    keep = last_of_each(valid & (wt >= 1) & (wt <= 4), sv, wt, iod)
+    five = np.flatnonzero(valid & (wt == 5))
+    keep[five[last_of_each(np.ones(five.size, bool), sv[five])]] = True
+    if five.size:
+        order = _order(pages)
+        place = sv * (1 << 40) + order  # (satellite, place in the log), sorted as the rows are within a satellite
+        fives = place[five]
+        by = np.argsort(fives, kind="stable")
+        ones = np.flatnonzero(keep & (wt == 1))
+        at = np.searchsorted(fives[by], place[ones])
+        for side in (at - 1, at):  # the nearest before, and after
+            inside = (side >= 0) & (side < five.size)
+            pick = five[by[side[inside]]]
+            keep[pick[sv[pick] == sv[ones[inside]]]] = True
+    return keep
 
 
 def _nearest_week(tow_s: np.ndarray, t_now_s: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.gnss.orbits import WEEK_S
-from tollcli.readers.ubx import subframe_words
+from tollcli.readers.ubx import last_of_each, subframe_words
 
 PI_GPS = 3.1415926535898  # IS-GPS-200's π for semicircles
 PREAMBLE = 0x8B
@@ -108,6 +108,20 @@ def ephemerides(sfrbx: pd.DataFrame, gps_week_hint: float) -> pd.DataFrame:
     eph["group_delay_s"] = eph["TGD"]
     eph["health"] = joined["hlth"].to_numpy(np.int64)
     return eph[columns]
+
+
+def kept(sfrbx: pd.DataFrame) -> np.ndarray:
+    """(n,) the subframes of ``sfrbx`` (as :func:`ephemerides` takes them, in log order) that can still change its
+    result, whatever subframes follow: of those with a good preamble, the last of each satellite, subframe 1–3 and
+    issue. :func:`ephemerides` reads only those (it keeps the last of each), so its result from the kept rows and any
+    that follow is its result from all of them."""
+    if sfrbx.empty:
+        return np.zeros(0, bool)
+    dec = decode_subframes(subframe_words(sfrbx, 10)[0])
+    sub = dec["subframe"].to_numpy(np.int64)
+    iode = np.select([sub == 1, sub == 2, sub == 3], [dec["IODC_lsb"], dec["IODE"], dec["IODE3"]], -1)
+    ok = dec["preamble_ok"].to_numpy(bool) & (sub >= 1) & (sub <= 3)
+    return last_of_each(ok, sfrbx["svId"].to_numpy(np.int64), sub, iode)
 
 
 def full_week(wn10: np.ndarray, hint_week: float) -> np.ndarray:

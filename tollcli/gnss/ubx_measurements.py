@@ -86,13 +86,14 @@ def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.Da
     from tollcli.readers.gps_time import leap_seconds_at_gps
 
     sf = ubx.sfrbx
-    gps = sf[(sf["gnssId"] == 0) & (sf["sigId"] == 0) & (sf["n_words"] == 10)]  # L1 C/A: LNAV
+    rows = _decoded_rows(sf)
+    gps = sf[rows["gps"]]
     gps = gps.assign(sv=sv_labels(np.full(len(gps), "GPS", dtype=object), gps["svId"].to_numpy()))
-    gal = sf[(sf["gnssId"] == 2) & sf["sigId"].isin([1, 5]) & (sf["n_words"] >= 8)]  # E1-B, E5b-I: I/NAV
+    gal = sf[rows["galileo"]]
     gal = gal.assign(sv=sv_labels(np.full(len(gal), "Galileo", dtype=object), gal["svId"].to_numpy()))
     galileo = inav_words.ephemerides(gal.reset_index(drop=True))
-    beidou = beidou_d1.ephemerides(sf[(sf["gnssId"] == 3) & sf["sigId"].isin(BEIDOU_D_SIGNALS)].reset_index(drop=True))
-    glo = sf[(sf["gnssId"] == 6) & (sf["n_words"] >= 4)].reset_index(drop=True)
+    beidou = beidou_d1.ephemerides(sf[rows["beidou"]].reset_index(drop=True))
+    glo = sf[rows["glonass"]].reset_index(drop=True)
     glonass = glonass_strings.ephemerides(glo, receive_times_gps_s(ubx, glo["message"].to_numpy()), leap_seconds_at_gps)
     if gps_week_hint is None:
         weeks = ubx.rawx["week"].to_numpy(float) if len(ubx.rawx) else _measured_heads(ubx)["week"].to_numpy(float)
@@ -107,6 +108,32 @@ def sfrbx_ephemerides(ubx: UbxRead, gps_week_hint: float | None = None) -> pd.Da
     if len(tables) <= 1:
         return tables[0] if tables else lnav
     return pd.concat(tables, ignore_index=True)
+
+
+def _decoded_rows(sf: pd.DataFrame) -> dict[str, np.ndarray]:
+    """Which subframes of ``sf`` each decoder of :func:`sfrbx_ephemerides` reads: GPS L1 C/A (LNAV, ten words),
+    Galileo E1-B and E5b-I (I/NAV, eight words or more), BeiDou B1I/B2I/B3I (D1), GLONASS (four words or more)."""
+    gnss, sig, n_words = (sf[c].to_numpy(np.int64) for c in ("gnssId", "sigId", "n_words"))
+    return {"gps": (gnss == 0) & (sig == 0) & (n_words == 10), "galileo": (gnss == 2) & np.isin(sig, (1, 5)) & (n_words >= 8),
+            "beidou": (gnss == 3) & np.isin(sig, BEIDOU_D_SIGNALS), "glonass": (gnss == 6) & (n_words >= 4)}  # fmt: skip
+
+
+def sfrbx_kept(sf: pd.DataFrame) -> np.ndarray:
+    """(n,) the subframes of ``sf`` (the reader's ``sfrbx`` layout, in log order) that can still change the
+    ephemerides :func:`sfrbx_ephemerides` makes, whatever subframes follow: each decoder's own (``kept`` of
+    :mod:`~tollcli.gnss.lnav_subframes`, :mod:`~tollcli.gnss.inav_words`, :mod:`~tollcli.gnss.beidou_d1`,
+    :mod:`~tollcli.gnss.glonass_strings`); none of another system, signal or message (SBAS, almanac pages …). A long
+    u-blox log's first pass sifts its subframes through this (``read_ubx(subframes_kept=…)``): the ephemerides are
+    the same (``tests/test_ubx_sifting.py``) and the subframes kept are those of the orbits, not of the log."""
+    from tollcli.gnss import beidou_d1, glonass_strings
+
+    keep = np.zeros(len(sf), bool)
+    for name, rows in _decoded_rows(sf).items():
+        at = np.flatnonzero(rows)
+        if at.size:
+            decoder = {"gps": lnav_subframes, "galileo": inav_words, "beidou": beidou_d1, "glonass": glonass_strings}[name]
+            keep[at[decoder.kept(sf.iloc[at].reset_index(drop=True))]] = True
+    return keep
 
 
 def _measured_heads(ubx: UbxRead) -> pd.DataFrame:

@@ -75,14 +75,14 @@ def _ubx(nav) -> SegmentFormat:
     the orbits, the second its RXM-RAWX a block of frames at a time."""
     from tollcli.gnss.pseudorange_inputs import navigation_of, ubx_orbits
     from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites
-    from tollcli.gnss.ubx_measurements import rawx_measurements, with_receiver_solution
+    from tollcli.gnss.ubx_measurements import rawx_measurements, sfrbx_kept, with_receiver_solution
     from tollcli.readers.ubx import UbxRead, iter_rawx, read_ubx
 
     known: dict = {}
 
     def blocks(path, strict):
         ephemerides, known["iono"] = navigation_of(nav)
-        first = read_ubx(path, strict, measurements=False)
+        first = read_ubx(path, strict, measurements=False, subframes_kept=sfrbx_kept)  # only the subframes the orbits need
         known["orbits"], known["pvt"] = ubx_orbits(path, first, ephemerides), first.pvt
         damaged = first.n_bad  # (counted once: the first pass saw every frame)
         for rawx in iter_rawx(path, strict):

@@ -80,6 +80,17 @@ def subframe_words(frame: pd.DataFrame, width: int) -> tuple[np.ndarray, np.ndar
     return out, frame["n_words"].to_numpy(np.int64)
 
 
+def last_of_each(ok: np.ndarray, *keys: np.ndarray) -> np.ndarray:
+    """(n,) whether each row is, among the rows ``ok``, the last of its key (the tuple of ``keys``' values, each (n,)
+    integers): what ``drop_duplicates(keys, keep="last")`` keeps of the rows ``ok``."""
+    out = np.zeros(ok.size, bool)
+    rows = np.flatnonzero(ok)
+    if rows.size:
+        table = pd.DataFrame({i: np.asarray(k, np.int64)[rows] for i, k in enumerate(keys)})
+        out[rows[~table.duplicated(keep="last").to_numpy()]] = True
+    return out
+
+
 def is_ubx(head: bytes) -> bool:
     """Whether the first bytes of a file hold a UBX frame (sync chars followed by a known class)."""
     at = head.find(UBX_SYNC)
@@ -93,15 +104,25 @@ def _records(data: np.ndarray, offsets: np.ndarray, dtype: np.dtype) -> np.ndarr
     return data[offsets[:, None] + np.arange(dtype.itemsize)].view(dtype).ravel()
 
 
-class _Tables:
-    """The columns of the messages read so far, a block's arrays at a time."""
+#: subframes held before a first pass's ``subframes_kept`` sifts them (then: once they have doubled since)
+SIFT_SUBFRAMES = 1024
 
-    def __init__(self, measurements: bool = True) -> None:
+
+class _Tables:
+    """The columns of the messages read so far, a block's arrays at a time. ``subframes_kept``: a function of a
+    subframe table (:func:`read_ubx`'s ``sfrbx`` layout, the rows in log order) giving the rows to keep; where given,
+    the subframes are sifted through it as they pile up (:data:`SIFT_SUBFRAMES`)."""
+
+    def __init__(self, measurements: bool = True, subframes_kept=None) -> None:
         self.measurements = measurements
         self.rawx: list[dict] = []
         self.heads: list[dict] = []
         self.sfrbx: list[tuple] = []
         self.pvt: list[dict] = []
+        self.subframes_kept = subframes_kept
+        self._held = 0  # subframe rows held
+        self._sift_at = SIFT_SUBFRAMES  # … at which they are sifted next
+        self.sifted = 0  # subframe rows sifted out (for tests and benchmarks)
 
     def add_rawx(self, data: np.ndarray, payload: np.ndarray, numbers: np.ndarray) -> None:
         head = _records(data, payload, _RAWX_HEAD)
@@ -134,6 +155,31 @@ class _Tables:
             at = np.repeat(payload + 8, count) + 4 * col
             words[row, col] = data[at[:, None] + np.arange(4)].view("<u4").ravel()
         self.sfrbx.append((head[:, 0], head[:, 1], head[:, 2], count, words, numbers))
+        self._held += count.size
+        if self.subframes_kept is not None and self._held >= self._sift_at:
+            self._sift()
+
+    def _sift(self) -> None:
+        """Keep only the subframes ``subframes_kept`` names: the memory of what can still change the orbits, not of
+        the log (sifted again once the rows held have doubled, so a log's subframes are sifted O(log) times each)."""
+        table = self.sfrbx_table()
+        keep = np.asarray(self.subframes_kept(table), bool)
+        words = table[[c for c in table.columns if c.startswith("w")]].to_numpy(np.uint32)[keep]
+        self.sfrbx = [tuple(table[c].to_numpy(np.int64)[keep] for c in SFRBX_COLUMNS[:4]) + (words, table["message"].to_numpy(np.int64)[keep])]
+        self.sifted += int((~keep).sum())
+        self._held = int(keep.sum())
+        self._sift_at = max(SIFT_SUBFRAMES, 2 * self._held)
+
+    def sfrbx_table(self) -> pd.DataFrame:
+        """The subframes held, one table (:data:`SFRBX_COLUMNS`, then the words ``w0`` …)."""
+        if not self.sfrbx:
+            return pd.DataFrame(columns=list(SFRBX_COLUMNS))
+        columns = list(zip(*self.sfrbx))
+        width = max(w.shape[1] for w in columns[4])
+        words = np.concatenate([np.pad(w, ((0, 0), (0, width - w.shape[1]))) for w in columns[4]])
+        return pd.DataFrame({"gnssId": np.concatenate(columns[0]), "svId": np.concatenate(columns[1]),
+                             "sigId": np.concatenate(columns[2]), "n_words": np.concatenate(columns[3]),
+                             "message": np.concatenate(columns[5]), **{f"w{i}": words[:, i] for i in range(width)}})  # fmt: skip
 
     def add_pvt(self, data: np.ndarray, payload: np.ndarray, numbers: np.ndarray) -> None:
         r = _records(data, payload, _PVT)
@@ -155,26 +201,22 @@ class _Tables:
         rawx = self.rawx_table()
         heads = pd.DataFrame({c: np.concatenate([b[c] for b in self.heads]) for c in HEAD_COLUMNS}) if self.heads \
             else pd.DataFrame({c: np.zeros(0, np.float64 if c == "rcvTow" else np.int64) for c in HEAD_COLUMNS})  # fmt: skip
-        if self.sfrbx:
-            columns = list(zip(*self.sfrbx))
-            width = max(w.shape[1] for w in columns[4])
-            words = np.concatenate([np.pad(w, ((0, 0), (0, width - w.shape[1]))) for w in columns[4]])
-            sfrbx = pd.DataFrame({"gnssId": np.concatenate(columns[0]), "svId": np.concatenate(columns[1]),
-                                  "sigId": np.concatenate(columns[2]), "n_words": np.concatenate(columns[3]),
-                                  "message": np.concatenate(columns[5]), **{f"w{i}": words[:, i] for i in range(width)}})  # fmt: skip
-        else:
-            sfrbx = pd.DataFrame(columns=list(SFRBX_COLUMNS))
+        sfrbx = self.sfrbx_table()
         pvt = pd.DataFrame({c: np.concatenate([b[c] for b in self.pvt]) for c in PVT_COLUMNS}) if self.pvt \
             else pd.DataFrame(columns=list(PVT_COLUMNS))  # fmt: skip
         return rawx, sfrbx, pvt, heads
 
 
-def read_ubx(path: str, strict: bool = False, block_bytes: int = 1 << 20, measurements: bool = True) -> UbxRead:
+def read_ubx(path: str, strict: bool = False, block_bytes: int = 1 << 20, measurements: bool = True,
+             subframes_kept=None) -> UbxRead:  # fmt: skip
     """The RAWX, SFRBX and PVT messages of a UBX (or mixed UBX/NMEA/RTCM) log, read ``block_bytes`` at a time.
     ``measurements`` False: the RAWX measurements are not kept (``rawx`` empty; ``rawx_heads`` still one row per
     message): what a long log's first pass needs (its navigation data and times), the measurements read by
-    :func:`iter_rawx` after."""
-    tables = _Tables(measurements)
+    :func:`iter_rawx` after. ``subframes_kept``: a function of a table of subframes (the ``sfrbx`` layout, in log
+    order) naming the rows that can still change what is made of them
+    (:func:`tollcli.gnss.ubx_measurements.sfrbx_kept`: the orbits); the subframes are sifted through it as they are
+    read, and ``sfrbx`` holds only those kept (the reader knows nothing of what they mean)."""
+    tables = _Tables(measurements, subframes_kept)
     stats = ReadStats(source=str(path), protocol="UBX messages")
     for _ in _frames_into(path, strict, block_bytes, tables, stats):
         pass
