@@ -155,11 +155,16 @@ def estimate_trajectory(inp: TrajectoryInputs, positioning: str = "smoothed", no
         passes = None  # (let go before the next sweep is made)
         z = np.clip(res / table[bins], -5.0, 5.0)
         res = sigma2 = None
-        factor, rho = correlation_inflation(z, sv_code, kept)  # the kept, not the outliers
         leaning, leaning_rho = 1.0, np.ones(1)
         if round_ == NOISE_ROUNDS - 1:  # the satellites' errors leaning together (in the last round only: the same
-            # figures on every drive of benchmarks/integrity_truth.py as in both, for half the cost)
-            leaning, leaning_rho = position_inflation(z, inp, smoothed_x, kept)
+            # figures on every drive of benchmarks/integrity_truth.py as in both, for half the cost), found on a second
+            # thread beside the correlation (both read z alone; numpy's transforms and sums let go of the interpreter)
+            with ThreadPoolExecutor(max_workers=1) as pool:
+                leaning_job = pool.submit(position_inflation, z, inp, smoothed_x, kept)
+                factor, rho = correlation_inflation(z, sv_code, kept)  # the kept, not the outliers
+                leaning, leaning_rho = leaning_job.result()
+        else:
+            factor, rho = correlation_inflation(z, sv_code, kept)
         if leaning > factor:
             factor = leaning
         if correlation_lags(leaning_rho) > correlation_lags(rho):
