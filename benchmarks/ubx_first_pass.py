@@ -9,8 +9,8 @@ pages, 4 753 NAV-PVT) written 1, 4 and 8 times over into one file (the same page
 recording; there is no longer real one). Printed per length and way, each read once timed and once under
 ``tracemalloc``: the subframe rows held at the end and their bytes, the NAV-PVT table's bytes, what the first pass
 keeps in all (the memory still allocated after it, its tables) and its peak while reading, the seconds the read and
-the decoding of the ephemerides take, and whether the ephemerides are the same both ways; then the ratios of the
-longest to the shortest. ≈ 40 s.
+the decoding of the ephemerides take, and whether the ephemerides are the same both ways, and what the second pass
+keeps of it (the receiver's solutions, ``receiver_solutions``); then the ratios of the longest to the shortest. ≈ 40 s.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tollcli.gnss.ubx_measurements import sfrbx_ephemerides, sfrbx_kept  # noqa: E402
+from tollcli.gnss.ubx_measurements import receiver_solutions, sfrbx_ephemerides, sfrbx_kept  # noqa: E402
 from tollcli.readers.ubx import read_ubx  # noqa: E402
 
 RECORDING = ROOT.parent / "shared" / "data" / "osnma" / "ublox" / "current_config.ubx"
@@ -47,7 +47,8 @@ def first_pass(path: str, sifted: bool) -> dict:
     eph = sfrbx_ephemerides(read)
     return {"rows": len(read.sfrbx), "subframes_mb": read.sfrbx.memory_usage(deep=True).sum() / 1e6,
             "pvt_mb": read.pvt.memory_usage(deep=True).sum() / 1e6, "kept_mb": kept / 1e6, "peak_mb": peak / 1e6,
-            "read_s": t_read, "decode_s": time.perf_counter() - t0, "eph": eph}  # fmt: skip
+            "read_s": t_read, "decode_s": time.perf_counter() - t0, "eph": eph,
+            "solutions_mb": receiver_solutions(read.pvt).memory_usage(deep=True).sum() / 1e6}  # fmt: skip
 
 
 def main() -> int:
@@ -73,6 +74,8 @@ def main() -> int:
                       f"ephemerides {r['decode_s']:.2f} s ({len(r['eph'])}{', the same' if name == 'sifted' and same else ''})")  # fmt: skip
             if not same:
                 print("  THE EPHEMERIDES DIFFER")
+            print(f"    then kept through the second pass: the receiver's solutions {sifted['solutions_mb']:.2f} MB (its NAV-PVT "
+                  f"table {sifted['pvt_mb']:.2f} MB); the subframes and RAWX times are let go")  # fmt: skip
     lo, hi = min(rows), max(rows)
     for i, name in enumerate(("all subframes", "sifted")):
         a, b = rows[lo][i], rows[hi][i]

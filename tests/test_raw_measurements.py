@@ -390,7 +390,7 @@ def test_process_and_batch_charge_a_ubx_drive_and_record_the_format(tmp_path):
 
 def test_the_receivers_own_nav_pvt_is_kept_beside_each_epoch():
     """Real NAV-PVT messages (ZED-F9P): each epoch at a PVT instant carries that solution; others carry NaN."""
-    from tollcli.gnss.ubx_measurements import with_receiver_solution
+    from tollcli.gnss.ubx_measurements import receiver_solutions, with_receiver_solution
 
     ubx = read_ubx(str(shared("gpsd", "ublox-zed-f9p-sfrbx.log")))
     pvt = ubx.pvt
@@ -403,6 +403,30 @@ def test_the_receivers_own_nav_pvt_is_kept_beside_each_epoch():
     assert out["receiver_lat_deg"].iloc[0] == pytest.approx(first["lat_deg"]) and out["receiver_lat_deg"].iloc[0] == pytest.approx(44.0688655)
     assert out["receiver_speed_mps"].iloc[0] == pytest.approx(0.027)
     assert np.isnan(out["receiver_lat_deg"].iloc[1])
+    # the solutions made once for a log read in segments (receiver_solutions) match each segment's epochs the same
+    for part in (epochs, epochs.iloc[:1], epochs.iloc[1:], epochs.iloc[:0]):
+        pd.testing.assert_frame_equal(with_receiver_solution(part, receiver_solutions(pvt)), with_receiver_solution(part, pvt))
+    assert receiver_solutions(pvt.iloc[:0]).empty and receiver_solutions(pvt).shape == (19, 6)
+
+
+def test_the_walks_epochs_carry_the_receivers_solutions_matched_once_or_per_segment():
+    """The u-blox walk's 536 solved epochs (its own NAV-PVT at 4 Hz): the solutions prepared once give every column
+    the NAV-PVT table gives, whole and for each of its quarters (as a long log's segments ask)."""
+    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+    from tollcli.gnss.sigma_models import NominalModel
+    from tollcli.gnss.ubx_measurements import receiver_solutions, with_receiver_solution
+
+    log = str(shared("rtklibexplorer", "gnss_1730.ubx"))
+    epochs, _ = pseudorange_epochs(log, "ubx", None, "nominal", 5.0, NominalModel())
+    pvt = read_ubx(log, measurements=False).pvt
+    prepared = receiver_solutions(pvt)
+    bare = epochs.drop(columns=[c for c in epochs if c.startswith("receiver_")])
+    for rows in np.array_split(np.arange(len(bare)), 4) + [np.arange(len(bare))]:
+        part = bare.iloc[rows]
+        pd.testing.assert_frame_equal(with_receiver_solution(part, prepared), with_receiver_solution(part, pvt))
+    matched = with_receiver_solution(bare, prepared)
+    assert matched["receiver_lat_deg"].notna().sum() > 500
+    pd.testing.assert_frame_equal(matched[list(epochs.columns)], epochs)  # what the whole log's reading gave
 
 
 def test_rinex_observations_with_a_navigation_file_of_another_day_are_a_clear_error(tmp_path):

@@ -191,26 +191,40 @@ def _pvt_week(pvt: pd.DataFrame) -> float:
 PVT_TOLERANCE_S = 0.05
 
 
-def with_receiver_solution(epochs: pd.DataFrame, pvt: pd.DataFrame) -> pd.DataFrame:
-    """``epochs`` with the receiver's own NAV-PVT solution of the same instant, for comparison:
-    ``receiver_lat_deg``, ``receiver_lon_deg``, ``receiver_height_m``, ``receiver_speed_mps``, ``receiver_h_acc_m``
-    (NaN where the log has no NAV-PVT within ``PVT_TOLERANCE_S``)."""
-    names = {"lat_deg": "receiver_lat_deg", "lon_deg": "receiver_lon_deg", "height_m": "receiver_height_m",
-             "speed_mps": "receiver_speed_mps", "h_acc_m": "receiver_h_acc_m"}  # fmt: skip
-    out = epochs.copy()
+#: the receiver's solution columns :func:`with_receiver_solution` adds: NAV-PVT's name → the epoch table's
+RECEIVER_COLUMNS = {"lat_deg": "receiver_lat_deg", "lon_deg": "receiver_lon_deg", "height_m": "receiver_height_m",
+                    "speed_mps": "receiver_speed_mps", "h_acc_m": "receiver_h_acc_m"}  # fmt: skip
+
+
+def receiver_solutions(pvt: pd.DataFrame) -> pd.DataFrame:
+    """The receiver's fixed NAV-PVT solutions (fix type 2–5) as :func:`with_receiver_solution` matches them: their
+    time ``_t`` (UTC, sorted) and :data:`RECEIVER_COLUMNS` (48 bytes a solution, where a NAV-PVT row is 128): made
+    once for a log read in segments, not once a segment."""
     fixed = pvt[pvt["fix_type"].between(2, 5)] if len(pvt) else pvt
-    if fixed.empty or out.empty:
-        for name in names.values():
-            out[name] = np.nan
-        return out
+    if fixed.empty:
+        return pd.DataFrame({"_t": pd.Series(dtype="datetime64[ns, UTC]"), **{c: pd.Series(dtype=float) for c in RECEIVER_COLUMNS.values()}})
     when = pd.to_datetime(dict(year=fixed["year"], month=fixed["month"], day=fixed["day"], hour=fixed["hour"],
                                minute=fixed["minute"], second=fixed["second"]), utc=True)  # fmt: skip
     when = when + pd.to_timedelta(fixed["nano"].to_numpy(np.int64), unit="ns")
-    table = fixed[list(names)].rename(columns=names).assign(_t=when.to_numpy()).sort_values("_t")
+    table = fixed[list(RECEIVER_COLUMNS)].rename(columns=RECEIVER_COLUMNS).assign(_t=when.to_numpy())
+    return table.sort_values("_t").reset_index(drop=True)
+
+
+def with_receiver_solution(epochs: pd.DataFrame, pvt: pd.DataFrame) -> pd.DataFrame:
+    """``epochs`` with the receiver's own NAV-PVT solution of the same instant, for comparison:
+    ``receiver_lat_deg``, ``receiver_lon_deg``, ``receiver_height_m``, ``receiver_speed_mps``, ``receiver_h_acc_m``
+    (NaN where the log has no NAV-PVT within ``PVT_TOLERANCE_S``). ``pvt``: the NAV-PVT table, or its
+    :func:`receiver_solutions` made before."""
+    table = pvt if "_t" in pvt else receiver_solutions(pvt)
+    out = epochs.copy()
+    if table.empty or out.empty:
+        for name in RECEIVER_COLUMNS.values():
+            out[name] = np.nan
+        return out
     left = pd.DataFrame({"_t": out["time_utc"].to_numpy(), "_i": np.arange(len(out))}).sort_values("_t")
-    table["_t"] = table["_t"].astype(left["_t"].dtype)
+    table = table.assign(_t=table["_t"].astype(left["_t"].dtype))  # (a copy: a log's table serves every segment)
     merged = pd.merge_asof(left, table, on="_t", direction="nearest",
                            tolerance=pd.Timedelta(seconds=PVT_TOLERANCE_S)).sort_values("_i")  # fmt: skip
-    for name in names.values():
+    for name in RECEIVER_COLUMNS.values():
         out[name] = merged[name].to_numpy(float)
     return out

@@ -75,7 +75,7 @@ def _ubx(nav) -> SegmentFormat:
     the orbits, the second its RXM-RAWX a block of frames at a time."""
     from tollcli.gnss.pseudorange_inputs import navigation_of, ubx_orbits
     from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites
-    from tollcli.gnss.ubx_measurements import rawx_measurements, sfrbx_kept, with_receiver_solution
+    from tollcli.gnss.ubx_measurements import rawx_measurements, receiver_solutions, sfrbx_kept, with_receiver_solution
     from tollcli.readers.ubx import UbxRead, iter_rawx, read_ubx
 
     known: dict = {}
@@ -83,10 +83,12 @@ def _ubx(nav) -> SegmentFormat:
     def blocks(path, strict):
         ephemerides, known["iono"] = navigation_of(nav)
         first = read_ubx(path, strict, measurements=False, subframes_kept=sfrbx_kept)  # only the subframes the orbits need
-        known["orbits"], known["pvt"] = ubx_orbits(path, first, ephemerides), first.pvt
+        known["orbits"], known["pvt"] = ubx_orbits(path, first, ephemerides), receiver_solutions(first.pvt)
         damaged = first.n_bad  # (counted once: the first pass saw every frame)
+        no_sfrbx, no_pvt = first.sfrbx.iloc[:0], first.pvt.iloc[:0]
+        first = None  # (its subframes, NAV-PVT rows and RAWX times let go before the measurements are read)
         for rawx in iter_rawx(path, strict):
-            part = UbxRead(rawx, first.sfrbx.iloc[:0], first.pvt.iloc[:0], 0, 0)
+            part = UbxRead(rawx, no_sfrbx, no_pvt, 0, 0)
             yield with_broadcast_satellites(rawx_measurements(part), known["orbits"]), None, damaged
             damaged = 0
 
