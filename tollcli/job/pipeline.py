@@ -223,9 +223,8 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         raise UsageError(str(exc)) from None
     tariff_doc = load_tariff(tariff)
     check_settings(settings, tariff_doc)
-    geo_objects = load_geoobjects(geo, sha256=geo_sha256)
-    tariff_doc.check_against(geo_objects.ids, geo_objects.road_class, geo)
-    with LogRun(log, settings.input_format) as run:  # the log opened once, hashed as it is read (io.log_run)
+    with _GeoObjectsAhead(geo, geo_sha256, tariff_doc) as geo_ahead, LogRun(log, settings.input_format) as run:
+        # the log opened once, hashed as it is read (io.log_run); the geo-objects loaded meanwhile (_GeoObjectsAhead)
         kind = run.kind
         osnma = osnma_evidence(log, kind, osnma_merkle, osnma_public_keys, auto=osnma_auto, required=settings.require_authenticated,
                                strict=settings.strict, run=run)  # fmt: skip
@@ -235,17 +234,19 @@ def charge_log(log: str, geo: str, tariff: str, settings: ChargeSettings, nav: s
         nominal = NominalModel()
         epoch_raim = replace(params, fde=False)
         finding_settings = FindingSettings.for_class(settings.vehicle_class)
-        charger = TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
         ignored: dict[str, list[int]] = {}  # receiver outputs that were no evidence: note → [epochs, first line]
         track = TrackExtent()  # where the log was, said when it came near no geo-object
         with run.named_errors():  # one charge for every input kind: its chunks of epochs and measurements, streamed
             stats = ReadStats()  # what the reader passed over (a pseudorange log: its malformed lines)
             placed: dict[str, str] = {}  # how a pseudorange log's epochs were placed: positioning, and a note why not
+            charger = None if kind in NAVIGATION_KINDS else TailCharger(geo_ahead.result(), settings, roads, rounds=STREAM_ROUNDS)
             chunks = (_navigation_chunks(run, kind, settings, nominal, stats) if kind in NAVIGATION_KINDS
                       else _pseudorange_chunks(run, kind, nav, settings, nominal, placed, charger, stats))  # fmt: skip
             # a navigation log's next chunk read (and its measurements made) on a second thread while this one is
             # prepared and charged (:func:`_prepared_chunks`: why the preparing is not on that thread)
             with (read_ahead(chunks) if kind in NAVIGATION_KINDS else contextlib.nullcontext(chunks)) as read:
+                geo_objects = geo_ahead.result()  # (its first chunks read meanwhile)
+                charger = charger or TailCharger(geo_objects, settings, roads, rounds=STREAM_ROUNDS)
                 prepared = _prepared_chunks(read, settings, params, model_column=epoch_table is not None)
                 params = _charge_chunks(prepared, settings, geo_objects, params, epoch_raim, charger, epoch_table, osnma,
                                         auth_counts, failure_fixes, ignored, track)  # fmt: skip
@@ -402,6 +403,51 @@ def _pseudorange_chunks(run: LogRun, kind: str, nav: str | tuple[str, ...] | Non
             check_not_future(part, run.name)
             first = False
             yield part, part_meas, None
+
+
+class _GeoObjectsAhead:
+    """The geo-object file ``geo`` hashed on a thread of its own while the log is opened and its first chunks read;
+    :meth:`result` then loads its geo-objects (:func:`load_geoobjects`: the store the digest names, mapped, or compiled
+    here) and checks them against the tariff.
+
+    Hashing a national network's GeoJSON (437 MB at 150 000 sections) takes ~0.4 s, which the hash's C code spends
+    without the interpreter lock, beside the reading. Only the hash runs there: a first run's compiling stays on the
+    calling thread, where Ctrl-C stops it. What is said stays as before: leaving the block by an error (the log's,
+    say) raises the geo-objects' or the tariff's own error first, as when they were loaded before the log was opened."""
+
+    def __init__(self, geo: str, sha256: str | None, tariff_doc):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="tollcli-geo-digest")
+        self._digest = self._pool.submit(_digest_or_none, geo) if sha256 is None else None
+        self._geo, self._sha256, self._tariff, self._loaded = geo, sha256, tariff_doc, None
+
+    def result(self):
+        """The geo-objects, checked against the tariff (raising either's error)."""
+        if self._loaded is None:
+            digest = self._sha256 if self._digest is None else self._digest.result()
+            geo_objects = load_geoobjects(self._geo, sha256=digest)
+            self._tariff.check_against(geo_objects.ids, geo_objects.road_class, self._geo)
+            self._loaded = geo_objects
+        return self._loaded
+
+    def __enter__(self) -> _GeoObjectsAhead:
+        return self
+
+    def __exit__(self, kind, error, trace) -> None:
+        try:
+            if kind is not None and issubclass(kind, Exception) and self._loaded is None:
+                self.result()  # the geo-objects' or the tariff's error first, as before; else the block's own
+        finally:
+            self._pool.shutdown(wait=True)
+
+
+def _digest_or_none(path: str) -> str | None:
+    """The file's SHA-256, or None where it cannot be read (:func:`load_geoobjects` then says why)."""
+    try:
+        return file_sha256(path)
+    except OSError:
+        return None
 
 
 @dataclass
