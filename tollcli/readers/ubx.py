@@ -122,7 +122,6 @@ class _Tables:
         self.subframes_kept = subframes_kept
         self._held = 0  # subframe rows held
         self._sift_at = SIFT_SUBFRAMES  # … at which they are sifted next
-        self.sifted = 0  # subframe rows sifted out (for tests and benchmarks)
 
     def add_rawx(self, data: np.ndarray, payload: np.ndarray, numbers: np.ndarray) -> None:
         head = _records(data, payload, _RAWX_HEAD)
@@ -165,8 +164,8 @@ class _Tables:
         table = self.sfrbx_table()
         keep = np.asarray(self.subframes_kept(table), bool)
         words = table[[c for c in table.columns if c.startswith("w")]].to_numpy(np.uint32)[keep]
-        self.sfrbx = [tuple(table[c].to_numpy(np.int64)[keep] for c in SFRBX_COLUMNS[:4]) + (words, table["message"].to_numpy(np.int64)[keep])]
-        self.sifted += int((~keep).sum())
+        ids = tuple(table[c].to_numpy(np.int64)[keep] for c in SFRBX_COLUMNS[:4])  # gnssId, svId, sigId, n_words
+        self.sfrbx = [(*ids, words, table["message"].to_numpy(np.int64)[keep])]  # (add_sfrbx's layout)
         self._held = int(keep.sum())
         self._sift_at = max(SIFT_SUBFRAMES, 2 * self._held)
 
