@@ -121,13 +121,13 @@ def _decoded(subframes: pd.DataFrame) -> pd.DataFrame:
     return d
 
 
-def _triples(subframes: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray]:
+def _triples(subframes: pd.DataFrame, decoded: pd.DataFrame | None = None) -> tuple[pd.DataFrame, np.ndarray]:
     """The joined subframes 1, 2, 3 of each (satellite, seconds of week) whose clock time is their ephemeris time (the
     last of each subframe where one came twice), in the order of their subframes 1, with each part's ``row_1`` …
-    ``row_3``; and their ephemeris time (GPS seconds)."""
+    ``row_3``; and their ephemeris time (GPS seconds). ``decoded``: :func:`_decoded` of ``subframes`` when made."""
     if subframes.empty:
         return pd.DataFrame(), np.zeros(0)
-    d = _decoded(subframes)
+    d = _decoded(subframes) if decoded is None else decoded
     d = d[d["ok"].to_numpy()]
     one = d[d["frn"] == 1].drop_duplicates(["svId", "sow"], keep="last")
     two = d[d["frn"] == 2].assign(sow=lambda x: x["sow"] - 6).drop_duplicates(["svId", "sow"], keep="last")
@@ -167,7 +167,7 @@ def kept(subframes: pd.DataFrame) -> np.ndarray:
     latest = pd.Series(sow[ok]).groupby(prn[ok]).last()  # each satellite's latest subframe's seconds of week
     behind = (latest.reindex(prn).to_numpy(float) - sow) % WEEK_S  # (across a week's turn too)
     keep = last & (behind <= LATE_S)
-    joined, t_gps = _triples(subframes)
+    joined, t_gps = _triples(subframes, d)
     if len(joined):
         winners = joined.assign(t=t_gps).drop_duplicates(["svId", "t"], keep="last")
         for part in ("row_1", "row_2", "row_3"):
