@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import SAMPLES, shared
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from tollcli.readers.nmea import bulk_fields, bulk_lines, kernels, read_nmea
@@ -93,6 +93,7 @@ _ALPHABET = b"$!*\r\n,.-+0123456789ABCDEFGPNMEA abce"
 
 @needs_compiled
 @settings(max_examples=400, deadline=None)
+@example(list(b"\n\n$"), b"NMEA,", [])  # a line too short for its prefix: no specials counted, not -1
 @given(st.lists(st.sampled_from(list(_ALPHABET)), max_size=300), st.sampled_from([b"", b"NMEA,", b"$GPGGA,12.5,-3.,00,.5*"]),
        st.lists(st.tuples(st.integers(0, 400), st.integers(0, 20)), max_size=40))  # fmt: skip
 def test_random_bytes_frame_and_read_the_same(body, prefix, spans):

@@ -134,7 +134,7 @@ def split_block_numpy(data: bytes) -> BlockLines:
     android = (win[np.minimum(start + 8, buf.size)] & 0xFFFFFFFFFF) == _ANDROID
     start = np.where(android, start + 5, start)
     last = np.searchsorted(specials, end) - 1
-    n_special = last + 1 - np.searchsorted(specials, start)
+    n_special = np.maximum(last + 1 - np.searchsorted(specials, start), 0)  # none where a prefix passes the end
     # the sentence ends two characters after its '*' (the reference reader ignores what follows)
     star = np.where(n_special > 0, specials[np.clip(last, 0, max(specials.size - 1, 0))] if specials.size else 0, end)
     framed = np.minimum(star + 3, end)
