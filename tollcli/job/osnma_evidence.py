@@ -32,17 +32,17 @@ SYNC_BOUND_S = 30.0
 class OsnmaEvidence:
     """A log's OSNMA check, the satellites it authenticated per epoch, and the key files it used.
 
-    ``pending``: the check still running beside the charge (a future); :attr:`check` waits for it."""
+    ``pending``: the check still running beside the charge (a forked process); :attr:`check` waits for it."""
 
-    pending: object  # tollcli.job.osnma_check.OsnmaCheck, or a concurrent.futures.Future of one
+    pending: object  # tollcli.job.osnma_check.OsnmaCheck, or a ForkedWork making one
     merkle: str
     public_keys: list[str]
 
     @property
     def check(self):
-        from concurrent.futures import Future
+        from tollcli.job.forked_work import ForkedWork
 
-        if isinstance(self.pending, Future):
+        if isinstance(self.pending, ForkedWork):
             self.pending = self.pending.result()
         return self.pending
 
@@ -94,31 +94,21 @@ def osnma_evidence(log: str, kind: str, merkle: str | None = None, public_keys: 
 
 def _beside(run, work):
     """``work`` (the OSNMA verification: pure Python, its own input) run in a forked process beside the charge's own
-    reading, on another CPU; its result (a future) is waited for when the first chunk needs it. Inline where no
-    second CPU or no child process is to be had (a batch's pool worker). Errors name the log."""
+    reading, on another CPU (:class:`~tollcli.job.forked_work.ForkedWork`); its result is waited for when the first
+    chunk needs it. Inline where no second CPU or no child process is to be had (a batch's pool worker). Errors name
+    the log."""
     import multiprocessing
-    from concurrent.futures import Future, ProcessPoolExecutor
+
+    from tollcli.job.forked_work import ForkedWork
 
     def named():
         with run.named_errors():
             return work()
 
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if cpus < 2 or multiprocessing.current_process().daemon or "fork" not in multiprocessing.get_all_start_methods():
+    if cpus < 2 or multiprocessing.current_process().daemon or not hasattr(os, "fork"):
         return named()
-    global _WORK
-    _WORK = named
-    pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"))
-    future: Future = pool.submit(_run_work)
-    pool.shutdown(wait=False)
-    return future
-
-
-_WORK = None  # what a forked child runs: set in the parent just before the fork
-
-
-def _run_work():
-    return _WORK()
+    return ForkedWork(named)
 
 
 def inputs_record(evidence: OsnmaEvidence) -> dict:
