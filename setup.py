@@ -1,4 +1,4 @@
-"""Build of the optional compiled kernels (the bulk NMEA reader's, the trajectory filter's pass), and the man pages'
+"""Build of the optional compiled kernels (the bulk NMEA reader's, the CSV writer's rows, the trajectory filter's pass), and the man pages'
 place (the rest is in pyproject.toml).
 
 ``optional=True``: where no C compiler is found the install goes on without them and
@@ -19,6 +19,12 @@ setup(
             "tollcli.readers.nmea._bulk_kernels",
             ["tollcli/readers/nmea/_bulk_kernels.c"],
             extra_compile_args=["-O3"],
+            optional=True,
+        ),
+        Extension(
+            "tollcli.io._csv_kernel",
+            ["tollcli/io/_csv_kernel.c"],
+            extra_compile_args=["-O3", "-ffp-contract=off"],
             optional=True,
         ),
         Extension(

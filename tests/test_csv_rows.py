@@ -1,0 +1,143 @@
+"""The CSV writer's compiled rows (tollcli/io/_csv_kernel.c, tollcli.io.csv_rows) against the csv module's: the same
+bytes for every float Python can format, for tables of every kind of column, and for the epoch and satellite tables
+of every real log in ../shared/data/gpsd; chunks the kernel cannot write exactly are left to the csv module."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import SAMPLES, shared
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
+
+from tollcli.io import csv_rows
+from tollcli.io.columns import Coded, Columns
+from tollcli.io.writers import TableWriter
+
+needs_compiled = pytest.mark.skipif(csv_rows.compiled is None, reason="compiled CSV kernel not built")
+
+
+def test_the_install_built_the_csv_kernel():
+    """`pip install .` compiles it (a C compiler and Python's headers are on this machine and in CI)."""
+    assert csv_rows.compiled is not None, "compiled CSV kernel not built (see README: pip install needs a C compiler)"
+
+
+def _reference(v: float) -> str:
+    return "" if math.isnan(v) else "%.15g" % v
+
+
+#: values at the kernel's edges: its range without an exponent, ties at the 15th digit, powers of ten, rounding up
+#: to the next power, the smallest and largest doubles
+EDGES = [0.0, -0.0, math.inf, -math.inf, math.nan, 1e-4, 9.99999999999999e-5, 1e-5, 1e15, 1e15 - 0.125, 999999999999999.9,
+         99999999999999.95, 123456789012345.5, 123456789012344.5, 0.5, 2.5, 0.1, 0.3, 1 / 3, 2 / 3, 5e-324, 1.7976931348623157e308,
+         2.2250738585072014e-308, 0.00012345678901234567, 42.698859, -2.8956, 24.9999422222222, 4503599627370495.5,
+         9007199254740993.0, 1e-4 * (1 + 2**-52), 0.000999999999999999999, 9.999999999999999, 99.99999999999999]  # fmt: skip
+
+
+@needs_compiled
+@settings(max_examples=3000, deadline=None)
+@given(st.floats(allow_nan=True, allow_infinity=True, width=64))
+@example(123456789012345.5)
+def test_a_float_cell_is_pythons_percent_15g(v):
+    assert csv_rows.compiled.float_cell(v) == _reference(v)
+
+
+@needs_compiled
+def test_float_cells_at_the_edges_and_in_bulk_are_pythons_percent_15g():
+    rng = np.random.default_rng(2026)
+    edges = np.array(EDGES)
+    with np.errstate(over="ignore"):
+        near = [np.nextafter(edges, np.inf), np.nextafter(edges, -np.inf)]
+    scale = 10.0 ** rng.integers(0, 12, 100_000)
+    values = np.concatenate([
+        edges, *near,
+        rng.integers(0, 2**64, 100_000, dtype=np.uint64).view(np.float64),  # every exponent, every mantissa
+        np.round(rng.uniform(-180, 180, 100_000) * scale) / scale,  # what receivers write: a few decimals
+        10 ** rng.uniform(-6, 17, 100_000) * rng.choice([-1, 1], 100_000),
+        np.arange(10**14, 10**14 + 2000) + 0.5,  # exact ties at the 15th digit
+    ])  # fmt: skip
+    text = csv_rows.compiled.rows(b"fi", (values, np.arange(values.size, dtype=np.int64)), values.size).decode()
+    want = "".join(f"{_reference(v)},{i}\n" for i, v in enumerate(values.tolist()))
+    assert text == want
+
+
+def _written(table: Columns, tmp_path, name: str, compiled) -> bytes:
+    saved = csv_rows.compiled
+    csv_rows.compiled = compiled
+    try:
+        path = tmp_path / name
+        with TableWriter(str(path), "csv") as writer:
+            writer.write(table)
+            writer.write(table)  # a second chunk: no header again
+            writer.commit()
+        return path.read_bytes()
+    finally:
+        csv_rows.compiled = saved
+
+
+@needs_compiled
+def test_a_table_of_every_kind_of_column_is_the_csv_modules(tmp_path):
+    rng = np.random.default_rng(7)
+    n = 2000
+    times = np.datetime64("2024-05-06T00:00:00", "ms") + rng.integers(0, 10**9, n).astype("timedelta64[ms]")
+    times[::17] = np.datetime64("NaT")
+    floats = rng.normal(0, 1e3, n)
+    floats[::5] = np.nan
+    text = np.array([["A", "", None, "dé", "x y"][i % 5] for i in range(n)], dtype=object)
+    table = Columns({"time_utc": times, "lat_deg": floats, "f32": floats.astype(np.float32), "n": rng.integers(-10**12, 10**12, n),
+                     "u8": rng.integers(0, 255, n).astype(np.uint8), "ok": rng.random(n) < 0.5, "mode": text,
+                     "constellation": Coded(rng.integers(0, 3, n), ("GPS", "Galileo", "BeiDou"))})  # fmt: skip
+    assert csv_rows.csv_text(table, lambda v: [""] * len(v)) is not None  # the kernel writes this one
+    assert _written(table, tmp_path, "fast.csv", csv_rows.compiled) == _written(table, tmp_path, "ref.csv", None)
+
+
+@needs_compiled
+@pytest.mark.parametrize("cell", ["a,b", 'say "x"', "two\nlines", "cr\r"])
+def test_a_text_cell_the_csv_module_would_quote_leaves_the_chunk_to_it(tmp_path, cell):
+    table = Columns({"id": np.arange(3), "note": np.array(["plain", cell, None], dtype=object)})
+    assert csv_rows.csv_text(table, None) is None
+    fast, ref = _written(table, tmp_path, "fast.csv", csv_rows.compiled), _written(table, tmp_path, "ref.csv", None)
+    assert fast == ref and cell.replace('"', '""') in fast.decode()
+
+
+@needs_compiled
+def test_the_kernel_refuses_offsets_outside_its_cells():
+    with pytest.raises(ValueError, match="offsets"):
+        csv_rows.compiled.rows(b"c", ((b"abc", np.array([0, 2, 9], np.int64)),), 2)
+    with pytest.raises(ValueError, match="offsets"):
+        csv_rows.compiled.rows(b"c", ((b"abc", np.array([0, 2, 1], np.int64)),), 2)
+    with pytest.raises(ValueError, match="too short"):
+        csv_rows.compiled.rows(b"f", (np.zeros(2),), 3)
+    with pytest.raises(ValueError, match="kind"):
+        csv_rows.compiled.rows(b"z", (np.zeros(2),), 2)
+
+
+@needs_compiled
+def test_every_real_logs_epoch_and_satellite_tables_are_the_csv_modules(tmp_path):
+    """What `tollcli epochs` writes: each gpsd log's tables (chunks of :class:`Columns`) through the kernel and through
+    the csv module, the same bytes."""
+    from tollcli.io.log_run import LogRun
+    from tollcli.readers.navigation import NAVIGATION_KINDS, iter_epoch_tables
+
+    logs = sorted(p for p in shared("gpsd").iterdir() if not p.name.endswith(".chk") and p.is_file() and "COPYING" not in p.name)
+    logs.append(SAMPLES / "sim" / "urban-fault" / "drive.nmea")
+    written, cells = 0, 0
+    for log in logs:
+        try:
+            with LogRun(str(log), "auto", hashed=False) as run:
+                if run.kind not in NAVIGATION_KINDS:
+                    continue
+                chunks = list(iter_epoch_tables(run, strict=False))
+        except Exception:  # noqa: BLE001 - a log no reader takes: nothing written from it
+            continue
+        for chunk in chunks:
+            for table in (chunk.epoch_columns, chunk.satellite_columns):
+                if not len(table):
+                    continue
+                fast = _written(table, tmp_path, "fast.csv", csv_rows.compiled)
+                assert fast == _written(table, tmp_path, "ref.csv", None), log.name
+                written += 1
+                cells += len(table) * len(table.columns)
+    assert written > 200 and cells > 500_000  # the comparison covered the real logs' tables (256 tables, 631 003 cells)

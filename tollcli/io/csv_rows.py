@@ -1,0 +1,65 @@
+"""A chunk of columns → its CSV rows in one compiled pass (``_csv_kernel.c``): the bytes Python's ``csv`` module
+writes for the cells :func:`tollcli.io.writers._csv_cells` makes, which stays the reference and the fallback.
+
+Floats are formatted ``%.15g`` in C (NaN empty), integers in decimal, booleans ``True``/``False``; times and text
+come as cells made here. A chunk the kernel cannot write exactly as the ``csv`` module would — a text cell it
+would quote (a comma, a quote, a line break), a single column, an unsigned 64-bit integer, a column of another
+kind — and every chunk where the kernel was not built is left to the reference (:func:`csv_text` gives None).
+``tests/test_csv_rows.py`` holds the two to the same bytes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tollcli.io.columns import Columns, is_text, is_time
+from tollcli.kernels import compiled_module
+
+compiled = compiled_module("tollcli.io._csv_kernel")
+
+#: characters that make the csv module quote a cell (QUOTE_MINIMAL, ``,`` delimiter, ``"`` quote, ``\n`` lines)
+_QUOTED = (",", '"', "\n", "\r")
+
+
+def csv_text(table: Columns, iso_ms) -> str | None:
+    """The CSV rows of ``table`` (no header; each row ended by ``\\n``), or None: left to the reference.
+
+    ``iso_ms``: datetime64 values → their ISO cells (the writer's own, so that both paths write the same times)."""
+    if compiled is None or len(table.columns) < 2:
+        return None
+    n = len(table)
+    kinds, columns = [], []
+    for name in table.columns:
+        values = table[name]
+        if is_time(values):
+            cells = _cells(iso_ms(values))
+        elif is_text(values):
+            texts = [v if isinstance(v, str) else "" for v in values.tolist()]
+            if any(q in t for t in set(texts) for q in _QUOTED):
+                return None
+            cells = _cells(texts)
+        elif values.dtype.kind == "f":
+            kinds.append("f")
+            columns.append(np.ascontiguousarray(values, dtype=np.float64))
+            continue
+        elif values.dtype.kind == "b":
+            kinds.append("b")
+            columns.append(np.ascontiguousarray(values, dtype=np.uint8))
+            continue
+        elif values.dtype.kind == "i" or (values.dtype.kind == "u" and values.dtype.itemsize < 8):
+            kinds.append("i")
+            columns.append(np.ascontiguousarray(values, dtype=np.int64))
+            continue
+        else:
+            return None
+        kinds.append("c")
+        columns.append(cells)
+    return compiled.rows("".join(kinds).encode(), tuple(columns), n).decode("utf-8")
+
+
+def _cells(texts: list[str]) -> tuple[bytes, np.ndarray]:
+    """Cells → (their UTF-8 bytes end to end, int64 offsets: cell i is ``data[offsets[i]:offsets[i + 1]]``)."""
+    encoded = [t.encode("utf-8") for t in texts]
+    offsets = np.zeros(len(encoded) + 1, np.int64)
+    np.cumsum([len(b) for b in encoded], out=offsets[1:])
+    return b"".join(encoded), offsets
