@@ -61,3 +61,20 @@ def test_the_command_lines_own_run_freezes_what_its_imports_made_and_collects_ag
     enabled, frozen = _collector_after("main()")
     assert enabled and frozen > 10_000  # a command's modules: tens of thousands of objects
     assert _collector_after("main(sys.argv[1:])") == (True, 0)
+
+
+def test_a_quiet_epochs_run_imports_neither_rich_nor_pandas(tmp_path):
+    """Reading a log into its tables needs numpy alone: `epochs -q` of an NMEA log imports no pandas, scipy or rich
+    (the stderr console is made at its first note: a quiet run has none)."""
+    from conftest import SAMPLES
+
+    out = tmp_path / "epochs.csv"
+    probe = ("import sys\nfrom tollcli.cli.main import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
+             "print('imported:' + ','.join(m for m in ('pandas', 'scipy', 'rich', 'tollcli.charging', 'tollcli.integrity') "
+             "if m in sys.modules))\n")  # fmt: skip
+    log = SAMPLES / "sim" / "urban-fault" / "drive.nmea"
+    r = subprocess.run([sys.executable, "-c", probe, "epochs", str(log), "-q", "-o", str(out)], capture_output=True, text=True,
+                       cwd=REPO, timeout=120)  # fmt: skip
+    assert r.returncode == 0 or "imported:" in r.stdout, r.stderr
+    assert r.stdout.rsplit("imported:", 1)[1].strip() == ""
+    assert out.read_text().startswith("epoch,time_utc,")

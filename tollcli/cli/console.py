@@ -6,15 +6,23 @@ import os
 import sys
 from contextlib import contextmanager
 
-from rich.console import Console
+#: the stderr console, made on first use: a quiet command never imports rich (30 ms of its start)
+err = None
 
-err = Console(stderr=True, highlight=False, no_color=bool(os.environ.get("NO_COLOR")))
+
+def _stderr():
+    global err
+    if err is None:
+        from rich.console import Console
+
+        err = Console(stderr=True, highlight=False, no_color=bool(os.environ.get("NO_COLOR")))
+    return err
 
 
 def note(message: str, quiet: bool = False) -> None:
     """A line for the user on stderr: a summary, a reason, a warning (silent with --quiet; errors are never notes)."""
     if not quiet:
-        err.print(message, markup=False, soft_wrap=True)
+        _stderr().print(message, markup=False, soft_wrap=True)
 
 
 @contextmanager
@@ -42,7 +50,7 @@ def progress(description: str, quiet: bool, log: str | None = None, total: int |
     if known:
         columns += [BarColumn(bar_width=24), TaskProgressColumn()]
     columns += [TextColumn("{task.fields[done]} " + unit), TimeElapsedColumn()]
-    with Progress(*columns, console=err, transient=True) as bar:
+    with Progress(*columns, console=_stderr(), transient=True) as bar:
         task = bar.add_task(description, total=known or None, done=0)
         done = 0
 
@@ -210,7 +218,9 @@ def show(renderables, quiet: bool, to_stdout: bool = False) -> None:
     """
     if quiet:
         return
-    console = Console(no_color=bool(os.environ.get("NO_COLOR"))) if to_stdout else err
+    from rich.console import Console
+
+    console = Console(no_color=bool(os.environ.get("NO_COLOR"))) if to_stdout else _stderr()
     if not console.is_terminal:
         return
     for r in renderables() if callable(renderables) else renderables:
