@@ -68,12 +68,12 @@ def osnma_evidence(log: str, kind: str, merkle: str | None = None, public_keys: 
     log's :class:`~tollcli.io.log_run.LogRun` (the pages are read from its replay, the log is not opened again; a log
     on stdin is checked with the key files given).
     """
-    from tollcli.job.osnma_check import check_osnma, key_files
-
     if kind not in PAGE_KINDS or (log == "-" and (run is None or merkle is None)):
         if merkle is not None:
             raise UsageError(f"{log}: --osnma-merkle needs a u-blox log file with Galileo I/NAV pages (RXM-SFRBX)")
         return None
+    from tollcli.job.osnma_check import check_osnma, key_files  # (here: a log without pages never imports the check)
+
     if merkle is None:
         beside = os.path.join(os.path.dirname(os.path.abspath(log)), "OSNMA_MerkleTree.xml")
         if not (auto and os.path.exists(beside)):
