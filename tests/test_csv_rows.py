@@ -141,3 +141,86 @@ def test_every_real_logs_epoch_and_satellite_tables_are_the_csv_modules(tmp_path
                 written += 1
                 cells += len(table) * len(table.columns)
     assert written > 200 and cells > 500_000  # the comparison covered the real logs' tables (256 tables, 631 003 cells)
+
+
+# ---- DataFrames: what pandas' to_csv writes (integrity, locate, findings tables) ------------------------------------
+
+def _frame_written(df, tmp_path, name: str, compiled) -> bytes:
+    saved = csv_rows.compiled
+    csv_rows.compiled = compiled
+    try:
+        path = tmp_path / name
+        with TableWriter(str(path), "csv") as writer:
+            writer.write(df)
+            writer.write(df.iloc[:3])  # a second chunk: no header again
+            writer.commit()
+        return path.read_bytes()
+    finally:
+        csv_rows.compiled = saved
+
+
+def _mixed_frame(n: int = 1500):
+    import pandas as pd
+
+    rng = np.random.default_rng(11)
+    floats = rng.normal(0, 1e4, n)
+    floats[::7], floats[1::97], floats[2::89] = np.nan, np.inf, -0.0
+    times = pd.Series(pd.to_datetime(rng.integers(1.7e12, 1.8e12, n), unit="ms", utc=True))
+    times[::13] = pd.NaT
+    status = pd.array([["valid", "fault_detected", None, "unavailable"][i % 4] for i in range(n)], dtype="string")
+    return pd.DataFrame({"time_utc": times, "hpl_m": floats, "n_used": rng.integers(0, 30, n).astype(np.int16),
+                         "fix_mode": rng.integers(-3, 3, n).astype(np.int8), "line": rng.integers(0, 10**12, n),
+                         "valid": rng.random(n) < 0.5, "raim_status": status,
+                         "note": np.array([["a b", None, float("nan"), "dé"][i % 4] for i in range(n)], dtype=object)})  # fmt: skip
+
+
+@needs_compiled
+def test_a_frame_of_every_kind_the_kernel_writes_is_pandas_to_csv(tmp_path):
+    df = _mixed_frame()
+    assert csv_rows.frame_csv_text(df.assign(time_utc=df["time_utc"].astype(str))) is not None  # the kernel writes it
+    assert _frame_written(df, tmp_path, "fast.csv", csv_rows.compiled) == _frame_written(df, tmp_path, "ref.csv", None)
+
+
+@needs_compiled
+@pytest.mark.parametrize("change", ["nullable_int", "category", "numbers_as_objects", "quoted_text", "naive_time", "float32"])
+def test_a_frame_column_the_kernel_does_not_write_leaves_the_chunk_to_pandas(tmp_path, change):
+    import pandas as pd
+
+    df = _mixed_frame(300)
+    col = {"nullable_int": pd.array([1, None, 3] * 100, dtype="Int64"), "category": pd.Categorical(["a", "b", "c"] * 100),
+           "numbers_as_objects": np.array([1, 2.5, None] * 100, dtype=object), "quoted_text": np.array(["x,y", "z", None] * 100, dtype=object),
+           "naive_time": pd.to_datetime(np.arange(300), unit="s"), "float32": np.linspace(0, 1, 300, dtype=np.float32)}[change]  # fmt: skip
+    df = df.assign(extra=col)
+    assert csv_rows.frame_csv_text(df) is None
+    assert _frame_written(df, tmp_path, "fast.csv", csv_rows.compiled) == _frame_written(df, tmp_path, "ref.csv", None)
+
+
+@needs_compiled
+def test_every_real_logs_integrity_table_is_pandas_to_csv(tmp_path):
+    """What `tollcli integrity` writes: each gpsd NMEA log's integrity chunks through the kernel and through pandas, the
+    same bytes; and the kernel wrote them (no chunk left to pandas)."""
+    import pandas as pd
+
+    from tollcli.integrity.raim import RaimParams
+    from tollcli.io.writers import iso_utc
+    from tollcli.job.log_integrity import iter_integrity
+
+    logs = sorted(p for p in shared("gpsd").iterdir() if p.suffix == ".log" and p.is_file())
+    logs.append(SAMPLES / "sim" / "urban-fault" / "drive.nmea")
+    written = rows = left_to_pandas = 0
+    for log in logs:
+        try:
+            chunks = [c.table for c in iter_integrity(str(log), "nmea", RaimParams())]
+        except Exception:  # noqa: BLE001 - not an NMEA log (binary): the epochs test covers what reads it
+            continue
+        for table in chunks:
+            if table.empty:
+                continue
+            fast = _frame_written(table, tmp_path, "fast.csv", csv_rows.compiled)
+            assert fast == _frame_written(table, tmp_path, "ref.csv", None), log.name
+            as_written = table.assign(**{c: iso_utc(table[c]) for c in table.columns if isinstance(table[c].dtype, pd.DatetimeTZDtype)})
+            left_to_pandas += csv_rows.frame_csv_text(as_written) is None
+            written += 1
+            rows += len(table)
+    assert written > 90 and rows > 2_000  # the real logs' tables were compared (98 tables, 2 433 rows)
+    assert left_to_pandas == 0

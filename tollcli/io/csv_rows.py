@@ -1,5 +1,7 @@
 """A chunk of columns → its CSV rows in one compiled pass (``_csv_kernel.c``): the bytes Python's ``csv`` module
-writes for the cells :func:`tollcli.io.writers._csv_cells` makes, which stays the reference and the fallback.
+writes for the cells :func:`tollcli.io.writers._csv_cells` makes (:func:`csv_text`), or that pandas' ``to_csv`` writes
+for a DataFrame the way :class:`~tollcli.io.writers.TableWriter` calls it (:func:`frame_csv_text`); those stay the
+reference and the fallback.
 
 Floats are formatted ``%.15g`` in C (NaN empty), integers in decimal, booleans ``True``/``False``; times and text
 come as cells made here. A chunk the kernel cannot write exactly as the ``csv`` module would — a text cell it
@@ -55,6 +57,45 @@ def csv_text(table: Columns, iso_ms) -> str | None:
         kinds.append("c")
         columns.append(cells)
     return compiled.rows("".join(kinds).encode(), tuple(columns), n).decode("utf-8")
+
+
+def frame_csv_text(df) -> str | None:
+    """The CSV rows pandas' ``to_csv(index=False, header=False, lineterminator="\\n", float_format="%.15g")`` writes
+    for ``df`` (its UTC times already ISO text), or None: left to pandas. Columns of float64, of numpy integers or
+    booleans, and of text (pandas' string dtypes, or objects that are all text or missing) are written here; a
+    column of another kind (nullable integers, categories, naive times, other objects) leaves the chunk to pandas."""
+    import pandas as pd
+
+    if compiled is None or df.shape[1] < 2 or not all(isinstance(c, str) for c in df.columns) or not df.columns.is_unique:
+        return None
+    kinds, columns = [], []
+    for name in df.columns:
+        col = df[name]
+        dtype = col.dtype
+        if isinstance(dtype, np.dtype) and dtype.kind in "fib" and (dtype.kind != "f" or dtype == np.float64):
+            kind = "b" if dtype.kind == "b" else dtype.kind
+            kinds.append(kind)
+            columns.append(np.ascontiguousarray(col.to_numpy(), dtype={"f": np.float64, "i": np.int64, "b": np.uint8}[kind]))
+            continue
+        if isinstance(dtype, pd.StringDtype) or dtype == object:
+            codes, uniques = pd.factorize(col, use_na_sentinel=True)  # missing (None, NaN, NA): -1
+            names = list(uniques)
+            if not all(isinstance(t, str) for t in names) or any(q in t for t in names for q in _QUOTED):
+                return None  # a value not text (pandas writes its str()), or a text the csv module would quote
+            kinds.append("c")
+            columns.append(_coded_cells(np.asarray(codes, np.int64), names))
+            continue
+        return None
+    return compiled.rows("".join(kinds).encode(), tuple(columns), len(df)).decode("utf-8")
+
+
+def _coded_cells(codes: np.ndarray, names: list[str]) -> tuple[bytes, np.ndarray]:
+    """:func:`_cells` of ``names[codes]`` (-1: empty), each name encoded once."""
+    encoded = np.array([t.encode("utf-8") for t in names] + [b""], dtype=object)
+    lengths = np.array([len(b) for b in encoded], np.int64)
+    offsets = np.zeros(codes.size + 1, np.int64)
+    np.cumsum(lengths[codes], out=offsets[1:])
+    return b"".join(encoded[codes].tolist()), offsets
 
 
 def _cells(texts: list[str]) -> tuple[bytes, np.ndarray]:

@@ -273,11 +273,19 @@ class TableWriter:
             return
         import pandas as pd
 
+        from tollcli.io.csv_rows import frame_csv_text
+
         out = df.copy(deep=False)
         for name in out.columns:
             if isinstance(out[name].dtype, pd.DatetimeTZDtype):
                 out[name] = iso_utc(out[name])
-        out.to_csv(fh, index=False, header=not self._started, lineterminator="\n", float_format=CSV_FLOAT)
+        text = frame_csv_text(out)  # the compiled pass, else pandas (the same bytes)
+        if text is None:
+            out.to_csv(fh, index=False, header=not self._started, lineterminator="\n", float_format=CSV_FLOAT)
+        else:
+            if not self._started:
+                csv.writer(fh, lineterminator="\n").writerow(out.columns)
+            fh.write(text)
         self._started = True
 
     def _close_csv(self, fh: IO) -> None:
