@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tollcli.io.columns import Columns, is_text, is_time
+from tollcli.io.columns import Coded, Columns, is_text, is_time
 from tollcli.kernels import compiled_module
 
 compiled = compiled_module("tollcli.io._csv_kernel")
@@ -23,18 +23,25 @@ compiled = compiled_module("tollcli.io._csv_kernel")
 _QUOTED = (",", '"', "\n", "\r")
 
 
-def csv_text(table: Columns, iso_ms) -> str | None:
-    """The CSV rows of ``table`` (no header; each row ended by ``\\n``), or None: left to the reference.
+def csv_text(table: Columns, iso_ms) -> bytes | None:
+    """The CSV rows of ``table`` (no header; each row ended by ``\\n``; UTF-8), or None: left to the reference.
 
     ``iso_ms``: datetime64 values → their ISO cells (the writer's own, so that both paths write the same times)."""
     if compiled is None or len(table.columns) < 2:
         return None
     n = len(table)
     kinds, columns = [], []
-    for name in table.columns:
+    for name, held in table.items():
+        if isinstance(held, Coded):  # few distinct texts: each written once
+            names = list(held.names)
+            if not all(isinstance(t, str) for t in names) or any(q in t for t in names for q in _QUOTED):
+                return None
+            kinds.append("c")
+            columns.append(_coded_cells(np.asarray(held.codes, np.int64), names))
+            continue
         values = table[name]
         if is_time(values):
-            cells = _cells(iso_ms(values))
+            cells = _time_cells(values, iso_ms)
         elif is_text(values):
             texts = [v if isinstance(v, str) else "" for v in values.tolist()]
             if any(q in t for t in set(texts) for q in _QUOTED):
@@ -56,12 +63,12 @@ def csv_text(table: Columns, iso_ms) -> str | None:
             return None
         kinds.append("c")
         columns.append(cells)
-    return compiled.rows("".join(kinds).encode(), tuple(columns), n).decode("utf-8")
+    return compiled.rows("".join(kinds).encode(), tuple(columns), n)
 
 
-def frame_csv_text(df) -> str | None:
+def frame_csv_text(df) -> bytes | None:
     """The CSV rows pandas' ``to_csv(index=False, header=False, lineterminator="\\n", float_format="%.15g")`` writes
-    for ``df`` (its UTC times already ISO text), or None: left to pandas. Columns of float64, of numpy integers or
+    for ``df`` (its UTC times already ISO text; UTF-8), or None: left to pandas. Columns of float64, of numpy integers or
     booleans, and of text (pandas' string dtypes, or objects that are all text or missing) are written here; a
     column of another kind (nullable integers, categories, naive times, other objects) leaves the chunk to pandas."""
     import pandas as pd
@@ -86,7 +93,18 @@ def frame_csv_text(df) -> str | None:
             columns.append(_coded_cells(np.asarray(codes, np.int64), names))
             continue
         return None
-    return compiled.rows("".join(kinds).encode(), tuple(columns), len(df)).decode("utf-8")
+    return compiled.rows("".join(kinds).encode(), tuple(columns), len(df))
+
+
+def _time_cells(values: np.ndarray, iso_ms) -> tuple[bytes, np.ndarray]:
+    """:func:`_cells` of datetime64 values, each run of one time (a satellite table's epoch) formatted once."""
+    ms = values.astype("datetime64[ms]")
+    if ms.size == 0:
+        return b"", np.zeros(1, np.int64)
+    change = np.empty(ms.size, bool)
+    change[0] = True
+    np.not_equal(ms.view(np.int64)[1:], ms.view(np.int64)[:-1], out=change[1:])
+    return _coded_cells(np.cumsum(change) - 1, iso_ms(ms[change]))
 
 
 def _coded_cells(codes: np.ndarray, names: list[str]) -> tuple[bytes, np.ndarray]:
