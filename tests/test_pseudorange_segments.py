@@ -307,7 +307,7 @@ def test_a_long_ubx_log_is_read_in_two_passes_and_placed_in_segments(tmp_path, m
     monkeypatch.setattr(segments, "MARGIN_EPOCHS", 40)
     blocks = []
     real_iter = ubx_reader.iter_rawx
-    monkeypatch.setattr(ubx_reader, "iter_rawx", lambda p, strict=False: (blocks.append(len(b)) or b for b in real_iter(p, strict, 4_000)))
+    monkeypatch.setattr(ubx_reader, "iter_rawx", lambda p, strict=False, **kw: (blocks.append(len(b[0])) or b for b in real_iter(p, strict, 4_000, **kw)))
     _placed_in_three_segments(str(path), "ubx", None, lat, lon, p95_m=5.0)
     assert len(blocks) > 10  # read a block of frames at a time
 

@@ -406,7 +406,7 @@ def test_the_receivers_own_nav_pvt_is_kept_beside_each_epoch():
     # the solutions made once for a log read in segments (receiver_solutions) match each segment's epochs the same
     for part in (epochs, epochs.iloc[:1], epochs.iloc[1:], epochs.iloc[:0]):
         pd.testing.assert_frame_equal(with_receiver_solution(part, receiver_solutions(pvt)), with_receiver_solution(part, pvt))
-    assert receiver_solutions(pvt.iloc[:0]).empty and receiver_solutions(pvt).shape == (19, 6)
+    assert receiver_solutions(pvt.iloc[:0]).empty and receiver_solutions(pvt).shape == (19, 7)  # (_t, epoch_key, five columns)
 
 
 def test_the_walks_epochs_carry_the_receivers_solutions_matched_once_or_per_segment():
@@ -427,6 +427,30 @@ def test_the_walks_epochs_carry_the_receivers_solutions_matched_once_or_per_segm
     matched = with_receiver_solution(bare, prepared)
     assert matched["receiver_lat_deg"].notna().sum() > 500
     pd.testing.assert_frame_equal(matched[list(epochs.columns)], epochs)  # what the whole log's reading gave
+
+
+def test_the_walk_placed_in_segments_carries_each_segments_own_receiver_solutions(monkeypatch):
+    """The walk read as a long log is (two passes, segments of 150 epochs, its NAV-PVT read beside its RAWX a block of
+    frames at a time and carried with each segment's rows): every epoch carries the receiver's solution the whole
+    log's reading gives it, to the bit; and no solution is kept for the whole log (the segments' format holds none)."""
+    from tollcli.gnss.pseudorange_inputs import pseudorange_epochs
+    from tollcli.gnss.sigma_models import NominalModel
+    from tollcli.job import pseudorange_segments as segments
+    from tollcli.readers import ubx as ubx_reader
+
+    log = str(shared("rtklibexplorer", "gnss_1730.ubx"))
+    whole, _ = pseudorange_epochs(log, "ubx", None, "nominal", 5.0, NominalModel())
+    monkeypatch.setattr(segments, "SEGMENT_EPOCHS", 150)
+    monkeypatch.setattr(segments, "SEGMENT_MIN_S", 30.0)
+    monkeypatch.setattr(segments, "MARGIN_EPOCHS", 40)
+    real_iter = ubx_reader.iter_rawx
+    monkeypatch.setattr(ubx_reader, "iter_rawx", lambda p, strict=False, **kw: real_iter(p, strict, 20_000, **kw))
+    with segments.placed_log(log, "ubx", None, "nominal", 5.0, NominalModel(), False, "snapshot") as placed:
+        epochs = pd.concat([e for e, _ in placed.chunks(100)], ignore_index=True)
+        assert placed.segments >= 3
+    columns = [c for c in whole if c.startswith("receiver_")]
+    assert len(columns) == 5 and whole["receiver_lat_deg"].notna().sum() > 500
+    pd.testing.assert_frame_equal(epochs[columns], whole[columns], check_exact=True)
 
 
 def test_rinex_observations_with_a_navigation_file_of_another_day_are_a_clear_error(tmp_path):

@@ -198,24 +198,30 @@ RECEIVER_COLUMNS = {"lat_deg": "receiver_lat_deg", "lon_deg": "receiver_lon_deg"
 
 def receiver_solutions(pvt: pd.DataFrame) -> pd.DataFrame:
     """The receiver's fixed NAV-PVT solutions (fix type 2–5) as :func:`with_receiver_solution` matches them: their
-    time ``_t`` (UTC, sorted) and :data:`RECEIVER_COLUMNS` (48 bytes a solution, where a NAV-PVT row is 128): made
-    once for a log read in segments, not once a segment."""
+    time ``_t`` (UTC, sorted), its GPS time in ms (``epoch_key``, the measurements' time scale: a log read in segments
+    carries each segment's solutions beside its rows) and :data:`RECEIVER_COLUMNS` (56 bytes a solution, where a
+    NAV-PVT row is 128)."""
+    from tollcli.readers.gps_time import gps_seconds, leap_seconds_at_gps
+
     fixed = pvt[pvt["fix_type"].between(2, 5)] if len(pvt) else pvt
     if fixed.empty:
-        return pd.DataFrame({"_t": pd.Series(dtype="datetime64[ns, UTC]"), **{c: pd.Series(dtype=float) for c in RECEIVER_COLUMNS.values()}})
+        return pd.DataFrame({"_t": pd.Series(dtype="datetime64[ns, UTC]"), "epoch_key": pd.Series(dtype=np.int64),
+                             **{c: pd.Series(dtype=float) for c in RECEIVER_COLUMNS.values()}})  # fmt: skip
     when = pd.to_datetime(dict(year=fixed["year"], month=fixed["month"], day=fixed["day"], hour=fixed["hour"],
                                minute=fixed["minute"], second=fixed["second"]), utc=True)  # fmt: skip
     when = when + pd.to_timedelta(fixed["nano"].to_numpy(np.int64), unit="ns")
     table = fixed[list(RECEIVER_COLUMNS)].rename(columns=RECEIVER_COLUMNS).assign(_t=when.to_numpy())
-    return table.sort_values("_t").reset_index(drop=True)
+    table = table.sort_values("_t").reset_index(drop=True)
+    seconds = gps_seconds(table["_t"].dt.tz_convert(None).to_numpy("datetime64[ns]"))
+    return table.assign(epoch_key=np.round((seconds + leap_seconds_at_gps(seconds)) * 1000).astype(np.int64))
 
 
 def with_receiver_solution(epochs: pd.DataFrame, pvt: pd.DataFrame) -> pd.DataFrame:
     """``epochs`` with the receiver's own NAV-PVT solution of the same instant, for comparison:
     ``receiver_lat_deg``, ``receiver_lon_deg``, ``receiver_height_m``, ``receiver_speed_mps``, ``receiver_h_acc_m``
     (NaN where the log has no NAV-PVT within ``PVT_TOLERANCE_S``). ``pvt``: the NAV-PVT table, or its
-    :func:`receiver_solutions` made before."""
-    table = pvt if "_t" in pvt else receiver_solutions(pvt)
+    :func:`receiver_solutions` made before (None: none)."""
+    table = receiver_solutions(pd.DataFrame()) if pvt is None else pvt if "_t" in pvt else receiver_solutions(pvt)
     out = epochs.copy()
     if table.empty or out.empty:
         for name in RECEIVER_COLUMNS.values():

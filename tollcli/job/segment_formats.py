@@ -21,7 +21,8 @@ class ReadWhole(Exception):
 @dataclass(frozen=True)
 class SegmentFormat:
     """How a segmented format is read and solved: ``blocks(path, strict)`` its rows in file order, a block at a time
-    (measurement rows, odometry rows or None, malformed lines); ``keys(rows)`` each row's epoch key (ms, int64);
+    (measurement rows, odometry rows or None — a u-blox log's: its receiver's fixes, carried the same way —, malformed
+    lines); ``keys(rows)`` each row's epoch key (ms, int64);
     ``solve(rows, odometry, sigma_model, sigma_m, nominal, orbits_required=True)`` a segment's (epochs, measurements) —
     rows none of which has an orbit raise :class:`~tollcli.gnss.satellite_states.NoOrbitForRows`, or give epochs without
     positions — and ``epoch_keys`` those epochs' keys; ``no_rows``: the error of a log without a measurement; ``check(sigma_model)``, where set, refuses
@@ -72,7 +73,9 @@ def _gsdc_derived() -> SegmentFormat:
 
 def _ubx(nav) -> SegmentFormat:
     """A u-blox log in two passes: the first reads its navigation data and message times (not its measurements) for
-    the orbits, the second its RXM-RAWX a block of frames at a time."""
+    the orbits, the second its RXM-RAWX and NAV-PVT a block of frames at a time. The receiver's own fixed solutions
+    (NAV-PVT) go where a libRSF log's odometry goes: beside the rows, each segment with its own (their GPS times in ms
+    its keys), matched to the segment's epochs when it is solved; none is kept for the whole log."""
     from tollcli.gnss.pseudorange_inputs import navigation_of, ubx_orbits
     from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites
     from tollcli.gnss.ubx_measurements import rawx_measurements, receiver_solutions, sfrbx_kept, with_receiver_solution
@@ -83,18 +86,19 @@ def _ubx(nav) -> SegmentFormat:
     def blocks(path, strict):
         ephemerides, known["iono"] = navigation_of(nav)
         first = read_ubx(path, strict, measurements=False, subframes_kept=sfrbx_kept)  # only the subframes the orbits need
-        known["orbits"], known["pvt"] = ubx_orbits(path, first, ephemerides), receiver_solutions(first.pvt)
+        known["orbits"] = ubx_orbits(path, first, ephemerides)
         damaged = first.n_bad  # (counted once: the first pass saw every frame)
         no_sfrbx, no_pvt = first.sfrbx.iloc[:0], first.pvt.iloc[:0]
         first = None  # (its subframes, NAV-PVT rows and RAWX times let go before the measurements are read)
-        for rawx in iter_rawx(path, strict):
-            part = UbxRead(rawx, no_sfrbx, no_pvt, 0, 0)
-            yield with_broadcast_satellites(rawx_measurements(part), known["orbits"]), None, damaged
+        for rawx, pvt in iter_rawx(path, strict, with_pvt=True):
+            rows = with_broadcast_satellites(rawx_measurements(UbxRead(rawx, no_sfrbx, no_pvt, 0, 0)), known["orbits"]) \
+                if len(rawx) else pd.DataFrame()  # fmt: skip
+            yield rows, receiver_solutions(pvt), damaged
             damaged = 0
 
-    def solve(rows, _odometry, sigma_model, sigma_m, nominal, orbits_required=True):
+    def solve(rows, fixes, sigma_model, sigma_m, nominal, orbits_required=True):
         epochs, meas = raw_epochs(rows, sigma_model, sigma_m, nominal, iono_coeffs=known["iono"], orbits_required=orbits_required)
-        return with_receiver_solution(epochs, known["pvt"]), meas
+        return with_receiver_solution(epochs, fixes), meas
 
     return SegmentFormat(blocks, lambda rows: rows["epoch_key"].to_numpy(np.int64), solve,
                    lambda epochs: epochs["gps_millis"].to_numpy(np.int64), "no RXM-RAWX measurements in the UBX log")  # fmt: skip

@@ -200,10 +200,13 @@ class _Tables:
         rawx = self.rawx_table()
         heads = pd.DataFrame({c: np.concatenate([b[c] for b in self.heads]) for c in HEAD_COLUMNS}) if self.heads \
             else pd.DataFrame({c: np.zeros(0, np.float64 if c == "rcvTow" else np.int64) for c in HEAD_COLUMNS})  # fmt: skip
-        sfrbx = self.sfrbx_table()
-        pvt = pd.DataFrame({c: np.concatenate([b[c] for b in self.pvt]) for c in PVT_COLUMNS}) if self.pvt \
-            else pd.DataFrame(columns=list(PVT_COLUMNS))  # fmt: skip
-        return rawx, sfrbx, pvt, heads
+        return rawx, self.sfrbx_table(), self.pvt_table(), heads
+
+    def pvt_table(self) -> pd.DataFrame:
+        """The NAV-PVT rows added so far, one table."""
+        if not self.pvt:
+            return pd.DataFrame(columns=list(PVT_COLUMNS))
+        return pd.DataFrame({c: np.concatenate([b[c] for b in self.pvt]) for c in PVT_COLUMNS})
 
 
 def read_ubx(path: str, strict: bool = False, block_bytes: int = 1 << 20, measurements: bool = True,
@@ -221,7 +224,7 @@ def read_ubx(path: str, strict: bool = False, block_bytes: int = 1 << 20, measur
         pass
     rawx, sfrbx, pvt, heads = tables.frames()
     n_bad = stats.bad_checksum + stats.malformed
-    dated = plausible_date(*(pvt[c].to_numpy(np.int64) for c in ("year", "month", "day", "hour", "minute", "second")))
+    dated = _dated(pvt)
     if not dated.all():  # a damaged date (year 60000) is no date: the row is dropped, and counted
         if strict:
             raise DataError(f"{path}: UBX message {int(pvt['message'][~dated].iloc[0])}: NAV-PVT with an impossible date")
@@ -230,14 +233,24 @@ def read_ubx(path: str, strict: bool = False, block_bytes: int = 1 << 20, measur
     return UbxRead(rawx, sfrbx, pvt, stats.sentences, n_bad, heads)
 
 
-def iter_rawx(path: str, strict: bool = False, block_bytes: int = 1 << 20):
+def iter_rawx(path: str, strict: bool = False, block_bytes: int = 1 << 20, with_pvt: bool = False):
     """The RXM-RAWX measurements of a UBX log (the table :func:`read_ubx` makes), a block of frames at a time: the
-    rows of each block as a table (blocks without one are passed over), in file order; joined, ``read_ubx``'s."""
+    rows of each block as a table (blocks without one are passed over), in file order; joined, ``read_ubx``'s.
+    ``with_pvt``: (measurements, NAV-PVT) of each block with either, the NAV-PVT table :func:`read_ubx` makes (its
+    rows with an impossible date dropped: the log's first pass counted them, or refused them with ``strict``)."""
     tables = _Tables()
-    for _ in _frames_into(path, strict, block_bytes, tables, ReadStats(), only=(RXM_RAWX,)):
-        if tables.rawx:
+    for _ in _frames_into(path, strict, block_bytes, tables, ReadStats(), only=(RXM_RAWX, NAV_PVT) if with_pvt else (RXM_RAWX,)):
+        if with_pvt and (tables.rawx or tables.pvt):
+            pvt = tables.pvt_table()
+            yield tables.rawx_table(), pvt[_dated(pvt)].reset_index(drop=True)
+        elif tables.rawx:
             yield tables.rawx_table()
-        tables.rawx, tables.heads = [], []  # (a block's rows once: the memory of one block)
+        tables.rawx, tables.heads, tables.pvt = [], [], []  # (a block's rows once: the memory of one block)
+
+
+def _dated(pvt: pd.DataFrame) -> np.ndarray:
+    """(n,) the NAV-PVT rows whose date is one (a damaged one, year 60000, is none)."""
+    return plausible_date(*(pvt[c].to_numpy(np.int64) for c in ("year", "month", "day", "hour", "minute", "second")))
 
 
 def _frames_into(path: str, strict: bool, block_bytes: int, tables: _Tables, stats: ReadStats, only: tuple | None = None):
