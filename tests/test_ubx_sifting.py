@@ -10,11 +10,12 @@ the same subframes and gives the same ephemerides.
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 import pytest
 from conftest import SHARED_DATA, shared
 
-from tollcli.gnss.ubx_measurements import sfrbx_ephemerides, sfrbx_kept
+from tollcli.gnss.ubx_measurements import receive_times_gps_s, sfrbx_ephemerides, sfrbx_kept, times_kept
 from tollcli.readers import ubx
 
 #: the real logs with navigation subframes, and the systems each decodes
@@ -28,6 +29,44 @@ def _sifted(path: str, monkeypatch, **kw) -> ubx.UbxRead:
     """``path`` read with its subframes sifted after every block (of 2 kB: many sifts, each cutting the log anew)."""
     monkeypatch.setattr(ubx, "SIFT_SUBFRAMES", 1)
     return ubx.read_ubx(path, block_bytes=2048, subframes_kept=sfrbx_kept, **kw)
+
+
+def _times_sifted(path: str, monkeypatch, **kw) -> ubx.UbxRead:
+    """``path``'s first pass with its subframes and its RAWX heads and NAV-PVT rows sifted after every block."""
+    monkeypatch.setattr(ubx, "SIFT_TIMES", 1)
+    return _sifted(path, monkeypatch, measurements=False, times_kept=times_kept, **kw)
+
+
+@pytest.mark.parametrize("parts", list(LOGS), ids=lambda p: p[-1])
+def test_every_real_first_pass_with_its_times_sifted_gives_the_same_orbits_and_times(monkeypatch, parts):
+    """The first pass as a long log's (no measurements kept), its RAWX heads and NAV-PVT rows sifted too: the same
+    ephemerides to the bit, the same check that measurements are there, the same receive time for each of the
+    GLONASS strings it kept, and far fewer rows kept where the log has many."""
+    path = str(shared(*parts))
+    whole = ubx.read_ubx(path, measurements=False)
+    sifted = _times_sifted(path, monkeypatch)
+    pd.testing.assert_frame_equal(sfrbx_ephemerides(sifted), sfrbx_ephemerides(whole))
+    measured = lambda r: bool((r.rawx_heads["numMeas"].to_numpy() > 0).any())  # noqa: E731
+    assert measured(sifted) == measured(whole)
+    glonass = sifted.sfrbx["message"].to_numpy(np.int64)[sifted.sfrbx["gnssId"].to_numpy() == 6]  # (the strings kept)
+    np.testing.assert_array_equal(receive_times_gps_s(sifted, glonass), receive_times_gps_s(whole, glonass))
+    assert sifted.n_bad == whole.n_bad and len(sifted.pvt) <= len(whole.pvt) and len(sifted.rawx_heads) <= len(whole.rawx_heads)
+    if len(whole.rawx_heads) + len(whole.pvt) > 1000:  # (the walk, the OSNMA recording)
+        assert len(sifted.rawx_heads) + len(sifted.pvt) < 0.05 * (len(whole.rawx_heads) + len(whole.pvt))
+
+
+def test_a_recording_eight_times_over_keeps_as_many_times_as_once(tmp_path, monkeypatch):
+    """Metamorphic: the OSNMA recording written 8 times over (the same messages again, 10 h 40 min): its first pass
+    keeps no more RAWX heads and NAV-PVT rows than the recording once, and the same ephemerides."""
+    data = shared(*OSNMA).read_bytes()
+    eight = tmp_path / "eight.ubx"
+    eight.write_bytes(data * 8)
+    once = ubx.read_ubx(str(shared(*OSNMA)), measurements=False, subframes_kept=sfrbx_kept, times_kept=times_kept)
+    many = ubx.read_ubx(str(eight), measurements=False, subframes_kept=sfrbx_kept, times_kept=times_kept)
+    whole_once = ubx.read_ubx(str(shared(*OSNMA)), measurements=False)
+    assert len(many.rawx_heads) + len(many.pvt) <= len(once.rawx_heads) + len(once.pvt) + ubx.SIFT_TIMES
+    assert (len(whole_once.rawx_heads) + len(whole_once.pvt)) * 8 > 4 * ubx.SIFT_TIMES  # (the sifting had rows to cut)
+    pd.testing.assert_frame_equal(sfrbx_ephemerides(many), sfrbx_ephemerides(once))
 
 
 @pytest.mark.parametrize("parts", list(LOGS), ids=lambda p: p[-1])

@@ -148,33 +148,74 @@ def receive_times_gps_s(ubx: UbxRead, message: np.ndarray) -> np.ndarray:
     """The receive time (GPS seconds) of messages at positions ``message`` in the log: that of the latest RAWX
     (its week and receive time of week), else NAV-PVT (its UTC date and time) at or before it, else the first one
     after it; NaN when the log has neither."""
+    first = ubx.rawx.drop_duplicates("message") if len(ubx.rawx) else _measured_heads(ubx)
+    at, when, _ = _timed_messages(first, ubx.pvt)
+    message = np.asarray(message, np.int64)
+    if at.size == 0:
+        return np.full(message.size, np.nan)
+    i = np.searchsorted(at, message, side="right") - 1
+    return when[np.clip(i, 0, at.size - 1)]
+
+
+def _timed_messages(heads: pd.DataFrame, pvt: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The messages that tell a time, in log order: their positions, their GPS times (s) and where each comes from
+    (0 … len(heads) - 1: a row of ``heads``, a RAWX with its week and receive time; then len(heads) + k: row k of
+    ``pvt``, a NAV-PVT with a date and time that is one)."""
     from tollcli.readers.gps_time import gps_seconds, leap_seconds_at_gps
 
-    at, when = [], []
-    first = ubx.rawx.drop_duplicates("message") if len(ubx.rawx) else _measured_heads(ubx)
-    if len(first):
-        at.append(first["message"].to_numpy(np.int64))
-        when.append(first["week"].to_numpy(float) * WEEK_S + first["rcvTow"].to_numpy(float))
-    if len(ubx.pvt):
-        p = ubx.pvt
+    at, when = [np.zeros(0, np.int64)], [np.zeros(0)]
+    if len(heads):
+        at.append(heads["message"].to_numpy(np.int64))
+        when.append(heads["week"].to_numpy(float) * WEEK_S + heads["rcvTow"].to_numpy(float))
+    if len(pvt):
+        p = pvt
         utc = pd.to_datetime(dict(year=p["year"], month=p["month"], day=p["day"], hour=p["hour"], minute=p["minute"],
                                   second=p["second"]), errors="coerce").to_numpy("datetime64[ns]")  # fmt: skip
         seconds = gps_seconds(utc)
         seconds = np.where(np.isnat(utc), np.nan, seconds)
         at.append(p["message"].to_numpy(np.int64))
         when.append(seconds + leap_seconds_at_gps(seconds))
-    message = np.asarray(message, np.int64)
-    if not at:
-        return np.full(message.size, np.nan)
     at, when = np.concatenate(at), np.concatenate(when)
-    ok = np.isfinite(when)
-    at, when = at[ok], when[ok]
-    if at.size == 0:
-        return np.full(message.size, np.nan)
-    order = np.argsort(at, kind="stable")
-    at, when = at[order], when[order]
-    i = np.searchsorted(at, message, side="right") - 1
-    return when[np.clip(i, 0, at.size - 1)]
+    source = np.flatnonzero(np.isfinite(when))
+    source = source[np.argsort(at[source], kind="stable")]
+    return at[source], when[source], source
+
+
+def times_kept(heads: pd.DataFrame, pvt: pd.DataFrame, sf: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """(heads, pvt) masks: the RXM-RAWX heads and NAV-PVT rows of a first pass (the reader's ``rawx_heads`` and
+    ``pvt`` layouts, in log order, NAV-PVT rows without a plausible date among them) that what reads them can still
+    read, whatever messages follow, given the subframes ``sf`` held:
+
+    - the first RAWX with a measurement (:func:`~tollcli.gnss.pseudorange_inputs.ubx_orbits`: the log has some);
+    - the first and the last RAWX with a measurement of each GPS week: the week hint of
+      :func:`sfrbx_ephemerides` is their median (it undoes a 10-bit week, so any hint within 512 weeks of the true
+      one gives the same orbits; the log's own weeks are);
+    - the first NAV-PVT with a plausible date (the hint where no RAWX has a measurement);
+    - of the messages that tell a time (:func:`receive_times_gps_s`), the first, the last, and for each GLONASS
+      string held the latest at or before it: every time a GLONASS string held now or read later is given.
+
+    A long u-blox log's first pass sifts its heads and NAV-PVT rows through this (``read_ubx(times_kept=…)``): the
+    ephemerides are the same (``tests/test_ubx_sifting.py``) and the rows kept are bounded."""
+    from tollcli.times import plausible_date
+
+    keep_heads, keep_pvt = np.zeros(len(heads), bool), np.zeros(len(pvt), bool)
+    dated = np.flatnonzero(plausible_date(*(pvt[c].to_numpy(np.int64) for c in ("year", "month", "day", "hour", "minute", "second"))))
+    if dated.size:
+        keep_pvt[dated[0]] = True
+    measured = np.flatnonzero(heads["numMeas"].to_numpy(np.int64) > 0) if len(heads) else np.zeros(0, np.int64)
+    if measured.size:
+        week = heads["week"].to_numpy(np.int64)[measured]
+        change = np.flatnonzero(np.diff(week) != 0)
+        keep_heads[measured[np.concatenate(([0], change, change + 1, [measured.size - 1]))]] = True
+    at, _, source = _timed_messages(heads.iloc[measured], pvt.iloc[dated])
+    if at.size:
+        glonass = sf["message"].to_numpy(np.int64)[_decoded_rows(sf)["glonass"]] if len(sf) else np.zeros(0, np.int64)
+        i = np.clip(np.searchsorted(at, glonass, side="right") - 1, 0, at.size - 1)
+        chosen = source[np.unique(np.concatenate(([0, at.size - 1], i)))]
+        from_heads = chosen < measured.size
+        keep_heads[measured[chosen[from_heads]]] = True
+        keep_pvt[dated[chosen[~from_heads] - measured.size]] = True
+    return keep_heads, keep_pvt
 
 
 def _pvt_week(pvt: pd.DataFrame) -> float:

@@ -73,19 +73,20 @@ def _gsdc_derived() -> SegmentFormat:
 
 def _ubx(nav) -> SegmentFormat:
     """A u-blox log in two passes: the first reads its navigation data and message times (not its measurements) for
-    the orbits, the second its RXM-RAWX and NAV-PVT a block of frames at a time. The receiver's own fixed solutions
+    the orbits, keeping only the subframes, RAWX heads and NAV-PVT rows they can still read (``sfrbx_kept``,
+    ``times_kept``), the second its RXM-RAWX and NAV-PVT a block of frames at a time. The receiver's own fixed solutions
     (NAV-PVT) go where a libRSF log's odometry goes: beside the rows, each segment with its own (their GPS times in ms
     its keys), matched to the segment's epochs when it is solved; none is kept for the whole log."""
     from tollcli.gnss.pseudorange_inputs import navigation_of, ubx_orbits
     from tollcli.gnss.raw_positions import raw_epochs, with_broadcast_satellites
-    from tollcli.gnss.ubx_measurements import rawx_measurements, receiver_solutions, sfrbx_kept, with_receiver_solution
+    from tollcli.gnss.ubx_measurements import rawx_measurements, receiver_solutions, sfrbx_kept, times_kept, with_receiver_solution
     from tollcli.readers.ubx import UbxRead, iter_rawx, read_ubx
 
     known: dict = {}
 
     def blocks(path, strict):
         ephemerides, known["iono"] = navigation_of(nav)
-        first = read_ubx(path, strict, measurements=False, subframes_kept=sfrbx_kept)  # only the subframes the orbits need
+        first = read_ubx(path, strict, measurements=False, subframes_kept=sfrbx_kept, times_kept=times_kept)  # what the orbits need
         known["orbits"] = ubx_orbits(path, first, ephemerides)
         damaged = first.n_bad  # (counted once: the first pass saw every frame)
         no_sfrbx, no_pvt = first.sfrbx.iloc[:0], first.pvt.iloc[:0]

@@ -106,6 +106,8 @@ def _records(data: np.ndarray, offsets: np.ndarray, dtype: np.dtype) -> np.ndarr
 
 #: subframes held before a first pass's ``subframes_kept`` sifts them (then: once they have doubled since)
 SIFT_SUBFRAMES = 1024
+#: RXM-RAWX heads and NAV-PVT rows held before a first pass's ``times_kept`` sifts them (then: once doubled since)
+SIFT_TIMES = 4096
 
 
 class _Tables:
@@ -113,7 +115,7 @@ class _Tables:
     subframe table (:func:`read_ubx`'s ``sfrbx`` layout, the rows in log order) giving the rows to keep; where given,
     the subframes are sifted through it as they pile up (:data:`SIFT_SUBFRAMES`)."""
 
-    def __init__(self, measurements: bool = True, subframes_kept=None) -> None:
+    def __init__(self, measurements: bool = True, subframes_kept=None, times_kept=None) -> None:
         self.measurements = measurements
         self.rawx: list[dict] = []
         self.heads: list[dict] = []
@@ -122,12 +124,16 @@ class _Tables:
         self.subframes_kept = subframes_kept
         self._held = 0  # subframe rows held
         self._sift_at = SIFT_SUBFRAMES  # … at which they are sifted next
+        self.times_kept = times_kept
+        self._times_held = 0  # RAWX heads and NAV-PVT rows held
+        self._times_sift_at = SIFT_TIMES
 
     def add_rawx(self, data: np.ndarray, payload: np.ndarray, numbers: np.ndarray) -> None:
         head = _records(data, payload, _RAWX_HEAD)
         count = head["numMeas"].astype(np.int64)
         self.heads.append({"rcvTow": head["rcvTow"].astype(np.float64), "week": head["week"].astype(np.int64),
                            "leapS": head["leapS"].astype(np.int64), "numMeas": count, "message": numbers})  # fmt: skip
+        self._held_times(head.size)
         if not self.measurements:
             return
         first = np.repeat(payload + 16 - 32 * np.concatenate([[0], np.cumsum(count)[:-1]]), count)
@@ -189,6 +195,23 @@ class _Tables:
             "lat_deg": r["lat"] / 1e7, "lon_deg": r["lon"] / 1e7, "height_m": r["height"] / 1000.0, "speed_mps": r["g_speed"] / 1000.0,
             "h_acc_m": r["h_acc"] / 1000.0, "speed_acc_mps": r["s_acc"] / 1000.0, "n_sv": i64(r["n_sv"]), "message": numbers,
         })  # fmt: skip
+        self._held_times(r.size)
+
+    def _held_times(self, n: int) -> None:
+        self._times_held += n
+        if self.times_kept is not None and self._times_held >= self._times_sift_at:
+            self._sift_times()
+
+    def _sift_times(self) -> None:
+        """Keep only the RAWX heads and NAV-PVT rows ``times_kept`` names (given the subframes held), and every NAV-PVT
+        row without a date, which the end of the reading counts (or refuses); sifted again once doubled."""
+        heads, pvt = self.heads_table(), self.pvt_table()
+        keep_heads, keep_pvt = (np.asarray(k, bool) for k in self.times_kept(heads, pvt, self.sfrbx_table()))
+        keep_pvt = keep_pvt | ~_dated(pvt)
+        self.heads = [{c: heads[c].to_numpy()[keep_heads] for c in HEAD_COLUMNS}]
+        self.pvt = [{c: pvt[c].to_numpy()[keep_pvt] for c in PVT_COLUMNS}]
+        self._times_held = int(keep_heads.sum() + keep_pvt.sum())
+        self._times_sift_at = max(SIFT_TIMES, 2 * self._times_held)
 
     def rawx_table(self) -> pd.DataFrame:
         """The RAWX measurements added so far, one table."""
@@ -197,10 +220,13 @@ class _Tables:
         return pd.DataFrame({c: np.concatenate([b[c] for b in self.rawx]) for c in (*RAWX_COLUMNS, "message")})
 
     def frames(self) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, pd.DataFrame]:
-        rawx = self.rawx_table()
-        heads = pd.DataFrame({c: np.concatenate([b[c] for b in self.heads]) for c in HEAD_COLUMNS}) if self.heads \
-            else pd.DataFrame({c: np.zeros(0, np.float64 if c == "rcvTow" else np.int64) for c in HEAD_COLUMNS})  # fmt: skip
-        return rawx, self.sfrbx_table(), self.pvt_table(), heads
+        return self.rawx_table(), self.sfrbx_table(), self.pvt_table(), self.heads_table()
+
+    def heads_table(self) -> pd.DataFrame:
+        """The RAWX heads added so far (:data:`HEAD_COLUMNS`), one table."""
+        if not self.heads:
+            return pd.DataFrame({c: np.zeros(0, np.float64 if c == "rcvTow" else np.int64) for c in HEAD_COLUMNS})
+        return pd.DataFrame({c: np.concatenate([b[c] for b in self.heads]) for c in HEAD_COLUMNS})
 
     def pvt_table(self) -> pd.DataFrame:
         """The NAV-PVT rows added so far, one table."""
@@ -210,15 +236,18 @@ class _Tables:
 
 
 def read_ubx(path: str, strict: bool = False, block_bytes: int = 1 << 20, measurements: bool = True,
-             subframes_kept=None) -> UbxRead:  # fmt: skip
+             subframes_kept=None, times_kept=None) -> UbxRead:  # fmt: skip
     """The RAWX, SFRBX and PVT messages of a UBX (or mixed UBX/NMEA/RTCM) log, read ``block_bytes`` at a time.
     ``measurements`` False: the RAWX measurements are not kept (``rawx`` empty; ``rawx_heads`` still one row per
     message): what a long log's first pass needs (its navigation data and times), the measurements read by
     :func:`iter_rawx` after. ``subframes_kept``: a function of a table of subframes (the ``sfrbx`` layout, in log
     order) naming the rows that can still change what is made of them
     (:func:`tollcli.gnss.ubx_measurements.sfrbx_kept`: the orbits); the subframes are sifted through it as they are
-    read, and ``sfrbx`` holds only those kept (the reader knows nothing of what they mean)."""
-    tables = _Tables(measurements, subframes_kept)
+    read, and ``sfrbx`` holds only those kept (the reader knows nothing of what they mean). ``times_kept``: likewise a
+    function of the RAWX heads, the NAV-PVT rows and the subframes held giving the heads and NAV-PVT rows to keep
+    (:func:`tollcli.gnss.ubx_measurements.times_kept`: what the orbits and the check for measurements read); with both,
+    a first pass keeps what its orbits need, not what the log's length brings."""
+    tables = _Tables(measurements, subframes_kept, times_kept)
     stats = ReadStats(source=str(path), protocol="UBX messages")
     for _ in _frames_into(path, strict, block_bytes, tables, stats):
         pass
