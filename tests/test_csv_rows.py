@@ -63,14 +63,16 @@ def test_float_cells_at_the_edges_and_in_bulk_are_pythons_percent_15g():
     assert text == want
 
 
-def _written(table: Columns, tmp_path, name: str, compiled) -> bytes:
+def _written(table, tmp_path, name: str, compiled, second=None) -> bytes:
+    """``table`` (numpy columns or a DataFrame) then ``second`` (default: ``table`` again: a second chunk, no header
+    again) written as CSV through TableWriter, with the kernel ``compiled`` (None: the reference)."""
     saved = csv_rows.compiled
     csv_rows.compiled = compiled
     try:
         path = tmp_path / name
         with TableWriter(str(path), "csv") as writer:
             writer.write(table)
-            writer.write(table)  # a second chunk: no header again
+            writer.write(table if second is None else second)
             writer.commit()
         return path.read_bytes()
     finally:
@@ -147,17 +149,7 @@ def test_every_real_logs_epoch_and_satellite_tables_are_the_csv_modules(tmp_path
 # ---- DataFrames: what pandas' to_csv writes (integrity, locate, findings tables) ------------------------------------
 
 def _frame_written(df, tmp_path, name: str, compiled) -> bytes:
-    saved = csv_rows.compiled
-    csv_rows.compiled = compiled
-    try:
-        path = tmp_path / name
-        with TableWriter(str(path), "csv") as writer:
-            writer.write(df)
-            writer.write(df.iloc[:3])  # a second chunk: no header again
-            writer.commit()
-        return path.read_bytes()
-    finally:
-        csv_rows.compiled = saved
+    return _written(df, tmp_path, name, compiled, second=df.iloc[:3])
 
 
 def _mixed_frame(n: int = 1500):
