@@ -32,7 +32,7 @@ def csv_text(table: Columns, iso_ms) -> bytes | None:
     n = len(table)
     kinds, columns = [], []
     for name, held in table.items():
-        if isinstance(held, Coded):  # few distinct texts: each written once
+        if isinstance(held, Coded) and (np.asarray(held.codes) >= 0).all():  # few distinct texts: each written once
             names = list(held.names)
             if not all(isinstance(t, str) for t in names) or any(q in t for t in names for q in _QUOTED):
                 return None
