@@ -158,7 +158,8 @@ def _write_utf8(fh: IO, data: bytes) -> None:
     """UTF-8 ``data`` appended to the text stream ``fh`` (opened UTF-8, no newline translation): to its byte buffer
     after what the text layer holds, not decoded to be encoded again (88 MB for a 10 h drive's satellite table)."""
     buffer = getattr(fh, "buffer", None)
-    if buffer is not None and (getattr(fh, "encoding", "") or "").lower().replace("-", "") == "utf8":
+    utf8 = (getattr(fh, "encoding", "") or "").lower().replace("-", "") == "utf8"
+    if buffer is not None and utf8 and os.linesep == "\n":  # (where a text stream may turn "\n" into "\r\n": through it)
         fh.flush()
         buffer.write(data)
     else:
