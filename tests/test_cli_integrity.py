@@ -77,3 +77,30 @@ def test_integrity_errors(args, code):
     proc = run_cli(*args)
     err = proc.stderr.decode()
     assert proc.returncode == code and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_the_summary_counts_are_those_of_counting_row_by_row():
+    """The statuses, sources, notes and environments `integrity` sums up, counted a column at a time: the same counts in
+    the same order as counting each row, on the real chunks of every gpsd NMEA log with a verdict (missing values and
+    all) and the simulated urban drive with its fault."""
+    from collections import Counter
+
+    from tollcli.cli.integrity import _tally
+    from tollcli.integrity.raim import RaimParams
+    from tollcli.job.log_integrity import iter_integrity
+
+    logs = [SAMPLES / "sim" / "urban-fault" / "drive.nmea"] + sorted(p for p in shared("gpsd").iterdir() if p.suffix == ".log")
+    tallied = Counter()
+    by_row = Counter()
+    for log in logs:
+        try:
+            tables = [c.table for c in iter_integrity(str(log), "nmea", RaimParams())]
+        except Exception:  # noqa: BLE001 - not an NMEA log
+            continue
+        for table in tables:
+            _tally(table, tallied)
+            for kind, column in (("status", "raim_status"), ("source", "integrity_source"), ("note", "gst_rms_note"),
+                                 ("environment", "environment")):
+                by_row.update((kind, v) for v in table[column].astype(str))
+    assert list(tallied.items()) == list(by_row.items())
+    assert tallied[("status", "fault_detected")] > 0 and sum(v for (k, _), v in tallied.items() if k == "status") > 2_000

@@ -6,6 +6,7 @@ import json
 from collections import Counter
 from typing import Annotated, Optional
 
+import numpy as np
 import pandas as pd
 import typer
 
@@ -187,10 +188,12 @@ def integrity(
 
 
 def _tally(table: pd.DataFrame, counts: Counter) -> None:
-    """Count the statuses, deciding sources and GST RMS notes of a table."""
+    """Count the statuses, deciding sources and GST RMS notes of a table (each value once per chunk, in the order the
+    rows first give it: the counts and their order are those of counting row by row)."""
     for kind, column in (("status", "raim_status"), ("source", "integrity_source"), ("note", "gst_rms_note"),
                          ("environment", "environment")):
-        counts.update((kind, v) for v in table[column].astype(str))
+        codes, values = pd.factorize(table[column].astype(str))
+        counts.update({(kind, v): int(n) for v, n in zip(values, np.bincount(codes, minlength=len(values)))})
 
 
 def _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto",
