@@ -85,9 +85,8 @@ def test_the_summary_counts_are_those_of_counting_row_by_row():
     all) and the simulated urban drive with its fault."""
     from collections import Counter
 
-    from tollcli.cli.integrity import _tally
     from tollcli.integrity.raim import RaimParams
-    from tollcli.job.log_integrity import iter_integrity
+    from tollcli.job.log_integrity import TALLIED_COLUMNS, iter_integrity, tally_verdicts
 
     logs = [SAMPLES / "sim" / "urban-fault" / "drive.nmea"] + sorted(p for p in shared("gpsd").iterdir() if p.suffix == ".log")
     tallied = Counter()
@@ -98,9 +97,8 @@ def test_the_summary_counts_are_those_of_counting_row_by_row():
         except Exception:  # noqa: BLE001 - not an NMEA log
             continue
         for table in tables:
-            _tally(table, tallied)
-            for kind, column in (("status", "raim_status"), ("source", "integrity_source"), ("note", "gst_rms_note"),
-                                 ("environment", "environment")):
+            tally_verdicts(table, tallied)
+            for kind, column in TALLIED_COLUMNS:
                 by_row.update((kind, v) for v in table[column].astype(str))
     assert list(tallied.items()) == list(by_row.items())
     assert tallied[("status", "fault_detected")] > 0 and sum(v for (k, _), v in tallied.items() if k == "status") > 2_000

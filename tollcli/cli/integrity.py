@@ -6,7 +6,6 @@ import json
 from collections import Counter
 from typing import Annotated, Optional
 
-import numpy as np
 import pandas as pd
 import typer
 
@@ -20,7 +19,7 @@ from tollcli.integrity.raim import RaimParams
 from tollcli.integrity.sources import LEVEL_CHOICES, LEVELS
 from tollcli.io.log_run import LogRun
 from tollcli.io.writers import TableWriter, format_for
-from tollcli.job.log_integrity import iter_integrity, with_epoch_checks
+from tollcli.job.log_integrity import iter_integrity, tally_verdicts, with_epoch_checks
 from tollcli.readers.navigation import NAVIGATION_KINDS
 from tollcli.readers.nmea import ReadStats
 from tollcli.readers.nmea.reader import check_partial, check_usable
@@ -115,7 +114,7 @@ def integrity(
                 table = with_epoch_checks(pd.concat(tables, ignore_index=True), roads)
                 used = table["positioning"].iat[0] if "positioning" in table and len(table) else "snapshot"
                 note_why = tables[0].attrs.get("positioning_note") if tables else None
-                _tally(table, counts)
+                tally_verdicts(table, counts)
                 writer.write(table)
             elif kind in NAVIGATION_KINDS:
                 _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day, environment, kind)
@@ -128,7 +127,7 @@ def integrity(
                         used = table["positioning"].iat[0] if "positioning" in table and len(table) else table.attrs.get("positioning_used", "snapshot")
                         note_why = table.attrs.get("positioning_note")
                         counts["skipped", "lines"] += int(table.attrs.get("skipped_lines", 0))
-                    _tally(table, counts)
+                    tally_verdicts(table, counts)
                     writer.write(table)
                 if note_why:
                     note_why = note_why.replace(run.replay_path(), run.name)
@@ -187,22 +186,13 @@ def integrity(
         raise PartialError(f"{run.name}: {counts['skipped', 'lines']} lines skipped, more than --max-bad {max_bad}; outputs were written")
 
 
-def _tally(table: pd.DataFrame, counts: Counter) -> None:
-    """Count the statuses, deciding sources and GST RMS notes of a table (each value once per chunk, in the order the
-    rows first give it: the counts and their order are those of counting row by row)."""
-    for kind, column in (("status", "raim_status"), ("source", "integrity_source"), ("note", "gst_rms_note"),
-                         ("environment", "environment")):
-        codes, values = pd.factorize(table[column].astype(str))
-        counts.update({(kind, v): int(n) for v, n in zip(values, np.bincount(codes, minlength=len(values)))})
-
-
 def _stream_navigation_log(run, writer, params, sigma_model, sigma, nominal, strict, quiet, counts, stats, day=None, environment="auto",
           kind="nmea") -> None:
     with progress(f"checking {run.name}", quiet, log=run.log) as advance:
         for chunk in iter_integrity(run, kind, params, sigma_model, sigma, nominal, strict, stats, date=day,
                                     environment=environment):
             writer.write(chunk.table)
-            _tally(chunk.table, counts)
+            tally_verdicts(chunk.table, counts)
             advance(len(chunk.table), int(chunk.table["line"].max()) if len(chunk.table) and "line" in chunk.table else None)
     check_usable(stats)
     note(stats.summary(), quiet)

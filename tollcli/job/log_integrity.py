@@ -6,6 +6,7 @@ import datetime as dt
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import numpy as np
 import pandas as pd
 
 from tollcli.errors import UsageError
@@ -98,6 +99,20 @@ def iter_integrity(log, kind: str, params: RaimParams, sigma_model: str = "nomin
             raim = run_raim(meas, params)
             table = chunk.epochs.rename(columns={"n_used": "n_used_receiver"}).reset_index(drop=True)
             yield IntegrityChunk(with_raim_position(pd.concat([table, env_columns, raim], axis=1)), chunk.satellites)
+
+
+#: what an integrity table's summary counts: (kind, column)
+TALLIED_COLUMNS = (("status", "raim_status"), ("source", "integrity_source"), ("note", "gst_rms_note"),
+                   ("environment", "environment"))
+
+
+def tally_verdicts(table: pd.DataFrame, counts) -> None:
+    """Add to ``counts`` (a Counter of (kind, value)) the statuses, deciding sources, GST RMS notes and environments of
+    an integrity table (:data:`TALLIED_COLUMNS`), a column at a time: each value once, in the order the rows first give
+    it (the counts and their order are those of counting row by row)."""
+    for kind, column in TALLIED_COLUMNS:
+        codes, values = pd.factorize(table[column].astype(str))
+        counts.update({(kind, v): int(n) for v, n in zip(values, np.bincount(codes, minlength=len(values)))})
 
 
 def measured_environment(epochs: pd.DataFrame, meas, setting: str, carry: EnvironmentCarry | None = None):
