@@ -29,41 +29,31 @@ def csv_text(table: Columns, iso_ms) -> bytes | None:
     ``iso_ms``: datetime64 values → their ISO cells (the writer's own, so that both paths write the same times)."""
     if compiled is None or len(table.columns) < 2:
         return None
-    n = len(table)
     kinds, columns = [], []
     for name, held in table.items():
         if isinstance(held, Coded) and (np.asarray(held.codes) >= 0).all():  # few distinct texts: each written once
             names = list(held.names)
-            if not all(isinstance(t, str) for t in names) or any(q in t for t in names for q in _QUOTED):
+            if not _plain(names):
                 return None
             kinds.append("c")
             columns.append(_coded_cells(np.asarray(held.codes, np.int64), names))
             continue
         values = table[name]
         if is_time(values):
-            cells = _time_cells(values, iso_ms)
+            kinds.append("c")
+            columns.append(_time_cells(values, iso_ms))
         elif is_text(values):
             texts = [v if isinstance(v, str) else "" for v in values.tolist()]
-            if any(q in t for t in set(texts) for q in _QUOTED):
+            if not _plain(set(texts)):
                 return None
-            cells = _cells(texts)
-        elif values.dtype.kind == "f":
-            kinds.append("f")
-            columns.append(np.ascontiguousarray(values, dtype=np.float64))
-            continue
-        elif values.dtype.kind == "b":
-            kinds.append("b")
-            columns.append(np.ascontiguousarray(values, dtype=np.uint8))
-            continue
-        elif values.dtype.kind == "i" or (values.dtype.kind == "u" and values.dtype.itemsize < 8):
-            kinds.append("i")
-            columns.append(np.ascontiguousarray(values, dtype=np.int64))
-            continue
+            kinds.append("c")
+            columns.append(_cells(texts))
+        elif (number := _number_column(values, any_float=True)) is not None:
+            kinds.append(number[0])
+            columns.append(number[1])
         else:
             return None
-        kinds.append("c")
-        columns.append(cells)
-    return compiled.rows("".join(kinds).encode(), tuple(columns), n)
+    return compiled.rows("".join(kinds).encode(), tuple(columns), len(table))
 
 
 def frame_csv_text(df) -> bytes | None:
@@ -78,22 +68,38 @@ def frame_csv_text(df) -> bytes | None:
     kinds, columns = [], []
     for name in df.columns:
         col = df[name]
-        dtype = col.dtype
-        if isinstance(dtype, np.dtype) and dtype.kind in "fib" and (dtype.kind != "f" or dtype == np.float64):
-            kind = "b" if dtype.kind == "b" else dtype.kind
-            kinds.append(kind)
-            columns.append(np.ascontiguousarray(col.to_numpy(), dtype={"f": np.float64, "i": np.int64, "b": np.uint8}[kind]))
-            continue
-        if isinstance(dtype, pd.StringDtype) or dtype == object:
+        if isinstance(col.dtype, np.dtype) and (number := _number_column(col.to_numpy(), any_float=False)) is not None:
+            kinds.append(number[0])
+            columns.append(number[1])
+        elif isinstance(col.dtype, pd.StringDtype) or col.dtype == object:
             codes, uniques = pd.factorize(col, use_na_sentinel=True)  # missing (None, NaN, NA): -1
             names = list(uniques)
-            if not all(isinstance(t, str) for t in names) or any(q in t for t in names for q in _QUOTED):
+            if not _plain(names):
                 return None  # a value not text (pandas writes its str()), or a text the csv module would quote
             kinds.append("c")
             columns.append(_coded_cells(np.asarray(codes, np.int64), names))
-            continue
-        return None
+        else:
+            return None
     return compiled.rows("".join(kinds).encode(), tuple(columns), len(df))
+
+
+def _number_column(values: np.ndarray, any_float: bool) -> tuple[str, np.ndarray] | None:
+    """(the kernel's kind, the array it reads) of a numpy column of floats (float64 only unless ``any_float``: a
+    narrower float converts exactly, as the csv module sees it), integers (not unsigned 64-bit) or booleans; None for
+    any other."""
+    kind, dtype = values.dtype.kind, values.dtype
+    if kind == "f" and (any_float or dtype == np.float64):
+        return "f", np.ascontiguousarray(values, dtype=np.float64)
+    if kind == "b":
+        return "b", np.ascontiguousarray(values, dtype=np.uint8)
+    if kind == "i" or (kind == "u" and dtype.itemsize < 8):
+        return "i", np.ascontiguousarray(values, dtype=np.int64)
+    return None
+
+
+def _plain(texts) -> bool:
+    """Whether every one of ``texts`` is text the csv module writes as it is (no quoting)."""
+    return all(isinstance(t, str) for t in texts) and not any(q in t for t in texts for q in _QUOTED)
 
 
 def _time_cells(values: np.ndarray, iso_ms) -> tuple[bytes, np.ndarray]:
