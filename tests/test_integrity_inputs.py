@@ -225,3 +225,67 @@ def test_angle_lookup_of_consecutive_epochs_is_the_searched_one(seed):
     kept = np.isin(keys, gaps)
     expected = np.array([values[kept][gaps == w][0] if (gaps == w).any() else np.nan for w in wanted])
     np.testing.assert_array_equal(_lookup(gaps, values[kept], wanted), expected)
+
+
+def _same_fields(a, b, where: str) -> None:
+    """Every field of two dataclass instances (Measurements, ReceiverOutputs) equal, arrays element by element."""
+    import dataclasses
+
+    for field in dataclasses.fields(a):
+        x, y = getattr(a, field.name), getattr(b, field.name)
+        if dataclasses.is_dataclass(x):
+            _same_fields(x, y, f"{where}.{field.name}")
+        elif isinstance(x, np.ndarray):
+            assert isinstance(y, np.ndarray) and x.dtype == y.dtype, f"{where}.{field.name}"
+            np.testing.assert_array_equal(x, y, err_msg=f"{where}.{field.name}")
+        else:
+            assert x == y, f"{where}.{field.name}"
+
+
+def test_the_readers_columns_give_the_measurements_and_cn0_summary_of_its_frame():
+    """``process`` hands the NMEA reader's satellite columns to the measurements and the C/N0 summary without building
+    a DataFrame: over every gpsd NMEA log, read in small chunks (the angles carried from chunk to chunk), every array
+    of the measurements and every C/N0 summary equals the one made from the frame. Logs whose used satellites lack
+    angles (filled from earlier GSV) take the frame's path inside; both kinds are among the logs."""
+    from tollcli.enforcement.trip import cn0_summary
+    from tollcli.gnss.nmea_measurements import fill_angles
+    from tollcli.io.columns import Columns
+    from tollcli.readers.nmea.reader import iter_nmea_tables
+
+    folder = shared("gpsd")
+    filled = plain = 0
+    for log in sorted(folder.glob("*.log")):
+        carry_columns, carry_frame = AngleCarry(), AngleCarry()
+        for k, chunk in enumerate(iter_nmea_tables(str(log), chunk_epochs=25, block_bytes=4096)):
+            columns = chunk.satellites_read
+            assert isinstance(columns, Columns)
+            frame = columns.to_pandas()
+            epochs = chunk.epochs
+            if len(frame):
+                probe = fill_angles(frame, epochs)
+                filled, plain = filled + (probe is not frame), plain + (probe is frame)
+            got = nmea_measurements(epochs, columns, carry=carry_columns)
+            want = nmea_measurements(epochs, frame, carry=carry_frame)
+            _same_fields(got, want, f"{log.name} chunk {k}")
+            pd.testing.assert_frame_equal(carry_columns.last, carry_frame.last)
+            if len(epochs):
+                first = int(epochs["epoch"].iat[0])
+                pd.testing.assert_frame_equal(cn0_summary(columns, len(epochs), first), cn0_summary(frame, len(epochs), first))
+    assert filled > 0 and plain > 0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_sorted_codes_are_factorizing_the_names_in_order(seed):
+    """A coded column's codes in its names' sorted order name the rows as ``pandas.factorize(sort=True)`` does, once
+    the names no row has are dropped."""
+    from tollcli.gnss.nmea_measurements import _compact
+    from tollcli.io.columns import Coded, sorted_codes
+
+    rng = np.random.default_rng(seed)
+    names = tuple(rng.permutation(["GPS", "Galileo", "BeiDou", "GLONASS", "QZSS", "NavIC", "SBAS", "unknown"]))
+    codes = rng.integers(0, rng.integers(1, 9), 300)
+    column = Coded(codes, names)
+    got = _compact(*sorted_codes(column))
+    want = pd.factorize(column.decoded(), sort=True)
+    np.testing.assert_array_equal(got[0], want[0])
+    assert list(got[1]) == list(want[1])

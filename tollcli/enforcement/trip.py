@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 
 from tollcli.geodesy import great_circle_distance_m
+from tollcli.io.columns import Columns, column_array
 
 
 @dataclass
@@ -31,17 +32,18 @@ def fixes(epochs: pd.DataFrame, t_s: np.ndarray) -> Fixes:
     return Fixes(rows, t, la, lo, np.diff(t), great_circle_distance_m(la[:-1], lo[:-1], la[1:], lo[1:]))
 
 
-def cn0_summary(satellites: pd.DataFrame | None, n_epochs: int, first_epoch: int) -> pd.DataFrame:
-    """Per epoch row: satellites with a C/N0, their median, 80th percentile and spread (dB-Hz).
+def cn0_summary(satellites: pd.DataFrame | Columns | None, n_epochs: int, first_epoch: int) -> pd.DataFrame:
+    """Per epoch row: satellites with a C/N0, their median, 80th percentile and spread (dB-Hz). ``satellites``: the
+    satellite table (``epoch``, ``cn0_dbhz``), a DataFrame or the reader's columns.
 
     The percentile interpolates linearly between order statistics (pandas' and numpy's
     default); the spread is the population standard deviation (two passes).
     """
     n_tracked = np.zeros(n_epochs, np.int64)
     med, p80, std = np.full(n_epochs, np.nan), np.full(n_epochs, np.nan), np.full(n_epochs, np.nan)
-    if satellites is not None and not satellites.empty:
-        cn0 = satellites["cn0_dbhz"].to_numpy(float)
-        row = satellites["epoch"].to_numpy(np.int64) - first_epoch
+    if satellites is not None and len(satellites):
+        cn0 = column_array(satellites, "cn0_dbhz", float)
+        row = column_array(satellites, "epoch", np.int64) - first_epoch
         keep = np.isfinite(cn0) & (cn0 > 0) & (row >= 0) & (row < n_epochs)
         cn0, row = cn0[keep], row[keep]
         order = np.lexsort((cn0, row))

@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from tollcli.io.columns import Coded, Columns, column_array, sorted_codes
 from tollcli.gnss.measurements import Measurements, pad, slots, sv_labels
 from tollcli.gnss.receiver_outputs import RmsCarry, receiver_outputs
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
@@ -84,9 +85,12 @@ def _constellation_codes(constellation: pd.Series, rows: np.ndarray,
     return pd.factorize(constellation.to_numpy(dtype=object)[rows], sort=True, use_na_sentinel=False)
 
 
-def _arrow_coded(constellation: pd.Series) -> tuple[np.ndarray, np.ndarray] | None:
-    """Every row's code and the names (sorted, as objects) of the reader's Arrow string column without a missing name;
-    None for another column (a missing name, or objects)."""
+def _arrow_coded(constellation) -> tuple[np.ndarray, np.ndarray] | None:
+    """Every row's code and the names (sorted, as objects) of the reader's Arrow string column without a missing name,
+    or of its :class:`~tollcli.io.columns.Coded` column (names no row has may be among them); None for another column
+    (a missing name, or objects)."""
+    if isinstance(constellation, Coded):
+        return sorted_codes(constellation)
     if isinstance(constellation.array, pd.arrays.ArrowStringArray) and not constellation.hasnans:
         codes, names = pd.factorize(constellation.array, sort=True)
         return codes, np.asarray(names, dtype=object)
@@ -116,20 +120,21 @@ def _lookup(keys: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndar
     return np.where(keys[pos] == wanted, values[pos], np.nan)
 
 
-def fill_angles(satellites: pd.DataFrame, epochs: pd.DataFrame, carry: AngleCarry | None = None,
+def fill_angles(satellites: pd.DataFrame | Columns, epochs: pd.DataFrame, carry: AngleCarry | None = None,
                 max_age_s: float = MAX_ANGLE_AGE_S, coded: tuple[np.ndarray, np.ndarray] | None = None) -> pd.DataFrame:  # fmt: skip
     """The satellite table with missing angles taken from the same satellite's latest GSV.
 
-    Returned as given (not copied) when no used satellite lacks its angles. ``coded``: :func:`_arrow_coded` of its
-    constellation column, when made (the latest angles are then picked by code, not by name: the same rows).
+    Returned as given (not copied) when no used satellite lacks its angles; else a DataFrame. ``coded``:
+    :func:`_arrow_coded` of its constellation column, when made (the latest angles are then picked by code, not by
+    name: the same rows); needed for :class:`~tollcli.io.columns.Columns`.
     """
-    t_s = _lookup(epochs["epoch"].to_numpy(), _epoch_seconds(epochs), satellites["epoch"].to_numpy())
-    elev, azim = satellites["elev_deg"].to_numpy(float), satellites["azim_deg"].to_numpy(float)
+    t_s = _lookup(epochs["epoch"].to_numpy(), _epoch_seconds(epochs), column_array(satellites, "epoch"))
+    elev, azim = column_array(satellites, "elev_deg", float), column_array(satellites, "azim_deg", float)
     seen = np.isfinite(elev) & np.isfinite(azim)
     fresh = seen & np.isfinite(t_s)
-    missing = ~seen & satellites["used"].to_numpy(dtype=bool) & np.isfinite(t_s)
+    missing = ~seen & column_array(satellites, "used", bool) & np.isfinite(t_s)
     if missing.any():
-        sats = satellites.copy()
+        sats = satellites.to_pandas() if isinstance(satellites, Columns) else satellites.copy()
         sats["t_s"] = t_s
         sats["constellation"] = sats["constellation"].astype(object)
         known = pd.concat([carry.last if carry is not None else None, sats.loc[fresh, list(_KNOWN)]], ignore_index=True)
@@ -147,7 +152,7 @@ def fill_angles(satellites: pd.DataFrame, epochs: pd.DataFrame, carry: AngleCarr
         return sats.drop(columns="t_s")
     if carry is not None:  # nothing to fill: only each satellite's latest angles are kept, from fewer rows
         idx = np.flatnonzero(fresh)
-        svid = satellites["svid"].to_numpy()[idx]
+        svid = column_array(satellites, "svid")[idx]
         if coded is not None:  # codes in the names' sorted order: the same groups, in the same order, as the names
             code = coded[0][idx]
             latest = _latest_rows(t_s[idx], code, svid)
@@ -203,24 +208,32 @@ def _latest_rows(t_s: np.ndarray, constellation, svid: np.ndarray) -> np.ndarray
 
 def nmea_measurements(
     epochs: pd.DataFrame,
-    satellites: pd.DataFrame,
+    satellites: pd.DataFrame | Columns,
     sigma_model: str = "nominal",
     sigma_m: float = 5.0,
     nominal: NominalModel | None = None,
     carry: AngleCarry | None = None,
 ) -> Measurements:
-    """Padded RAIM inputs for every row of ``epochs`` (``carry``: GSV angles from earlier chunks)."""
+    """Padded RAIM inputs for every row of ``epochs`` (``carry``: GSV angles from earlier chunks). ``satellites``: the
+    satellite table as a DataFrame or as the reader's :class:`~tollcli.io.columns.Columns` (the same measurements;
+    no frame is built unless angles must be filled in)."""
     n_epochs = len(epochs)
-    coded = _arrow_coded(satellites["constellation"])  # once, for the angles carried and the clocks
+    if isinstance(satellites, Columns):
+        held = dict(satellites.items()).get("constellation")
+        if not isinstance(held, Coded):  # (names as objects: the frame's path)
+            satellites = satellites.to_pandas()
+    coded = _arrow_coded(dict(satellites.items())["constellation"] if isinstance(satellites, Columns)
+                         else satellites["constellation"])  # once, for the angles carried and the clocks
     filled = fill_angles(satellites, epochs, carry, coded=coded)
     if filled is not satellites:  # (angles filled: a copy, its names as objects)
         satellites, coded = filled, None
-    elev_all, azim_all = satellites["elev_deg"].to_numpy(float), satellites["azim_deg"].to_numpy(float)
-    take = np.flatnonzero(satellites["used"].to_numpy(dtype=bool) & np.isfinite(elev_all) & np.isfinite(azim_all))
+    elev_all, azim_all = column_array(satellites, "elev_deg", float), column_array(satellites, "azim_deg", float)
+    take = np.flatnonzero(column_array(satellites, "used", bool) & np.isfinite(elev_all) & np.isfinite(azim_all))
     # constellation names coded once, in name order (a receiver clock per constellation, in name order)
-    code_all, names = _constellation_codes(satellites["constellation"], take, coded)
-    sat_epoch = satellites["epoch"].to_numpy()
-    first = _first_of_each(sat_epoch[take].astype(np.int64), code_all, satellites["svid"].to_numpy()[take].astype(np.int64))
+    code_all, names = _constellation_codes(None if coded is not None else satellites["constellation"], take, coded)
+    sat_epoch = column_array(satellites, "epoch")
+    svid_all = column_array(satellites, "svid")
+    first = _first_of_each(sat_epoch[take].astype(np.int64), code_all, svid_all[take].astype(np.int64))
     take, code_all = take[first], code_all[first]  # = drop_duplicates on the three
     epoch_ids = epochs["epoch"].to_numpy()
     used_epoch = sat_epoch[take]
@@ -228,8 +241,8 @@ def nmea_measurements(
     keep = (row < n_epochs) & (epoch_ids[np.minimum(row, max(n_epochs - 1, 0))] == used_epoch) if n_epochs else np.zeros(take.size, bool)
     order = np.flatnonzero(keep)[np.argsort(row[keep], kind="stable")]
     take, row, clock = take[order], row[order], code_all[order]
-    used = {c: satellites[c].to_numpy(float)[take] for c in ("cn0_dbhz", "residual_m")}
-    used.update(elev_deg=elev_all[take], azim_deg=azim_all[take], svid=satellites["svid"].to_numpy()[take])
+    used = {c: column_array(satellites, c, float)[take] for c in ("cn0_dbhz", "residual_m")}
+    used.update(elev_deg=elev_all[take], azim_deg=azim_all[take], svid=svid_all[take])
     slot, n_slots = slots(row, n_epochs)
     shape = (n_epochs, n_slots)
 

@@ -183,6 +183,25 @@ def text_array(values: np.ndarray):
     return pd.arrays.ArrowStringArray(pa.array(values, type=pa.string(), from_pandas=True))
 
 
+def column_array(table, name: str, dtype=None) -> np.ndarray:
+    """One column of a :class:`Columns` or a DataFrame as a numpy array (``dtype``: converted to it), so that code
+    reading a table's numbers takes either without building the other."""
+    values = table[name]
+    if isinstance(table, Columns):
+        return values if dtype is None else np.asarray(values, dtype=dtype)
+    return values.to_numpy(dtype=dtype)
+
+
+def sorted_codes(values: Coded) -> tuple[np.ndarray, np.ndarray]:
+    """A :class:`Coded` column's codes renumbered in its names' sorted order, and those names (objects): what
+    ``pandas.factorize(column, sort=True)`` gives, except that names no row has may be among them."""
+    names = np.asarray(values.names, dtype=object)
+    order = np.argsort(names, kind="stable")
+    rank = np.empty(len(names), np.int64)
+    rank[order] = np.arange(len(names))
+    return rank[values.codes], names[order]
+
+
 def as_columns(table) -> Columns:
     """A :class:`Columns` (returned as it is) or a DataFrame → :class:`Columns` (times to ``datetime64[ms]`` UTC,
     text to object arrays with ``None`` for missing)."""

@@ -19,6 +19,7 @@ from tollcli.charging.invoice import file_sha256
 from tollcli.enforcement.osnma_failures import osnma_failure_findings
 from tollcli.errors import UsageError
 from tollcli.integrity.nav_authentication import ACCEPTED, NAV_AUTH_STATUSES, STATUS_NOTES, authenticated_satellites
+from tollcli.io.columns import Columns
 from tollcli.io.sources import printable_path
 from tollcli.readers.gps_time import LEAP_SECONDS
 
@@ -46,11 +47,14 @@ class OsnmaEvidence:
             self.pending = self.pending.result()
         return self.pending
 
-    def authenticated_for(self, satellites: pd.DataFrame) -> pd.DataFrame:
+    def authenticated_for(self, satellites: pd.DataFrame | Columns) -> pd.DataFrame:
         """(``time_utc``, ``sv``) of the rows of a chunk's satellite table (``time_utc``, ``constellation``, ``svid``)
         whose navigation data were authenticated by then: what the chunk's positions look up."""
         from tollcli.gnss.osnma.satellite_status import satellite_status
 
+        if isinstance(satellites, Columns):  # (the NMEA reader's columns)
+            held = dict(satellites.items())
+            satellites = Columns({c: held[c] for c in ("time_utc", "constellation", "svid")}).to_pandas()
         return authenticated_satellites(satellite_status(self.check.result, satellites[["time_utc", "constellation", "svid"]]))
 
     @property

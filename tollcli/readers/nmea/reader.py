@@ -81,6 +81,12 @@ class NmeaTables:
         self._satellites = frame
 
     @property
+    def satellites_read(self):
+        """The satellite table as the reader made it: :class:`~tollcli.io.columns.Columns`, or a DataFrame where the
+        reader built one (what reads its numbers only, :func:`~tollcli.io.columns.column_array`, needs no frame)."""
+        return self._built_satellites()
+
+    @property
     def epoch_columns(self) -> Columns:
         return as_columns(self._epochs)
 
