@@ -289,3 +289,17 @@ def test_sorted_codes_are_factorizing_the_names_in_order(seed):
     want = pd.factorize(column.decoded(), sort=True)
     np.testing.assert_array_equal(got[0], want[0])
     assert list(got[1]) == list(want[1])
+
+
+def test_integrity_chunks_still_give_the_readers_satellite_frame():
+    """``iter_integrity`` measures from the reader's satellite columns; a consumer that asks for a chunk's satellite
+    table (``findings``, ``locate``) still gets the reader's DataFrame, row for row."""
+    from tollcli.job.log_integrity import iter_integrity
+
+    folder = shared("gpsd")
+    logs = [log for log in sorted(folder.glob("*.log")) if len(read_nmea(log).satellites)][:12]
+    assert logs
+    for log in logs:
+        chunks = list(iter_integrity(str(log), "nmea", RaimParams("ss")))
+        got = pd.concat([c.satellites for c in chunks], ignore_index=True)
+        pd.testing.assert_frame_equal(got, read_nmea(log).satellites.reset_index(drop=True))
