@@ -114,3 +114,24 @@ def test_epochs_and_info_of_an_nmea_log_import_no_pandas(tmp_path, command, log)
     assert tail.split()[0] in ("0", "None"), r.stderr
     imported = tail.split("imported:", 1)[1].strip()
     assert imported == "", f"tollcli {' '.join(command)} imported {imported}"
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_text_of_codes_is_the_string_array_of_the_names(seed):
+    """A status column made from its codes equals ``pd.array`` of the names the codes index (negative codes from the
+    end, as numpy indexes), dtype included; a code outside the names is refused, as numpy's indexing refuses it."""
+    import pandas as pd
+
+    from tollcli.io.columns import text_of_codes
+
+    rng = np.random.default_rng(seed)
+    names = ("valid", "fault", "unavailable", "", "probable_false_alarm")[: int(rng.integers(1, 6))]
+    codes = rng.integers(-len(names), len(names), int(rng.integers(0, 300))).astype(rng.choice([np.int8, np.int64]))
+    want = pd.array(np.asarray(names, dtype=object)[codes], dtype="string")
+    got = text_of_codes(codes, names)
+    assert got.dtype == want.dtype
+    pd.testing.assert_extension_array_equal(got, want)
+    with pytest.raises(IndexError):
+        text_of_codes(np.array([len(names)]), names)
+    with pytest.raises(IndexError):
+        text_of_codes(np.array([-len(names) - 1]), names)

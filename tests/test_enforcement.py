@@ -339,3 +339,30 @@ def test_binomial_tail_is_scipys():
     p[:50], p[50:100] = 1.0, 1e-12
     assert np.allclose(binomial_tail(k, n, p), binom.sf(k - 1, n, p), rtol=1e-9, atol=1e-15)
     assert binomial_tail(np.array([24]), np.array([30]), np.array([0.5]))[0] == pytest.approx(0.000715, rel=1e-2)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_cn0_summary_orders_the_values_as_lexsort_does(seed):
+    """The C/N0 summary's sort (one exact key where every C/N0 is a whole dB-Hz below 256) gives the values and rows of
+    ``np.lexsort((cn0, row))`` to the bit, and so the summary of a lexsort: whole values, fractional ones (Android's),
+    rows in order or not, values up to the edges (255, and 256 which takes the general path)."""
+    from tollcli.enforcement.trip import _sorted_by_epoch, cn0_summary
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 4000))
+    row = rng.integers(0, int(rng.integers(1, 500)), n)
+    if seed % 2:
+        row = np.sort(row)
+    cn0 = rng.integers(1, 257, n).astype(float) if seed < 6 else rng.uniform(0.1, 60.0, n)
+    if seed == 4:
+        cn0 = np.minimum(cn0, 255.0)
+    order = np.lexsort((cn0, row))
+    x, r = _sorted_by_epoch(cn0, row)
+    np.testing.assert_array_equal(x, cn0[order])
+    np.testing.assert_array_equal(r, row[order])
+    summary = cn0_summary(pd.DataFrame({"epoch": row + 7, "cn0_dbhz": cn0}), int(row.max()) + 1, 7)
+    for k in np.flatnonzero(np.bincount(row)):
+        values = np.sort(cn0[row == k])
+        assert summary["n_tracked"].iat[k] == values.size
+        assert summary["cn0_median"].iat[k] == np.median(values)
+        assert summary["cn0_p80"].iat[k] == pytest.approx(np.percentile(values, 80), rel=1e-12)

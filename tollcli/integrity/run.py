@@ -26,6 +26,7 @@ from tollcli.gnss.receiver_outputs import GST_RMS_NOTES
 from tollcli.gnss.wls import Geometry, horizontal_covariance, post_fit_residuals, wls_geometry, wsse
 from tollcli.integrity.fde import exclude
 from tollcli.integrity.kalman_hit import hpl_sbas_m
+from tollcli.io.columns import text_of_codes
 from tollcli.integrity.raim import (
     EXCLUDED,
     FAULT,
@@ -37,7 +38,6 @@ from tollcli.integrity.raim import (
     VALID,
     RaimParams,
     detect,
-    status_names,
 )
 from tollcli.integrity.solution_separation import (
     SeparationResult,
@@ -119,7 +119,7 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
     final, deciding = combine(verdicts, allowed, undecided)
     return pd.DataFrame(
         {
-            "raim_mode": pd.array([params.mode] * n_epochs, dtype="string"),
+            "raim_mode": text_of_codes(np.zeros(n_epochs, np.int8), (params.mode,)),
             "n_used": geometry.n_meas.astype(np.int16),
             "dof": detection.dof.astype(np.int16),
             "slope_max_m": detection.slope_max_m,
@@ -131,7 +131,7 @@ def run_raim(meas: Measurements, params: RaimParams, hal_m=None, geometry: Geome
             "hal_m": detection.hal_m,
             "p_fa": detection.p_fa,
             "p_md": np.full(n_epochs, params.p_md),
-            "raim_status": pd.array(status_names(final), dtype="string"),
+            "raim_status": text_of_codes(final, STATUSES),
             "integrity_source": pd.array(deciding, dtype="string"),
             "residual_status": _names(verdicts["grs"] if "grs" in verdicts else verdicts["pseudorange"]),
             "gbs_status": _names(verdicts["gbs"]),
@@ -203,7 +203,7 @@ def separation_read(meas: Measurements, test_stat: np.ndarray) -> np.ndarray:
 
 
 def _names(verdict: np.ndarray):
-    return pd.array(_STATUS_OR_NONE[verdict], dtype="string")
+    return text_of_codes(verdict, _STATUS_OR_NONE)
 
 
 def _source_verdicts(meas: Measurements, status: np.ndarray, source: np.ndarray, hal_m: np.ndarray, params: RaimParams,

@@ -41,11 +41,15 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from tollcli.io.columns import text_of_codes
+
 SPEED_STATUSES = ("ok", "low_speed", "unavailable", "inconsistent", "no_data")
 #: the speed verdict that vetoes a position (evidence of a fault); every other one confirms or leaves it to the RAIM
 SPEED_FAULTS = ("inconsistent",)
 #: the statuses under which the check confirmed nothing: why it could not
 SPEED_NOT_CHECKED = ("low_speed", "unavailable", "no_data")
+#: the statuses in the order :func:`speed_integrity` codes them (each later rule overrides an earlier)
+_STATUS_CODES = ("no_data", "ok", "unavailable", "low_speed", "inconsistent")
 
 
 #: what each speed verdict tells the reader of an invoice (``speed_`` + status)
@@ -179,17 +183,17 @@ def speed_integrity(epochs: pd.DataFrame, params: SpeedParams = SpeedParams(), s
         have = np.isfinite(avg) & np.isfinite(mismatch) & np.isfinite(tol) & regular
         inconsistent = have & (mismatch > tol)
         passed = have & ~inconsistent
-    status = np.full(m, "no_data", dtype=object)
-    status[passed] = "ok"
+    status = np.zeros(m, np.int8)  # codes into _STATUS_CODES
+    status[passed] = 1
     with np.errstate(invalid="ignore"):
-        status[passed & ~(mase >= params.k_sigma * sigma)] = "unavailable"
-        status[passed & (avg < params.min_speed_mps)] = "low_speed"
-    status[inconsistent] = "inconsistent"
+        status[passed & ~(mase >= params.k_sigma * sigma)] = 2
+        status[passed & (avg < params.min_speed_mps)] = 3
+    status[inconsistent] = 4
     return pd.DataFrame({
         "speed_doppler_avg_mps": avg, "speed_position_mps": pos_speed, "speed_error_mps": speed_error,
         "mase_mps": mase, "speed_sigma_mps": sigma, "speed_mismatch_m": mismatch, "speed_tolerance_m": tol,
-        "speed_sigma_source": pd.array(np.where(from_doppler, "doppler_wls", "configured"), dtype="string"),
-        "speed_status": pd.array(status, dtype="string"),
+        "speed_sigma_source": text_of_codes(from_doppler.astype(np.int8), ("configured", "doppler_wls")),
+        "speed_status": text_of_codes(status, _STATUS_CODES),
     })  # fmt: skip
 
 

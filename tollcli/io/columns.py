@@ -173,6 +173,17 @@ def coded_text_array(values: Coded):
     return pd.arrays.ArrowStringArray(names.cast(pa.string()))
 
 
+def text_of_codes(codes: np.ndarray, names):
+    """``pd.array(np.asarray(names, dtype=object)[codes], dtype="string")`` made from the codes (a negative code counts
+    from the end, as numpy's indexing does): a status column of a few names without a Python string per row (about half
+    the time for a chunk's 5 000 rows)."""
+    names = tuple(names)
+    codes = np.asarray(codes)
+    if codes.size and (codes.min() < -len(names) or codes.max() >= len(names)):
+        raise IndexError(f"a code outside the {len(names)} names")
+    return coded_text_array(Coded(np.where(codes < 0, codes + len(names), codes), names))
+
+
 def text_array(values: np.ndarray):
     """An object array of str/None → pandas' ``string`` column (Arrow-backed; built by pyarrow directly, faster)."""
     import pandas as pd
