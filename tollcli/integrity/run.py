@@ -222,14 +222,14 @@ def _source_verdicts(meas: Measurements, status: np.ndarray, source: np.ndarray,
         verdicts["model"] = bound_verdict(hpl_model, hal)
         nan = np.full(n, np.nan)
         return verdicts, {"hpl_gbs_m": nan, "hpl_gst_m": nan, "hpl_model_m": hpl_model,
-                          "gst_rms_note": pd.array(np.full(n, "", object), dtype="string")}  # fmt: skip
+                          "gst_rms_note": text_of_codes(np.zeros(n, np.int8), ("",))}  # fmt: skip
     own = receiver_verdicts(r, hal, params.p_md, params.p_fa)
     gst_rms = np.where(decided & (source == "gst"), status, NONE)
     verdicts["gbs"] = own["gbs"]
     verdicts["gst"] = strictest(gst_rms, own["gst_bound"])
     verdicts["model"] = bound_verdict(hpl_model, hal)
     return verdicts, {"hpl_gbs_m": own["hpl_gbs_m"], "hpl_gst_m": own["hpl_gst_m"], "hpl_model_m": hpl_model,
-                      "gst_rms_note": pd.array(np.asarray(GST_RMS_NOTES, dtype=object)[r.gst_rms_note], dtype="string")}  # fmt: skip
+                      "gst_rms_note": text_of_codes(r.gst_rms_note, GST_RMS_NOTES)}  # fmt: skip
 
 
 def model_hpl(meas: Measurements, geometry: Geometry, p_md: float) -> np.ndarray:
