@@ -27,11 +27,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from tollcli.io.columns import Coded, Columns, column_array, sorted_codes
 from tollcli.gnss.measurements import Measurements, pad, slots, sv_labels
 from tollcli.gnss.receiver_outputs import RmsCarry, receiver_outputs
 from tollcli.gnss.sigma_models import NominalModel, sigma_for
 from tollcli.gnss.wls import observation_matrix
+from tollcli.io.columns import Coded, Columns, column_array, sorted_codes
 
 MAX_ANGLE_AGE_S = 30.0
 #: GGA fix qualities of a corrected solution: 2 DGNSS/SBAS, 4 RTK fixed, 5 RTK float, 9 SBAS (some makes)
@@ -85,12 +85,10 @@ def _constellation_codes(constellation: pd.Series, rows: np.ndarray,
     return pd.factorize(constellation.to_numpy(dtype=object)[rows], sort=True, use_na_sentinel=False)
 
 
-def _arrow_coded(constellation) -> tuple[np.ndarray, np.ndarray] | None:
-    """Every row's code and the names (sorted, as objects) of the reader's Arrow string column without a missing name,
-    or of its :class:`~tollcli.io.columns.Coded` column (names no row has may be among them); None for another column
-    (a missing name, or objects)."""
-    if isinstance(constellation, Coded):
-        return sorted_codes(constellation)
+def _arrow_coded(constellation: pd.Series) -> tuple[np.ndarray, np.ndarray] | None:
+    """Every row's code and the names (sorted, as objects) of the reader's Arrow string column without a missing name;
+    None for another column (a missing name, or objects). (The reader's :class:`~tollcli.io.columns.Coded` column:
+    :func:`~tollcli.io.columns.sorted_codes`, where names no row has may be among them.)"""
     if isinstance(constellation.array, pd.arrays.ArrowStringArray) and not constellation.hasnans:
         codes, names = pd.factorize(constellation.array, sort=True)
         return codes, np.asarray(names, dtype=object)
@@ -218,12 +216,12 @@ def nmea_measurements(
     satellite table as a DataFrame or as the reader's :class:`~tollcli.io.columns.Columns` (the same measurements;
     no frame is built unless angles must be filled in)."""
     n_epochs = len(epochs)
-    if isinstance(satellites, Columns):
-        held = dict(satellites.items()).get("constellation")
-        if not isinstance(held, Coded):  # (names as objects: the frame's path)
-            satellites = satellites.to_pandas()
-    coded = _arrow_coded(dict(satellites.items())["constellation"] if isinstance(satellites, Columns)
-                         else satellites["constellation"])  # once, for the angles carried and the clocks
+    held = dict(satellites.items()).get("constellation") if isinstance(satellites, Columns) else None
+    if isinstance(held, Coded):  # the reader's coded names: their codes, in the names' order
+        coded = sorted_codes(held)
+    else:  # a frame (names as objects in columns: made one)
+        satellites = satellites.to_pandas() if isinstance(satellites, Columns) else satellites
+        coded = _arrow_coded(satellites["constellation"])  # once, for the angles carried and the clocks
     filled = fill_angles(satellites, epochs, carry, coded=coded)
     if filled is not satellites:  # (angles filled: a copy, its names as objects)
         satellites, coded = filled, None
