@@ -216,7 +216,7 @@ def nmea_measurements(
     satellite table as a DataFrame or as the reader's :class:`~tollcli.io.columns.Columns` (the same measurements;
     no frame is built unless angles must be filled in)."""
     n_epochs = len(epochs)
-    held = dict(satellites.items()).get("constellation") if isinstance(satellites, Columns) else None
+    held = satellites.held("constellation") if isinstance(satellites, Columns) and "constellation" in satellites else None
     if isinstance(held, Coded):  # the reader's coded names: their codes, in the names' order
         coded = sorted_codes(held)
     else:  # a frame (names as objects in columns: made one)

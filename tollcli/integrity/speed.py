@@ -48,8 +48,7 @@ SPEED_STATUSES = ("ok", "low_speed", "unavailable", "inconsistent", "no_data")
 SPEED_FAULTS = ("inconsistent",)
 #: the statuses under which the check confirmed nothing: why it could not
 SPEED_NOT_CHECKED = ("low_speed", "unavailable", "no_data")
-#: the statuses in the order :func:`speed_integrity` codes them (each later rule overrides an earlier)
-_STATUS_CODES = ("no_data", "ok", "unavailable", "low_speed", "inconsistent")
+_CODE = {status: k for k, status in enumerate(SPEED_STATUSES)}
 
 
 #: what each speed verdict tells the reader of an invoice (``speed_`` + status)
@@ -183,17 +182,17 @@ def speed_integrity(epochs: pd.DataFrame, params: SpeedParams = SpeedParams(), s
         have = np.isfinite(avg) & np.isfinite(mismatch) & np.isfinite(tol) & regular
         inconsistent = have & (mismatch > tol)
         passed = have & ~inconsistent
-    status = np.zeros(m, np.int8)  # codes into _STATUS_CODES
-    status[passed] = 1
+    status = np.full(m, _CODE["no_data"], np.int8)  # codes into SPEED_STATUSES; each later rule overrides an earlier
+    status[passed] = _CODE["ok"]
     with np.errstate(invalid="ignore"):
-        status[passed & ~(mase >= params.k_sigma * sigma)] = 2
-        status[passed & (avg < params.min_speed_mps)] = 3
-    status[inconsistent] = 4
+        status[passed & ~(mase >= params.k_sigma * sigma)] = _CODE["unavailable"]
+        status[passed & (avg < params.min_speed_mps)] = _CODE["low_speed"]
+    status[inconsistent] = _CODE["inconsistent"]
     return pd.DataFrame({
         "speed_doppler_avg_mps": avg, "speed_position_mps": pos_speed, "speed_error_mps": speed_error,
         "mase_mps": mase, "speed_sigma_mps": sigma, "speed_mismatch_m": mismatch, "speed_tolerance_m": tol,
         "speed_sigma_source": text_of_codes(from_doppler.astype(np.int8), ("configured", "doppler_wls")),
-        "speed_status": text_of_codes(status, _STATUS_CODES),
+        "speed_status": text_of_codes(status, SPEED_STATUSES),
     })  # fmt: skip
 
 

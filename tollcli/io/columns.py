@@ -74,6 +74,10 @@ class Columns:
         """(name, column) pairs as held: numpy arrays, or :class:`Coded`."""
         return self._data.items()
 
+    def held(self, name: str):
+        """Column ``name`` as held: a numpy array, or :class:`Coded` (not decoded)."""
+        return self._data[name]
+
     def to_pandas(self):
         """The DataFrame: times as ``datetime64[ms, UTC]``, text as pandas' Arrow-backed strings."""
         import pandas as pd

@@ -53,8 +53,7 @@ class OsnmaEvidence:
         from tollcli.gnss.osnma.satellite_status import satellite_status
 
         if isinstance(satellites, Columns):  # (the NMEA reader's columns)
-            held = dict(satellites.items())
-            satellites = Columns({c: held[c] for c in ("time_utc", "constellation", "svid")}).to_pandas()
+            satellites = Columns({c: satellites.held(c) for c in ("time_utc", "constellation", "svid")}).to_pandas()
         return authenticated_satellites(satellite_status(self.check.result, satellites[["time_utc", "constellation", "svid"]]))
 
     @property
