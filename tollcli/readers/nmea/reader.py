@@ -30,6 +30,7 @@ from tollcli.io.sources import (
 from tollcli.readers.nmea.assembler import EpochAssembler
 from tollcli.readers.nmea.bulk_reader import BulkReader, Decoded, merge_arrays
 from tollcli.readers.nmea.dates import DateCarry, first_own_date_contradiction, resolve_days, to_time_utc_ms
+from tollcli.readers.nmea.joined_blocks import join_blocks, satellite_rows
 from tollcli.readers.nmea.line_reader import ReadStats, feed_lines
 from tollcli.io.columns import Columns, as_columns
 from tollcli.io.prefetch import read_ahead
@@ -184,9 +185,9 @@ def _bulk_chunks(stream, name, stats, strict, chunk_epochs, block_bytes, pending
                 ready.append(arrays)
                 n_ready += arrays["epoch"].size
             if n_ready >= chunk_epochs:
-                yield from _emit(merge_arrays(ready), pending, carry, stats, final=False)
+                yield from _emit(join_blocks(ready, merge_arrays), pending, carry, stats, final=False)
                 ready, n_ready = [], 0
-    yield from _emit(merge_arrays(ready), pending, carry, stats, final=True)
+    yield from _emit(join_blocks(ready, merge_arrays), pending, carry, stats, final=True)
 
 
 def _decoded_blocks(bulk: BulkReader, blocks: Iterator[bytes]) -> Iterator[Decoded]:
@@ -227,7 +228,7 @@ def _emit(
     time_utc = to_time_utc_ms(days, arrays["tod_s"])
     epochs = epoch_columns(arrays, time_utc)
     stats.epochs += len(epochs)
-    stats.satellite_rows += arrays["sat_epoch"].size
+    stats.satellite_rows += satellite_rows(arrays)
     stats.undated_epochs += int((days < 0).sum())
     yield NmeaTables(epochs, lambda: satellite_columns(arrays, time_utc), stats)  # built when asked for
 
