@@ -218,10 +218,12 @@ def _decoded_alike(monkeypatch, sentence: str, extra: bytes) -> tuple[int, int]:
 def test_gsv_groups_compiled_and_numpy_are_the_same(monkeypatch):
     """The GSV satellite groups read in one compiled pass equal the numpy reading, on every real log's GSV lines
     (signal ids, empty groups, NMEA 4.10 and older) and on groups the bulk path must refuse: a dotted or too large
-    number, an elevation beyond ±90°, an azimuth beyond 360°, an exponent."""
+    number, an elevation beyond ±90°, an azimuth beyond 360°, an exponent; numbers of one to three digits beside
+    longer ones, signs, spaces, letters and lone dots (the kernel's short-number path and its fallback)."""
     extra = b"\n".join([b"$GPGSV,3,1,11,01,45,120,40,02,-91,10,,03,5.0,,30,04,,361,*00",
                         b"$GPGSV,3,1,11,1.5,45,120,40,1024,1,1,1,x,1,1,1,07,1,1,1e3*00",
-                        b"$GLGSV,1,1,02,65,10,20,30,70,,,*00", b"$GAGSV,1,1,01,05,10,20,30,7*00", b""])  # fmt: skip
+                        b"$GLGSV,1,1,02,65,10,20,30,70,,,*00", b"$GAGSV,1,1,01,05,10,20,30,7*00",
+                        b"$GPGSV,1,1,04,0009,+5,999,9a,10, 5,20 ,-5,11,00,000,00,12,9.,.5,1/*00", b""])  # fmt: skip
     n_gsv, refused = _decoded_alike(monkeypatch, "GSV", extra)
     assert n_gsv > 5_000 and refused >= 2
 
