@@ -17,7 +17,8 @@ of ``../shared/data/gpsd/``, epoch by epoch, as :func:`real_patterns.drive` repl
 GBS (the receiver's RAIM, no failed satellite), no GRS; the share of the segments under the track that are
 charged, the parallel roads (300 m apart) charged, the findings, and the time ``pynmea2.parse`` alone needs
 for the file are printed beside; then ``--pairs`` (3) ratios of a warm ``process`` to ``pynmea2.parse`` timed right
-after it, and their median (the two seconds apart, not minutes: a shared machine's speed drifts).
+after it, and their median (the two seconds apart, not minutes: a shared machine's speed drifts), and as many of
+``tollcli epochs`` to ``pynmea2.parse``.
 ``--mix neo-m9n``: the same drive without the ZED-F9P's second-band GSV lines (:func:`real_patterns.first_band`: 12 GSV lines an
 epoch instead of 24, 23 lines an epoch, 828 000 lines in 10 h — what a single-band u-blox NEO-M9N with GST, GBS and ZDA
 on writes, and the line count of the 10 h drive issue 49 was measured on).
@@ -127,7 +128,7 @@ def ublox_drive(path: Path, n_epochs: int, single_band: bool = False) -> None:
 
 
 def paired_ratios(process: list[str], env: dict, log: Path, pairs: int) -> list[float]:
-    """``pairs`` ratios of a warm ``process`` to ``pynmea2.parse`` of ``log`` timed right after it: the two measured
+    """``pairs`` ratios of a command (a warm ``process``, ``epochs``) to ``pynmea2.parse`` of ``log`` timed right after it: the two measured
     within seconds of each other, so a machine whose speed drifts over minutes (a shared host) moves both alike."""
     ratios = []
     for _ in range(pairs):
@@ -237,11 +238,17 @@ def main() -> None:
         if args.mix != "ubx":
             t_py = plain_pynmea2(log)
             print(f"pynmea2.parse alone on the same file: {t_py:6.2f} s; ratio process / pynmea2: {t_proc / t_py:.2f} "
-                  f"(on one thread {t_one / t_py:.2f}); tollcli epochs {n_lines / t_read:,.0f} lines/s")  # fmt: skip
+                  f"(on one thread {t_one / t_py:.2f}); tollcli epochs {n_lines / t_read:,.0f} lines/s "
+                  f"({t_read / t_py:.2f}× pynmea2.parse)")  # fmt: skip
             if args.pairs:
                 ratios = paired_ratios([*process, "-o", str(Path(tmp) / "invoice-pair.json")], env, log, args.pairs)
                 print(f"paired, each warm process then pynmea2.parse right after it ({args.pairs} pairs): ratios "
                       f"{', '.join(f'{r:.2f}' for r in ratios)}; median {statistics.median(ratios):.2f}")  # fmt: skip
+                ratios = paired_ratios([*tollcli, "epochs", str(log), "-o", str(Path(tmp) / "e-pair.parquet"), "-q"], env,
+                                       log, args.pairs)  # fmt: skip
+                print(f"paired, each tollcli epochs then pynmea2.parse right after it ({args.pairs} pairs): ratios "
+                      f"{', '.join(f'{r:.3f}' for r in ratios)}; median {statistics.median(ratios):.3f} "
+                      f"(1 M lines/s is {n_lines / 1e6:.2f} s)")  # fmt: skip
         memory = []
         for hours in sorted(args.memory_hours):
             n = int(hours * 3600)
