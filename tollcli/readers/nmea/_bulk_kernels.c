@@ -305,9 +305,6 @@ done:
     return result;
 }
 
-/* Field k (1 = first after the address) of a plain line: [*s, *e). Field k starts after the line's k-th
- * comma and ends at the next comma or at the '*'; past the last field it is empty, at the '*'.
- * Returns 0 when the comma index falls before the first comma (a caller's error). */
 /* parse_decimal for a field of one to three digits (a GSV's numbers, nearly always), else parse_decimal itself */
 static inline int small_count(const uint8_t *buf, Py_ssize_t n, int64_t s, int64_t e, double *value, uint8_t *empty,
                               uint8_t *has_dot) {
@@ -327,6 +324,9 @@ static inline int small_count(const uint8_t *buf, Py_ssize_t n, int64_t s, int64
     return parse_decimal(buf, n, s, e, 0, value, empty, has_dot);
 }
 
+/* Field k (1 = first after the address) of a plain line: [*s, *e). Field k starts after the line's k-th
+ * comma and ends at the next comma or at the '*'; past the last field it is empty, at the '*'.
+ * Returns 0 when the comma index falls before the first comma (a caller's error). */
 static inline int field_bounds(const int64_t *first, const int64_t *end, const int64_t *commas, Py_ssize_t top,
                                int64_t line, int64_t k, int64_t *s, int64_t *e) {
     int64_t c = first[line] + k - 1;
