@@ -68,3 +68,41 @@ def test_a_block_whose_satellites_go_back_is_merged_at_once():
     joined = join_blocks([first, second], merge_arrays)
     assert not isinstance(joined, JoinedArrays)
     _assert_equal(joined, merged)
+
+
+def test_satellites_looked_up_from_two_threads_at_once_are_joined_once(monkeypatch):
+    import threading
+
+    from tollcli.readers.nmea import joined_blocks
+
+    rng = np.random.default_rng(11)
+    blocks = [_block(rng, np.arange(10 * i, 10 * i + 10), 3) for i in range(3)]
+    expected = merge_arrays([dict(b) for b in blocks])
+    joined = join_blocks(blocks, merge_arrays)
+    calls, started = [], threading.Barrier(2)
+    real = np.concatenate
+
+    def slow_concatenate(parts):  # the first joiner still joining when the second looks
+        calls.append(1)
+        threading.Event().wait(0.02)
+        return real(parts)
+
+    monkeypatch.setattr(joined_blocks.np, "concatenate", slow_concatenate)
+    found, errors = {}, []
+
+    def look(name):
+        started.wait()
+        try:
+            found[name] = joined[name]
+        except Exception as exc:  # noqa: BLE001 - what the other thread saw
+            errors.append(exc)
+
+    threads = [threading.Thread(target=look, args=(n,)) for n in ("sat_cn0_dbhz", "sat_used")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    assert len(calls) == 3  # the three satellite arrays, joined once
+    for name in found:
+        assert np.array_equal(found[name], expected[name])

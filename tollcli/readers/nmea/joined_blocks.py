@@ -13,6 +13,7 @@ no block's rows before the last one's), merging is joining; anything else is mer
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator, Mapping
 
 import numpy as np
@@ -23,20 +24,24 @@ SATELLITE_PREFIX = "sat_"
 class JoinedArrays(Mapping):
     """The arrays of blocks in epoch order: the epoch arrays joined, the satellite arrays joined on first lookup.
 
-    ``satellite_rows`` is their row count, known without joining them."""
+    ``satellite_rows`` is their row count, known without joining them. Looked up from several threads at once, the
+    satellite arrays are still joined once, and every lookup waits for them."""
 
     def __init__(self, epochs: dict[str, np.ndarray], blocks: list[dict[str, np.ndarray]], names: list[str]):
         self._arrays = epochs
         self._blocks: list[dict[str, np.ndarray]] | None = blocks
         self._names = names
         self.satellite_rows = sum(b["sat_epoch"].size for b in blocks)
+        self._joining = threading.Lock()
 
     def __getitem__(self, name: str) -> np.ndarray:
-        if name not in self._arrays and self._blocks is not None and name.startswith(SATELLITE_PREFIX):
-            blocks, self._blocks = self._blocks, None  # the blocks let go once joined
-            for key in blocks[0]:
-                if key.startswith(SATELLITE_PREFIX):
-                    self._arrays[key] = np.concatenate([b[key] for b in blocks])
+        if name not in self._arrays and name.startswith(SATELLITE_PREFIX):
+            with self._joining:
+                if self._blocks is not None:
+                    for key in self._blocks[0]:
+                        if key.startswith(SATELLITE_PREFIX):
+                            self._arrays[key] = np.concatenate([b[key] for b in self._blocks])
+                    self._blocks = None  # the blocks let go once joined
         return self._arrays[name]
 
     def __setitem__(self, name: str, values: np.ndarray) -> None:
