@@ -40,7 +40,7 @@ def test_joined_equals_merged(seed):
     rng = np.random.default_rng(seed)
     blocks = _blocks(rng, int(rng.integers(0, 7)), shuffled=bool(seed % 2))
     expected = merge_arrays([dict(b) for b in blocks])
-    joined = join_blocks(blocks, merge_arrays)
+    joined = join_blocks(blocks)
     assert satellite_rows(joined) == expected["sat_epoch"].size
     _assert_equal(joined, expected)
 
@@ -48,7 +48,7 @@ def test_joined_equals_merged(seed):
 def test_blocks_in_order_are_joined_their_satellites_when_first_looked_up():
     rng = np.random.default_rng(7)
     blocks = [_block(rng, np.arange(10 * i, 10 * i + 10), 3) for i in range(3)]
-    joined = join_blocks(blocks, merge_arrays)
+    joined = join_blocks(blocks)
     assert isinstance(joined, JoinedArrays)
     assert joined["epoch"].tolist() == list(range(30))
     blocks[1]["sat_cn0_dbhz"][:] = -1.0  # changed after joining, before any satellite array was looked up
@@ -65,7 +65,7 @@ def test_a_block_whose_satellites_go_back_is_merged_at_once():
     second["sat_epoch"][:] = 0  # satellite rows of an earlier epoch in a later block
     assert second["sat_epoch"].size
     merged = merge_arrays([dict(first), dict(second)])
-    joined = join_blocks([first, second], merge_arrays)
+    joined = join_blocks([first, second])
     assert not isinstance(joined, JoinedArrays)
     _assert_equal(joined, merged)
 
@@ -78,7 +78,7 @@ def test_satellites_looked_up_from_two_threads_at_once_are_joined_once(monkeypat
     rng = np.random.default_rng(11)
     blocks = [_block(rng, np.arange(10 * i, 10 * i + 10), 3) for i in range(3)]
     expected = merge_arrays([dict(b) for b in blocks])
-    joined = join_blocks(blocks, merge_arrays)
+    joined = join_blocks(blocks)
     calls, started = [], threading.Barrier(2)
     real = np.concatenate
 

@@ -18,6 +18,8 @@ from collections.abc import Iterator, Mapping
 
 import numpy as np
 
+from tollcli.readers.nmea.bulk_reader import merge_arrays
+
 SATELLITE_PREFIX = "sat_"
 
 
@@ -56,15 +58,15 @@ class JoinedArrays(Mapping):
         return len(self._names)
 
 
-def join_blocks(blocks: list[dict[str, np.ndarray]], merge) -> Mapping[str, np.ndarray]:
-    """The blocks' arrays as one chunk: a :class:`JoinedArrays` where they are in epoch order, else ``merge(blocks)``
-    (:func:`~tollcli.readers.nmea.bulk_reader.merge_arrays`, which sorts them)."""
+def join_blocks(blocks: list[dict[str, np.ndarray]]) -> Mapping[str, np.ndarray]:
+    """The blocks' arrays as one chunk: a :class:`JoinedArrays` where they are in epoch order, else
+    :func:`~tollcli.readers.nmea.bulk_reader.merge_arrays` of them (which sorts them)."""
     blocks = [b for b in blocks if b["epoch"].size or b["sat_epoch"].size]
     if len(blocks) < 2:
-        return merge(blocks)
+        return merge_arrays(blocks)
     epochs = {k: np.concatenate([b[k] for b in blocks]) for k in blocks[0] if not k.startswith(SATELLITE_PREFIX)}
     if not _in_epoch_order(epochs["epoch"], [b["sat_epoch"] for b in blocks]):
-        return merge(blocks)
+        return merge_arrays(blocks)
     return JoinedArrays(epochs, blocks, list(blocks[0]))
 
 

@@ -28,7 +28,7 @@ from tollcli.io.sources import (
     source_name,
 )
 from tollcli.readers.nmea.assembler import EpochAssembler
-from tollcli.readers.nmea.bulk_reader import BulkReader, Decoded, merge_arrays
+from tollcli.readers.nmea.bulk_reader import BulkReader, Decoded
 from tollcli.readers.nmea.dates import DateCarry, first_own_date_contradiction, resolve_days, to_time_utc_ms
 from tollcli.readers.nmea.joined_blocks import join_blocks, satellite_rows
 from tollcli.readers.nmea.line_reader import ReadStats, feed_lines
@@ -185,9 +185,9 @@ def _bulk_chunks(stream, name, stats, strict, chunk_epochs, block_bytes, pending
                 ready.append(arrays)
                 n_ready += arrays["epoch"].size
             if n_ready >= chunk_epochs:
-                yield from _emit(join_blocks(ready, merge_arrays), pending, carry, stats, final=False)
+                yield from _emit(join_blocks(ready), pending, carry, stats, final=False)
                 ready, n_ready = [], 0
-    yield from _emit(join_blocks(ready, merge_arrays), pending, carry, stats, final=True)
+    yield from _emit(join_blocks(ready), pending, carry, stats, final=True)
 
 
 def _decoded_blocks(bulk: BulkReader, blocks: Iterator[bytes]) -> Iterator[Decoded]:
